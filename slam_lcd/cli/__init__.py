@@ -1,0 +1,1 @@
+"""The ``slam-lcd`` command line: one module per subcommand, each with ``register(subparsers)``."""

@@ -1,0 +1,167 @@
+"""Run configuration: typed dataclasses, YAML presets, ``--set section.key=value`` overrides.
+
+Each stage owns its section (``slam_lcd/<stage>/config.py``); this module composes them.
+Unknown keys are errors, values are type-checked, and :func:`save_config` writes the
+resolved configuration next to a run's outputs.
+"""
+from __future__ import annotations
+
+import dataclasses
+import types
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from .atomic import write_text
+from .backend.config import BackendConfig
+from .errors import ConfigError, FileMissingError
+from .eval.config import EvalConfig
+from .features.config import FeaturesConfig
+from .frontend.config import FrontendConfig
+from .io.config import IOConfig
+from .lcd.config import LcdConfig
+from .vocab.config import VocabConfig
+
+PRESET_DIR = Path(__file__).resolve().parent.parent / "data" / "configs"
+
+
+@dataclass
+class Config:
+    io: IOConfig = field(default_factory=IOConfig)
+    frontend: FrontendConfig = field(default_factory=FrontendConfig)
+    features: FeaturesConfig = field(default_factory=FeaturesConfig)
+    vocab: VocabConfig = field(default_factory=VocabConfig)
+    lcd: LcdConfig = field(default_factory=LcdConfig)
+    backend: BackendConfig = field(default_factory=BackendConfig)
+    eval: EvalConfig = field(default_factory=EvalConfig)
+
+
+def _coerce(value: Any, tp: Any, where: str) -> Any:
+    """Check/convert ``value`` to the annotated type ``tp`` (str from the CLI is parsed as YAML)."""
+    origin = typing.get_origin(tp)
+    args = typing.get_args(tp)
+    if origin in (typing.Union, types.UnionType):
+        if value is None and type(None) in args:
+            return None
+        errors = []
+        for a in args:
+            if a is type(None):
+                continue
+            try:
+                return _coerce(value, a, where)
+            except ConfigError as e:
+                errors.append(str(e))
+        raise ConfigError(f"{where}: value {value!r} does not fit {tp}")
+    if typing.get_origin(tp) is typing.Literal:
+        if value not in args:
+            raise ConfigError(f"{where}: {value!r} is not one of {list(args)}")
+        return value
+    if dataclasses.is_dataclass(tp):
+        if not isinstance(value, dict):
+            raise ConfigError(f"{where}: expected a mapping, got {type(value).__name__}")
+        return _from_dict(tp, value, where)
+    if origin in (list, tuple):
+        if not isinstance(value, (list, tuple)):
+            raise ConfigError(f"{where}: expected a list, got {value!r}")
+        inner = args[0] if args else Any
+        out = [_coerce(v, inner, f"{where}[{i}]") for i, v in enumerate(value)]
+        return out if origin is list else tuple(out)
+    if origin is dict:
+        if not isinstance(value, dict):
+            raise ConfigError(f"{where}: expected a mapping, got {value!r}")
+        return dict(value)
+    if tp is Any:
+        return value
+    if tp is bool:
+        if isinstance(value, bool):
+            return value
+        raise ConfigError(f"{where}: expected true/false, got {value!r}")
+    if tp is float:
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            return float(value)
+        raise ConfigError(f"{where}: expected a number, got {value!r}")
+    if tp is int:
+        if isinstance(value, int) and not isinstance(value, bool):
+            return value
+        raise ConfigError(f"{where}: expected an integer, got {value!r}")
+    if tp is str:
+        if isinstance(value, str):
+            return value
+        raise ConfigError(f"{where}: expected a string, got {value!r}")
+    return value
+
+
+def _from_dict(cls, data: dict, where: str = ""):
+    hints = typing.get_type_hints(cls)
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown = set(data) - names
+    if unknown:
+        raise ConfigError(f"unknown key(s) {sorted(unknown)} in section {where or 'top'}; known: {sorted(names)}")
+    kwargs = {k: _coerce(v, hints[k], f"{where}.{k}".lstrip(".")) for k, v in data.items()}
+    return cls(**kwargs)
+
+
+def config_to_dict(cfg) -> dict:
+    return dataclasses.asdict(cfg)
+
+
+def apply_override(cfg: Config, assignment: str) -> Config:
+    """Apply one ``section.key=value`` override (value parsed as YAML) and re-validate."""
+    if "=" not in assignment:
+        raise ConfigError(f"override {assignment!r} must look like section.key=value")
+    key, raw = assignment.split("=", 1)
+    try:
+        value = yaml.safe_load(raw) if raw.strip() else ""
+    except yaml.YAMLError as e:
+        raise ConfigError(f"override {assignment!r}: value is not valid YAML ({e.__class__.__name__})") from None
+    data = config_to_dict(cfg)
+    node = data
+    parts = key.strip().split(".")
+    for p in parts[:-1]:
+        if not isinstance(node, dict) or p not in node:
+            raise ConfigError(f"override {assignment!r}: unknown section {p!r}")
+        node = node[p]
+    if not isinstance(node, dict) or parts[-1] not in node:
+        raise ConfigError(f"override {assignment!r}: unknown key {key!r}")
+    node[parts[-1]] = value
+    return _from_dict(Config, data)
+
+
+def load_config(source: str | Path | None = None, overrides: list[str] | tuple[str, ...] = ()) -> Config:
+    """Load a preset name (``default``, ``fast`` …) or a YAML path, then apply overrides."""
+    data: dict = {}
+    if source is not None:
+        path = Path(source)
+        if not path.suffix and not path.exists():
+            path = PRESET_DIR / f"{source}.yaml"
+            if not path.exists():
+                presets = sorted(p.stem for p in PRESET_DIR.glob("*.yaml"))
+                raise ConfigError(f"no preset named {source!r}; presets: {presets}")
+        if not path.is_file():
+            raise FileMissingError("configuration file not found", path)
+        try:
+            data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+        except (yaml.YAMLError, UnicodeDecodeError) as e:
+            raise ConfigError(f"not valid YAML ({e.__class__.__name__})", path) from None
+        if not isinstance(data, dict):
+            raise ConfigError("top level of a config file must be a mapping", path)
+        try:
+            cfg = _from_dict(Config, data)
+        except ConfigError as e:
+            raise ConfigError(e.problem, path) from None
+    else:
+        cfg = Config()
+    for ov in overrides:
+        cfg = apply_override(cfg, ov)
+    return cfg
+
+
+def dump_config(cfg: Config) -> str:
+    return yaml.safe_dump(config_to_dict(cfg), sort_keys=False)
+
+
+def save_config(cfg: Config, path: str | Path) -> None:
+    write_text(path, dump_config(cfg))

@@ -1,0 +1,98 @@
+"""Typed errors of slam-lcd.
+
+Library code raises these; only the CLI turns them into a one-line message and exit
+status 2. Every error names the file (or object) it is about and what is wrong with it,
+in a single line, so that ``str(err)`` is what a user sees.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+
+class SlamLcdError(Exception):
+    """Base class of every error slam-lcd raises on purpose."""
+
+    def __init__(self, message: str, path: str | Path | None = None):
+        self.path = Path(path) if path is not None else None
+        self.problem = " ".join(str(message).split())  # one line, always
+        text = f"{self.path}: {self.problem}" if self.path is not None else self.problem
+        super().__init__(text)
+
+
+class InputError(SlamLcdError):
+    """Something wrong with what the user gave us (file, topic, value)."""
+
+
+class FileMissingError(InputError):
+    """The path does not exist (or is not the kind of thing expected)."""
+
+
+class UnsupportedFormatError(InputError):
+    """The file exists but is not a format slam-lcd reads."""
+
+
+class CorruptLogError(InputError):
+    """A log (bag/MCAP) whose bytes cannot be parsed."""
+
+
+class TruncatedLogError(CorruptLogError):
+    """A log that ends early; ``recovered`` messages could still be read."""
+
+    def __init__(self, message: str, path=None, recovered: int = 0):
+        self.recovered = recovered
+        super().__init__(message, path)
+
+
+class TopicNotFoundError(InputError):
+    """A requested topic is not in the log; ``available`` lists the ones that are."""
+
+    def __init__(self, topic: str, available, path=None):
+        self.topic = topic
+        self.available = sorted(available)
+        shown = ", ".join(self.available) if self.available else "(none)"
+        super().__init__(f"topic {topic!r} not found; available topics: {shown}", path)
+
+
+class MessageEncodingError(InputError):
+    """A message whose encoding/type we cannot decode (e.g. image encoding 'yuv422')."""
+
+
+class TrajectoryFormatError(InputError):
+    """A malformed trajectory file line; ``line`` is 1-based."""
+
+    def __init__(self, message: str, path=None, line: int | None = None):
+        self.line = line
+        where = f"line {line}: " if line is not None else ""
+        super().__init__(f"{where}{message}", path)
+
+
+class InvalidPoseError(InputError):
+    """A pose with NaN/inf values, a non-unit quaternion that cannot be normalised, etc."""
+
+
+class UnsortedStampsError(InputError):
+    """Timestamps that go backwards where a time-ordered series is required."""
+
+
+class ConfigError(InputError):
+    """Unknown key, wrong type or bad value in a configuration file or override."""
+
+
+class WeightsError(InputError):
+    """Network weights missing, corrupt, or of the wrong shape."""
+
+
+class VocabularyError(InputError):
+    """A vocabulary file that is missing, truncated or not a slam-lcd vocabulary."""
+
+
+class DownloadError(SlamLcdError):
+    """A download that failed (offline, bad URL, checksum mismatch)."""
+
+
+class NotBuiltError(SlamLcdError):
+    """A feature that is not implemented yet; raised instead of faking a result."""
+
+
+class PipelineError(SlamLcdError):
+    """A run that cannot proceed (e.g. log without the image topic it needs)."""
