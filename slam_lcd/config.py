@@ -11,7 +11,7 @@ import types
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import yaml
 
@@ -29,6 +29,24 @@ PRESET_DIR = Path(__file__).resolve().parent.parent / "data" / "configs"
 
 
 @dataclass
+class RunConfig:
+    """Section `run`: what ``slam-lcd run`` evaluates and writes."""
+
+    # alignment of odometry/corrected to ground truth for the before/after ATE
+    align: Literal["none", "se3", "sim3"] = "se3"
+    # time association tolerance (s) between ground truth and estimates
+    t_max_diff: float = 0.02
+    # a loop is counted false when its keyframes' ground-truth positions are further apart than this (m)
+    loop_true_max_distance: float = 3.0
+    # write trajectory.png and ate_over_time.png
+    plots: bool = True
+    # write corrected.mcap (input topics + corrected trajectory)
+    write_mcap: bool = True
+    # copy image topics into corrected.mcap too (large); false copies every non-image topic
+    copy_images: bool = False
+
+
+@dataclass
 class Config:
     io: IOConfig = field(default_factory=IOConfig)
     frontend: FrontendConfig = field(default_factory=FrontendConfig)
@@ -37,6 +55,7 @@ class Config:
     lcd: LcdConfig = field(default_factory=LcdConfig)
     backend: BackendConfig = field(default_factory=BackendConfig)
     eval: EvalConfig = field(default_factory=EvalConfig)
+    run: RunConfig = field(default_factory=RunConfig)
 
 
 def _coerce(value: Any, tp: Any, where: str) -> Any:

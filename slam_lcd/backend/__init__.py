@@ -1,1 +1,34 @@
-"""slam_lcd.backend"""
+"""slam_lcd.backend: GTSAM iSAM2 pose graph with robust loop handling (issue #7).
+
+Public API (see docs/CONTRACTS.md and docs/backend.md):
+
+- :class:`PoseGraph` (``add_keyframe``, ``add_loop``, ``estimate``, ``keyframe_trajectory``,
+  ``loop_records``, ``finalize``, ``write_g2o``) and :class:`LoopRecord`;
+- :func:`correct_full_rate` (corrected pose for every odometry stamp);
+- :func:`read_g2o` / :func:`write_g2o`.
+
+Names are imported lazily so that ``slam_lcd.config`` (which imports
+``slam_lcd.backend.config``) does not pull in GTSAM.
+"""
+from __future__ import annotations
+
+import importlib
+
+_EXPORTS = {
+    "PoseGraph": ".pose_graph",
+    "LoopRecord": ".pose_graph",
+    "robust_kernel": ".pose_graph",
+    "correct_full_rate": ".full_rate",
+    "read_g2o": ".g2o",
+    "write_g2o": ".g2o",
+    "G2oEdge": ".g2o",
+    "BackendConfig": ".config",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(_EXPORTS[name], __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

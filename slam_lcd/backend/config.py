@@ -1,9 +1,69 @@
-"""Configuration section `backend` (owned by :mod:`slam_lcd.backend`)."""
+"""Configuration section `backend` (owned by :mod:`slam_lcd.backend`).
+
+Sigmas are standard deviations: rotations in radians, translations in metres. Every
+covariance/information matrix of the back end is in GTSAM Pose3 tangent order
+``[rx ry rz tx ty tz]``.
+"""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 
 @dataclass
 class BackendConfig:
-    pass
+    # Prior that anchors the first keyframe (gauge freedom of the pose graph).
+    prior_sigma_rot: float = 1e-4
+    prior_sigma_trans: float = 1e-4
+    # Odometry noise used when a keyframe comes without a 6x6 covariance (per keyframe step).
+    odom_sigma_rot: float = 0.01
+    odom_sigma_trans: float = 0.05
+    # Use the covariance handed to add_keyframe (false: always the sigmas above).
+    use_odometry_covariance: bool = True
+    # Loop noise used when a closure's information matrix is missing or not positive definite.
+    loop_sigma_rot: float = 0.02
+    loop_sigma_trans: float = 0.2
+    # Robust kernel on loop factors (odometry and prior stay Gaussian).
+    loop_kernel: Literal["none", "huber", "cauchy", "dcs", "geman_mcclure"] = "cauchy"
+    # Kernel width on the whitened error (Huber k, Cauchy k, DCS phi, Geman-McClure c).
+    loop_kernel_width: float = 3.0
+    # iSAM2: relinearise a variable whose update exceeds this (tangent norm) ...
+    isam2_relinearize_threshold: float = 0.1
+    # ... checking every this many updates.
+    isam2_relinearize_skip: int = 1
+    # iSAM2 factorisation of the linear system.
+    isam2_factorization: Literal["cholesky", "qr"] = "cholesky"
+    # Extra iSAM2 update() calls after a loop is added or removed (lets big corrections converge).
+    isam2_extra_updates_per_loop: int = 1
+    # Outlier handling: 'none' accepts every loop as given (kernel only); 'gate' runs the
+    # consistency checks on each new loop; 'gate+gnc' adds the batch GNC (TLS) re-check;
+    # 'gnc' accepts every loop into iSAM2 and relies on the GNC re-check alone.
+    outlier_rejection: Literal["none", "gate", "gate+gnc", "gnc"] = "gate+gnc"
+    # Consistency gate: chi-square test of the loop against the current estimate (with the
+    # odometry chain covariance) and PCM-style pairwise tests, at this probability (6 dof).
+    gate_chi2_probability: float = 0.999
+    # Pairwise (PCM) tests against earlier loops whose keyframes lie within this many
+    # keyframes of the new loop's ends (0 disables them).
+    gate_pairwise_window: int = 50
+    # A loop failing the first test is accepted (with its supporters) when at least this many
+    # nearby earlier loops are pairwise consistent with it (0: never).
+    gate_min_support: int = 2
+    # ... but only while its chi2 against the estimate is at most this multiple of the gate
+    # threshold (and likewise for each supporting loop): a cluster of loops into an aliased
+    # place (same texture elsewhere) is mutually consistent, and only its gross disagreement
+    # with odometry gives it away. True loops under biased odometry score a few times the
+    # threshold; aliases that shift the map by metres / tens of degrees score far more.
+    gate_rescue_max_factor: float = 8.0
+    # A new loop is rejected when it is inconsistent with more than this fraction of the
+    # earlier accepted loops it was checked against pairwise.
+    gate_pairwise_max_inconsistent: float = 0.5
+    # Batch GNC (TLS) re-check after every this many new loops (0: only in finalize()).
+    gnc_every_n_loops: int = 50
+    # GNC also reconsiders loops the pairwise test rejected (may restore them as inliers).
+    gnc_includes_gated: bool = False
+    # GNC inlier threshold as a chi-square probability per loop factor (6 dof).
+    gnc_inlier_probability: float = 0.99
+    # GNC iterations (outer, mu schedule) limit.
+    gnc_max_iterations: int = 100
+    # Weight below which GNC declares a loop an outlier.
+    gnc_outlier_weight: float = 0.5

@@ -1,14 +1,74 @@
-"""`slam-lcd export`: convert a trajectory to TUM / KITTI / EuRoC / MCAP (not built yet, see issue #9)."""
+"""`slam-lcd export TRAJ --to tum|kitti|euroc|mcap OUT`: convert a trajectory.
+
+TRAJ is a TUM / KITTI / EuRoC file or ``LOG:TOPIC``. Text outputs keep full precision
+(stamps as exact decimal seconds or integer ns); MCAP output carries a PoseStamped per
+stamp, ``/tf`` and a ``nav_msgs/Path`` (see :func:`slam_lcd.io.writers.write_trajectory_log`).
+The output is written atomically and never onto the input.
+"""
 from __future__ import annotations
 
-from ..errors import NotBuiltError
+from ..errors import InputError, NotBuiltError
+from ..eval.cli_util import check_output_path, one_line_errors, write_guard
+from ..io.trajectory_files import FORMATS
+
+TARGETS = (*FORMATS, "mcap")
 
 
 def register(sub) -> None:
-    p = sub.add_parser("export", help="convert a trajectory to TUM / KITTI / EuRoC / MCAP [not built yet]")
-    p.add_argument("args", nargs="*")
+    p = sub.add_parser(
+        "export",
+        help="convert a trajectory (file or LOG:TOPIC) to TUM / KITTI / EuRoC / MCAP",
+        description="Convert a trajectory (TUM / KITTI / EuRoC file or LOG:TOPIC) to another format.",
+    )
+    one_line_errors(p)
+    p.add_argument("traj", metavar="TRAJ", help="input trajectory: file or LOG:TOPIC")
+    p.add_argument("--to", dest="to", required=True, choices=TARGETS, help="output format")
+    p.add_argument("out", metavar="OUT", help="output path")
+    p.add_argument("--format", dest="in_format", choices=FORMATS, default=None, help="input format (default: detect)")
+    p.add_argument("--times", default=None, metavar="FILE", help="KITTI times file of the input")
+    p.add_argument("--times-out", default=None, metavar="FILE", help="with --to kitti: also write the stamps (s) here")
+    p.add_argument("--topic", default="/slam_lcd/trajectory", help="with --to mcap: pose topic (default %(default)s)")
+    p.add_argument("--frame-id", default=None, help="with --to mcap: parent frame (default: the input's, else 'map')")
+    p.add_argument("--child-frame-id", default=None, help="with --to mcap: child frame (default: the input's, else 'base_link')")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    raise NotBuiltError("'slam-lcd export' is not built yet (issue #9)")
+    from ..eval.sources import load_trajectory_source
+    from ..io.trajectory_files import write_trajectory
+
+    check_output_path(args.out, args.traj, args.times)
+    if args.times_out is not None:
+        if args.to != "kitti":
+            raise InputError("--times-out only applies to --to kitti (the other formats keep their stamps)")
+        check_output_path(args.times_out, args.traj, args.times, args.out)
+    for opt in ("topic", "frame_id", "child_frame_id"):
+        if args.to != "mcap" and getattr(args, opt) not in (None, "/slam_lcd/trajectory"):
+            raise InputError(f"--{opt.replace('_', '-')} only applies to --to mcap")
+    traj = load_trajectory_source(args.traj, args.in_format, args.times)
+    if args.to == "mcap":
+        from .. import io as slam_io
+
+        try:
+            from ..io.writers import write_trajectory_log
+        except ImportError:
+            write_trajectory_log = None
+        if write_trajectory_log is None:
+            raise NotBuiltError("writing a trajectory to MCAP is not built yet (slam_lcd.io.writers)", args.out)
+        del slam_io
+        frame = args.frame_id or (traj.frame_id if traj.frame_id != "world" else "map")
+        child = args.child_frame_id or (traj.child_frame_id if traj.child_frame_id != "body" else "base_link")
+        if not args.topic.startswith("/"):
+            raise InputError(f"--topic must start with '/', got {args.topic!r}")
+        with write_guard(args.out):
+            counts = write_trajectory_log(args.out, traj, "mcap", topic=args.topic, frame_id=frame, child_frame_id=child)
+        print(f"wrote {args.out} ({len(traj)} poses; " + ", ".join(f"{k}: {v}" for k, v in counts.items()) + ")")
+        return 0
+    with write_guard(args.out):
+        write_trajectory(args.out, traj, args.to, times_path=args.times_out)
+    print(f"wrote {args.out} ({args.to}, {len(traj)} poses)")
+    if args.to == "kitti" and args.times_out is None:
+        print("note: KITTI files carry no stamps; pass --times-out FILE to keep them")
+    elif args.to == "kitti":
+        print(f"wrote {args.times_out} (stamps in seconds)")
+    return 0

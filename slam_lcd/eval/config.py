@@ -2,8 +2,20 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 
 @dataclass
 class EvalConfig:
-    pass
+    # max |t_ref - t_est| (s) for two poses to be associated (evo's --t_max_diff)
+    t_max_diff: float = 0.01
+    # constant offset (s) added to the estimate's stamps before association (evo's --t_offset)
+    t_offset: float = 0.0
+    # alignment before ATE: none, SE(3) or Sim(3) Umeyama (sim3 for monocular/scale-free estimates), scale only
+    align: Literal["none", "se3", "sim3", "scale"] = "se3"
+    # fit the alignment on the first N matched poses only (null: all of them)
+    n_to_align: int | None = None
+    # RPE pair spacing, in rpe_delta_unit
+    rpe_delta: float = 1.0
+    # RPE spacing unit: frames (matched poses) or metres travelled along the reference
+    rpe_delta_unit: Literal["frames", "m"] = "m"

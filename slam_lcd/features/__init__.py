@@ -1,1 +1,33 @@
-"""slam_lcd.features"""
+"""slam_lcd.features: SuperPoint (and an ORB baseline) behind one extractor interface.
+
+``load_extractor(conf, weights=..., device=...)`` returns an :class:`Extractor` whose
+``extract(image)`` gives a :class:`slam_lcd.types.Features` record.
+
+Names are imported lazily (PEP 562): importing the configuration, or running a CLI command
+that needs no network (``slam-lcd info``), must not pay torch's import time.
+"""
+from __future__ import annotations
+
+import importlib
+
+from .config import FeaturesConfig
+
+_LAZY = {
+    "FeatureCache": ".cache",
+    "Extractor": ".extract",
+    "OrbExtractor": ".extract",
+    "SuperPointExtractor": ".extract",
+    "load_extractor": ".extract",
+    "SuperPoint": ".superpoint",
+    "resolve_weights": ".weights",
+}
+
+__all__ = ["FeaturesConfig", *_LAZY]
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        value = getattr(importlib.import_module(_LAZY[name], __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

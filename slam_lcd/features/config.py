@@ -2,8 +2,45 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
+
+# Official Magic Leap release of the SuperPoint weights (MIT-style research licence: the user
+# downloads them; the package never ships them).
+SUPERPOINT_URL = "https://github.com/magicleap/SuperPointPretrainedNetwork/raw/master/superpoint_v1.pth"
+SUPERPOINT_SHA256 = "52b6708629640ca883673b5d5c097c4ddad37d8048b33f09c8ca0d69db12c40e"
 
 
 @dataclass
 class FeaturesConfig:
-    pass
+    # which extractor: 'superpoint' (learned, float 256-D) or 'orb' (OpenCV, binary 32-byte)
+    kind: Literal["superpoint", "orb"] = "superpoint"
+    # SuperPoint weights file; None = $SLAM_LCD_SUPERPOINT_WEIGHTS, then the cache dir, then download
+    weights: str | None = None
+    # where inference runs: 'auto' picks CUDA when available, else CPU
+    device: Literal["auto", "cpu", "cuda"] = "auto"
+    # non-maximum suppression radius in pixels (window of 2r+1)
+    nms_radius: int = 4
+    # minimum detector confidence (softmax probability) of a keypoint
+    keypoint_threshold: float = 0.015
+    # keypoints closer than this many pixels to the image border are dropped
+    remove_borders: int = 4
+    # keep the highest-scoring keypoints only; -1 keeps all
+    max_keypoints: int = 1000
+    # interpolation of the 1/8-resolution descriptor map at keypoints
+    descriptor_sampling: Literal["bilinear", "bicubic"] = "bilinear"
+    # images per network forward in extract_batch
+    batch_size: int = 8
+    # ORB baseline: number of features, pyramid scale factor and levels, FAST threshold
+    orb_n_features: int = 1000
+    orb_scale_factor: float = 1.2
+    orb_n_levels: int = 8
+    orb_fast_threshold: int = 20
+    # user cache directory (weights, features); None = $SLAM_LCD_CACHE_DIR or ~/.cache/slam-lcd
+    cache_dir: str | None = None
+    # store extracted features on disk keyed by log, topic, stamp and extractor config
+    feature_cache: bool = True
+    # allow downloading the official weights when none are found locally
+    allow_download: bool = True
+    # download source and expected sha256 of the SuperPoint weights
+    weights_url: str = SUPERPOINT_URL
+    weights_sha256: str = SUPERPOINT_SHA256

@@ -1,1 +1,18 @@
-"""slam_lcd.io"""
+"""slam_lcd.io: read ROS1 bags, rosbag2 directories and MCAP files; decode messages; write new logs.
+
+See docs/io.md. Public API: :func:`open_log`, :class:`LogMessage`, :class:`TopicInfo`,
+:func:`read_trajectory_from_log`, :mod:`.decode`, :mod:`.tf`, :mod:`.messages`, :mod:`.writers`,
+and the trajectory-file functions of :mod:`.trajectory_files`.
+"""
+from .reader import LogMessage, LogReader, RawMessage, TopicInfo, open_log
+from .log_trajectory import read_trajectory_from_log
+
+__all__ = ["open_log", "LogReader", "LogMessage", "RawMessage", "TopicInfo", "read_trajectory_from_log"]
+
+try:  # trajectory file formats live in their own module (written separately)
+    from . import trajectory_files as _tf_files
+    from .trajectory_files import *  # noqa: F401,F403
+
+    __all__ += [n for n in getattr(_tf_files, "__all__", []) if n not in __all__]
+except ImportError:  # pragma: no cover - only while that module does not exist yet
+    pass

@@ -1,1 +1,17 @@
-"""slam_lcd.lcd"""
+"""slam_lcd.lcd: loop-closure detection and verification (issue #6).
+
+Public API (docs/CONTRACTS.md): :func:`verify_graph` -> :class:`GraphVerdict`,
+:func:`estimate_loop_pose` -> :class:`PoseVerdict`, :func:`verify_epipolar`,
+:class:`LoopDetector` (``add(keyframe) -> list[LoopClosure]``, ``records``).
+"""
+from .config import LcdConfig
+from .detector import VERIFY_MODES, CandidateRecord, LoopDetector
+from .geometry import EpipolarVerdict, PoseVerdict, default_camera, estimate_loop_pose, keyframe_points3d, verify_epipolar
+from .graph import GraphVerdict, planar_graph, verify_graph
+from .temporal import TemporalConsistency
+
+__all__ = [
+    "LcdConfig", "VERIFY_MODES", "CandidateRecord", "LoopDetector", "EpipolarVerdict", "PoseVerdict",
+    "default_camera", "estimate_loop_pose", "keyframe_points3d", "verify_epipolar", "GraphVerdict",
+    "planar_graph", "verify_graph", "TemporalConsistency",
+]

@@ -2,8 +2,51 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 
 @dataclass
 class LcdConfig:
-    pass
+    # --- candidate retrieval (Bag of Words) ---
+    top_k: int = 5  # BoW candidates verified per query keyframe
+    min_bow_score: float = 0.0  # candidates scoring below this are not verified at all
+    exclude_recent_n: int = 20  # skip the last N keyframes (they look alike without being loops)
+    exclude_recent_s: float = 0.0  # skip keyframes newer than this many seconds before the query
+    verify: Literal["none", "ransac", "graph", "graph+ransac"] = "graph+ransac"  # verification chain
+    pose: bool = True  # estimate a metric T_match_query for accepted loops (needs camera + depth/stereo/landmarks)
+    require_pose: bool = True  # reject a verified loop when no metric pose can be estimated (when pose=True)
+
+    # --- matching ---
+    match_ratio: float | None = 0.9  # Lowe ratio on top of mutual nearest neighbours (None: off)
+    match_max_distance_sp: float | None = 0.8  # max L2 distance between SuperPoint descriptors (None: off)
+    match_max_distance_orb: float | None = 64.0  # max Hamming distance between ORB descriptors (None: off)
+
+    # --- graph verification (paper III-E) ---
+    graph_min_matches: int = 20  # fewer one-to-one matches than this: reject before building a graph
+    graph_min_nodes: int = 20  # nodes that must survive the pruning
+    graph_min_node_ratio: float = 0.3  # surviving nodes / matches must reach this
+    graph_min_score: float = 0.8  # structural agreement of the surviving graphs (0..1) must reach this
+    graph_max_edge_factor: float = 3.0  # drop triangles with an edge longer than this x median edge (non-convex hull)
+    graph_node_threshold: float = 0.2  # a node whose violation score exceeds this is removed
+    graph_remove_fraction: float = 0.2  # at most this fraction of the violating nodes is removed per iteration
+    graph_max_iterations: int = 50  # cap on pruning rounds
+    graph_min_separation_px: float = 2.0  # merge matched points closer than this (duplicates break triangulation)
+
+    # --- geometric verification (essential matrix) ---
+    ransac_threshold_px: float = 2.0  # Sampson/epipolar RANSAC threshold in pixels
+    ransac_confidence: float = 0.999  # RANSAC confidence
+    ransac_min_inliers: int = 20  # essential-matrix inliers required
+    ransac_min_inlier_ratio: float = 0.3  # inliers / matches required
+    default_focal_factor: float = 0.9  # focal = factor * image width when a keyframe has no camera model
+
+    # --- metric relative pose ---
+    pnp_threshold_px: float = 3.0  # PnP-RANSAC reprojection threshold in pixels
+    pnp_min_inliers: int = 15  # PnP inliers required for a metric pose
+    pnp_max_rms_px: float = 2.0  # reject a pose whose refined reprojection RMS exceeds this
+    min_depth_m: float = 0.1  # depth values outside [min, max] are unknown
+    max_depth_m: float = 20.0
+    pixel_sigma_px: float = 1.0  # floor of the pixel noise used for the pose information matrix
+
+    # --- temporal consistency (DBoW2-style) ---
+    temporal_k: int = 0  # accept only after k consecutive consistent detections (0: off)
+    temporal_window: int = 3  # two detections are consistent if their match ids differ by <= this

@@ -1,1 +1,26 @@
-"""slam_lcd.sim"""
+"""slam_lcd.sim: the built-in demo world (issue #3).
+
+A rendered indoor environment with loops, drifting odometry and exact ground truth,
+written as real log files. Public API:
+
+- :func:`build_world` / :class:`DemoWorld`: textured planes (corridors around two blocks);
+- :func:`render`: pinhole view -> (uint8 image, float32 metric depth);
+- :func:`demo_camera`, :func:`T_body_camera`: the sensor rig;
+- :func:`make_trajectory` / :func:`make_path`: laps around block A or a figure eight;
+- :func:`simulate_odometry`: drifting odometry with honest covariance;
+- :func:`gt_loop_pairs`, :func:`write_loop_pairs`: ground-truth loop pairs;
+- :func:`make_demo_log`: everything written as MCAP / rosbag2 / ROS1 bag / folder.
+"""
+from .demo_log import DemoLogInfo, loops_path_for, make_demo_log
+from .loops import gt_loop_pairs, read_loop_pairs, write_loop_pairs
+from .odometry import OdometryNoise, end_drift, simulate_odometry
+from .render import render
+from .rig import T_body_camera, T_left_right, demo_camera
+from .trajectory import DemoPath, make_path, make_trajectory
+from .world import DemoWorld, Plane, build_world
+
+__all__ = [
+    "DemoLogInfo", "DemoPath", "DemoWorld", "OdometryNoise", "Plane", "T_body_camera", "T_left_right",
+    "build_world", "demo_camera", "end_drift", "gt_loop_pairs", "loops_path_for", "make_demo_log",
+    "make_path", "make_trajectory", "read_loop_pairs", "render", "simulate_odometry", "write_loop_pairs",
+]

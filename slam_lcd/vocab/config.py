@@ -2,8 +2,52 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 
 @dataclass
 class VocabConfig:
-    pass
+    # --- incremental word learning (paper §III-C) ---
+    # Lowe ratio for matching an image to the previous one (None: mutual NN only)
+    match_ratio: float | None = 0.9
+    # max descriptor distance of a match on unit vectors (None: 0.8 for float descriptors,
+    # 1.0 for binary ones, which is Hamming 64 of 256 bits)
+    match_max_distance: float | None = None
+    # --- tree over the words ---
+    # 'dp': Dirichlet-process mixture level by level up to a root; 'hkmeans': DBoW2-style k^L
+    tree: Literal["dp", "hkmeans"] = "dp"
+    # DP tree: dimensions kept by PCA before the mixture is fitted (0: no PCA)
+    dp_pca_dims: int = 24
+    # DP tree: nodes of one level are cut into spatial blocks of at most this many before fitting
+    dp_block_size: int = 256
+    # DP tree: truncation of the stick-breaking prior (max components per block)
+    dp_truncation: int = 64
+    # DP tree: concentration of the Dirichlet process (smaller: fewer parents)
+    dp_concentration: float = 1.0
+    # DP tree: variational EM iterations per block
+    dp_max_iter: int = 30
+    # DP tree: hard-EM steps per level moving each child to its nearest parent (0: pure DP grouping)
+    dp_refine_iters: int = 10
+    # both trees: a parent with more children than this is split by k-means (bounds descent cost)
+    max_branching: int = 24
+    # hkmeans baseline: branching factor k and depth L
+    hk_branching: int = 10
+    hk_depth: int = 4
+    # seed for every random choice of training
+    seed: int = 0
+    # --- BoW database ---
+    # idf weights: from the vocabulary's training images, or from the database so far
+    idf_source: Literal["vocabulary", "database"] = "vocabulary"
+    # candidates returned by a query
+    top_k: int = 5
+    # keyframes newer than this many seconds before the query are never candidates
+    exclude_recent_s: float = 0.0
+    # the most recent this-many keyframes are never candidates
+    exclude_recent_n: int = 0
+    # divide scores by the score against the previous keyframe (DBoW2's alpha normalisation)
+    normalise_by_previous: bool = False
+    # with normalise_by_previous: skip the query when the previous-keyframe score is below this
+    min_previous_score: float = 0.005
+    # --- online mode (no pre-trained vocabulary) ---
+    # an unmatched feature closer than this to an existing word joins it instead of founding a new word
+    online_word_radius: float = 0.7

@@ -1,0 +1,147 @@
+"""Figures of trajectories and errors (matplotlib, Agg backend, no display needed).
+
+Every function returns a :class:`matplotlib.figure.Figure`; pass ``out=`` to also write it
+as PNG atomically (the file appears only when complete). The alignment used is part of
+every title, because an ATE figure without it cannot be read correctly.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import matplotlib
+
+matplotlib.use("Agg", force=False)
+import numpy as np  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+
+from ..atomic import atomic_path  # noqa: E402
+from ..types import Trajectory  # noqa: E402
+from .metrics import AteResult  # noqa: E402
+
+_PLANES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2)}
+
+
+def auto_plane(positions: np.ndarray) -> str:
+    """The coordinate plane with the largest extent ('xy' for robots, 'xz' for KITTI cameras)."""
+    if len(positions) == 0:
+        return "xy"
+    extent = np.ptp(positions, axis=0)
+    drop = int(np.argmin(extent))
+    return {0: "yz", 1: "xz", 2: "xy"}[drop]
+
+
+def save_figure(fig: Figure, out: str | Path, dpi: int = 120) -> Path:
+    """Write ``fig`` as PNG to ``out`` atomically and return the path."""
+    out = Path(out)
+    with atomic_path(out) as tmp:
+        fig.savefig(tmp, format="png", dpi=dpi, bbox_inches="tight")
+    return out
+
+
+def _new_figure(size=(7.0, 6.0)) -> Figure:
+    # a bare Figure (no pyplot): nothing global is touched, figures are garbage-collected
+    return Figure(figsize=size)
+
+
+def plot_trajectories_top(
+    trajectories: Sequence[tuple[str, Trajectory]],
+    *,
+    loop_edges: Iterable[tuple[np.ndarray, np.ndarray]] | None = None,
+    plane: str = "auto",
+    title: str = "trajectories (top view)",
+    out: str | Path | None = None,
+) -> Figure:
+    """Top view of several named trajectories; ``loop_edges`` are (p_a, p_b) position pairs."""
+    if plane == "auto":
+        plane = auto_plane(trajectories[0][1].positions if trajectories else np.zeros((0, 3)))
+    if plane not in _PLANES:
+        raise ValueError(f"plane must be one of {sorted(_PLANES)}, got {plane!r}")
+    a, b = _PLANES[plane]
+    fig = _new_figure()
+    ax = fig.add_subplot(1, 1, 1)
+    styles = ["-", "--", "-.", ":"]
+    for k, (name, traj) in enumerate(trajectories):
+        p = traj.positions
+        ax.plot(p[:, a], p[:, b], styles[k % len(styles)], linewidth=1.2, label=f"{name} ({len(traj)} poses)")
+        if len(p):
+            ax.plot(p[0, a], p[0, b], "o", color=ax.lines[-1].get_color(), markersize=4)
+    if loop_edges is not None:
+        edges = list(loop_edges)
+        for i, (pa, pb) in enumerate(edges):
+            ax.plot(
+                [pa[a], pb[a]], [pa[b], pb[b]], "-", color="tab:red", linewidth=0.8, alpha=0.7,
+                label=f"loop edges ({len(edges)})" if i == 0 else None,
+            )
+    ax.set_xlabel(f"{'xyz'[a]} [m]")
+    ax.set_ylabel(f"{'xyz'[b]} [m]")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    ax.set_title(title)
+    if out is not None:
+        save_figure(fig, out)
+    return fig
+
+
+def plot_error_over_time(
+    results: Sequence[tuple[str, AteResult]],
+    *,
+    title: str | None = None,
+    out: str | Path | None = None,
+) -> Figure:
+    """Translation ATE of each result against time since the first matched stamp."""
+    fig = _new_figure((8.0, 4.0))
+    ax = fig.add_subplot(1, 1, 1)
+    t0 = min(int(r.stamps[0]) for _, r in results if len(r.stamps)) if results else 0
+    labels = set()
+    for name, res in results:
+        t = (res.stamps - t0) * 1e-9
+        ax.plot(t, res.errors, linewidth=1.0, label=f"{name}: RMSE {res.rmse:.4f} m")
+        labels.add(res.alignment.label)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("translation error [m]")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    ax.set_title(title or f"ATE over time ({', '.join(sorted(labels))})")
+    if out is not None:
+        save_figure(fig, out)
+    return fig
+
+
+def plot_ate(
+    ref: Trajectory,
+    result: AteResult,
+    *,
+    est_name: str = "estimate",
+    ref_name: str = "reference",
+    plane: str = "auto",
+    out: str | Path | None = None,
+) -> Figure:
+    """Two panels: top view of reference and aligned estimate, and the error over time."""
+    fig = _new_figure((13.0, 5.5))
+    ax1 = fig.add_subplot(1, 2, 1)
+    p_ref = ref.positions
+    a, b = _PLANES[auto_plane(p_ref) if plane == "auto" else plane]
+    ax1.plot(p_ref[:, a], p_ref[:, b], "-", color="0.4", linewidth=1.0, label=f"{ref_name} ({len(ref)})")
+    if result.est_aligned is not None:
+        p = result.est_aligned.positions
+        ax1.plot(p[:, a], p[:, b], "-", color="tab:blue", linewidth=1.0, label=f"{est_name}, aligned ({len(p)})")
+    ax1.set_xlabel(f"{'xyz'[a]} [m]")
+    ax1.set_ylabel(f"{'xyz'[b]} [m]")
+    ax1.set_aspect("equal", adjustable="datalim")
+    ax1.grid(True, alpha=0.3)
+    ax1.legend(loc="best", fontsize=8)
+    ax1.set_title(f"top view ({result.alignment.label})")
+    ax2 = fig.add_subplot(1, 2, 2)
+    t = (result.stamps - result.stamps[0]) * 1e-9
+    ax2.plot(t, result.errors, color="tab:blue", linewidth=1.0)
+    ax2.axhline(result.rmse, color="tab:red", linewidth=1.0, label=f"RMSE {result.rmse:.4f} m")
+    ax2.set_xlabel("time [s]")
+    ax2.set_ylabel("translation error [m]")
+    ax2.grid(True, alpha=0.3)
+    ax2.legend(loc="best", fontsize=8)
+    ax2.set_title(f"ATE over time ({result.alignment.label})")
+    if out is not None:
+        save_figure(fig, out)
+    return fig

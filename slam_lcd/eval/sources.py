@@ -1,0 +1,62 @@
+"""Where a trajectory to evaluate comes from: a TUM/KITTI/EuRoC file or ``LOG:TOPIC``.
+
+``LOG:TOPIC`` (``run.mcap:/odom``, ``data.bag:/groundtruth``) names a pose topic of a ROS1
+bag, rosbag2 folder or MCAP file; the part before the first ``:`` that names an existing
+path is the log. A TF frame pair is ``LOG:/tf:PARENT:CHILD`` (``run.bag:/tf:map:base_link``) or, as evo
+spells it, ``LOG:/tf:PARENT.CHILD``.
+Reading topics is delegated to ``slam_lcd.io.read_trajectory_from_log``.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..errors import FileMissingError, NotBuiltError
+from ..io.trajectory_files import read_trajectory
+from ..types import Trajectory
+
+
+def split_log_topic(spec: str) -> tuple[str, str] | None:
+    """``(log, topic)`` when ``spec`` is ``LOG:TOPIC`` and not itself an existing file, else None."""
+    if Path(spec).exists() or ":" not in spec:
+        return None
+    # prefer the split whose log part exists (paths may contain ':' themselves)
+    positions = [i for i, c in enumerate(spec) if c == ":"]
+    for i in positions:
+        if Path(spec[:i]).exists() and spec[i + 1 :]:
+            return spec[:i], spec[i + 1 :]
+    i = positions[0]
+    if spec[i + 1 :].startswith("/"):
+        return spec[:i], spec[i + 1 :]
+    return None
+
+
+def load_trajectory_source(spec: str, fmt: str | None = None, times_path: str | None = None) -> Trajectory:
+    """Read a trajectory from a file (format ``fmt`` or detected) or from ``LOG:TOPIC``."""
+    log_topic = split_log_topic(str(spec))
+    if log_topic is None:
+        if not Path(spec).exists():
+            raise FileMissingError("trajectory file not found", spec)
+        return read_trajectory(spec, fmt, times_path=times_path)
+    log, topic = log_topic
+    if not Path(log).exists():
+        raise FileMissingError("log not found (argument read as LOG:TOPIC)", log)
+    from .. import io as slam_io
+
+    reader = getattr(slam_io, "read_trajectory_from_log", None)
+    if reader is None:
+        raise NotBuiltError(
+            f"reading a trajectory from a log topic ({topic}) is not built yet "
+            "(slam_lcd.io.read_trajectory_from_log is missing)",
+            log,
+        )
+    from ..errors import InputError
+
+    parts = topic.split(":")
+    if len(parts) == 1:
+        return reader(log, topic)
+    if len(parts) == 2 and parts[1].count(".") == 1 and all(parts[1].split(".")):
+        parent, child = parts[1].split(".")  # evo's spelling: /tf:PARENT.CHILD
+        return reader(log, parts[0], parent_frame=parent, child_frame=child)
+    if len(parts) == 3 and all(parts):
+        return reader(log, parts[0], parent_frame=parts[1], child_frame=parts[2])
+    raise InputError(f"cannot read {topic!r} as TOPIC or TOPIC:PARENT_FRAME:CHILD_FRAME", log)

@@ -1,0 +1,241 @@
+"""Extractors: numpy images in, :class:`slam_lcd.types.Features` out.
+
+Every stage calls features through this one interface, so SuperPoint (learned, float
+descriptors) and ORB (OpenCV, binary descriptors, the DBoW2-style baseline) can be
+swapped by ``features.kind``.
+"""
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+from abc import ABC, abstractmethod
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import cv2
+import numpy as np
+import torch
+
+from ..errors import ConfigError, InputError
+from ..types import Features
+from .config import FeaturesConfig
+from .superpoint import SuperPoint
+from .weights import load_state_dict_checked, resolve_weights, sha256_of
+
+
+def to_gray_float(image: np.ndarray) -> np.ndarray:
+    """uint8/uint16 gray or RGB, or float gray in [0, 1] -> float32 H x W in [0, 1]."""
+    img = np.asarray(image)
+    if img.ndim == 3 and img.shape[2] == 1:
+        img = img[:, :, 0]
+    if img.ndim == 3 and img.shape[2] in (3, 4):
+        if img.dtype == np.uint8:
+            img = cv2.cvtColor(img[:, :, :3], cv2.COLOR_RGB2GRAY)
+        else:
+            img = img[:, :, :3].astype(np.float32) @ np.array([0.299, 0.587, 0.114], np.float32)
+    if img.ndim != 2:
+        raise InputError(f"expected a grayscale or RGB image, got an array of shape {img.shape}")
+    if img.dtype == np.uint8:
+        return img.astype(np.float32) * (1.0 / 255.0)
+    if img.dtype == np.uint16:
+        return img.astype(np.float32) * (1.0 / 65535.0)
+    if np.issubdtype(img.dtype, np.floating):
+        return np.ascontiguousarray(img, dtype=np.float32)
+    raise InputError(f"unsupported image dtype {img.dtype}")
+
+
+def to_gray_uint8(image: np.ndarray) -> np.ndarray:
+    img = np.asarray(image)
+    if img.dtype == np.uint8 and img.ndim == 2:
+        return img
+    if img.dtype == np.uint8 and img.ndim == 3 and img.shape[2] == 1:
+        return img[:, :, 0]
+    g = to_gray_float(img)
+    return np.clip(g * 255.0 + 0.5, 0, 255).astype(np.uint8)
+
+
+def resolve_device(device: str) -> torch.device:
+    if device == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if device == "cuda" and not torch.cuda.is_available():
+        raise ConfigError("features.device is 'cuda' but PyTorch sees no CUDA device; use 'cpu' or 'auto'")
+    if device not in ("cpu", "cuda") and not device.startswith("cuda:"):
+        raise ConfigError(f"features.device must be 'auto', 'cpu' or 'cuda', got {device!r}")
+    return torch.device(device)
+
+
+class Extractor(ABC):
+    """Common interface of every feature extractor."""
+
+    kind: str = ""
+    descriptor_dim: int = 0
+    descriptor_dtype = np.float32
+
+    def __init__(self, conf: FeaturesConfig):
+        self.conf = conf
+
+    @abstractmethod
+    def extract(self, image: np.ndarray) -> Features:
+        """Keypoints, scores and descriptors of one image (strongest first)."""
+
+    def extract_batch(self, images: Iterable[np.ndarray]) -> list[Features]:
+        return [self.extract(im) for im in images]
+
+    def identity(self) -> dict:
+        """What determines the output: used as the feature-cache key (device excluded)."""
+        return {"kind": self.kind}
+
+    @property
+    def fingerprint(self) -> str:
+        text = json.dumps(self.identity(), sort_keys=True)
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+class SuperPointExtractor(Extractor):
+    """SuperPoint on CPU or CUDA, batched, under ``torch.inference_mode``."""
+
+    kind = "superpoint"
+    descriptor_dim = 256
+    descriptor_dtype = np.float32
+
+    def __init__(self, conf: FeaturesConfig, weights: str | Path | None = None, device: str = "auto",
+                 model: SuperPoint | None = None):
+        super().__init__(conf)
+        self.device = resolve_device(device)
+        if model is None:
+            self.weights_path = resolve_weights(
+                weights or conf.weights,
+                cache=conf.cache_dir,
+                url=conf.weights_url,
+                sha256=conf.weights_sha256,
+                allow_download=conf.allow_download,
+            )
+            model = SuperPoint(self.model_conf(conf))
+            load_state_dict_checked(model, self.weights_path)
+            self._weights_id = sha256_of(self.weights_path)
+        else:  # an in-memory model (tests, benchmarks): identify it by its parameters
+            self.weights_path = None
+            h = hashlib.sha256()
+            for k, v in model.state_dict().items():
+                h.update(k.encode())
+                h.update(v.detach().cpu().numpy().tobytes())
+            self._weights_id = h.hexdigest()
+        self.model = model.eval().to(self.device)
+
+    @staticmethod
+    def model_conf(conf: FeaturesConfig) -> dict:
+        if conf.nms_radius < 0 or conf.remove_borders < 0:
+            raise ConfigError("features.nms_radius and features.remove_borders must be >= 0")
+        if conf.max_keypoints == 0 or conf.max_keypoints < -1:
+            raise ConfigError(f"features.max_keypoints must be positive or -1 (all), got {conf.max_keypoints}")
+        return {
+            "nms_radius": conf.nms_radius,
+            "keypoint_threshold": conf.keypoint_threshold,
+            "max_keypoints": conf.max_keypoints,
+            "remove_borders": conf.remove_borders,
+            "descriptor_sampling": conf.descriptor_sampling,
+        }
+
+    def identity(self) -> dict:
+        return {"kind": self.kind, "weights_sha256": self._weights_id, **self.model.conf}
+
+    def _run(self, grays: Sequence[np.ndarray]) -> list[Features]:
+        h, w = grays[0].shape
+        batch = torch.from_numpy(np.stack(grays)[:, None])
+        with torch.inference_mode():
+            out = self.model({"image": batch.to(self.device, non_blocking=True)})
+            counts = [len(k) for k in out["keypoints"]]
+            # one device-to-host copy for the whole batch: [x, y, score, descriptor...] rows
+            packed = torch.cat(
+                [torch.cat([k, s[:, None], d], dim=1) for k, s, d in
+                 zip(out["keypoints"], out["keypoint_scores"], out["descriptors"])]
+            ).float().cpu().numpy()
+        feats = []
+        for rows in np.split(packed, np.cumsum(counts)[:-1]):
+            feats.append(
+                Features(
+                    keypoints=np.ascontiguousarray(rows[:, :2]),
+                    scores=np.ascontiguousarray(rows[:, 2]),
+                    descriptors=np.ascontiguousarray(rows[:, 3:]),
+                    image_size=(int(w), int(h)),
+                    kind=self.kind,
+                )
+            )
+        return feats
+
+    def extract(self, image: np.ndarray) -> Features:
+        return self._run([to_gray_float(image)])[0]
+
+    def extract_batch(self, images: Iterable[np.ndarray]) -> list[Features]:
+        """Batched extraction; images of different sizes are grouped by size."""
+        grays = [to_gray_float(im) for im in images]
+        result: list[Features | None] = [None] * len(grays)
+        by_shape: dict[tuple[int, int], list[int]] = {}
+        for i, g in enumerate(grays):
+            by_shape.setdefault(g.shape, []).append(i)
+        bs = max(1, self.conf.batch_size)
+        for idx in by_shape.values():
+            for s in range(0, len(idx), bs):
+                chunk = idx[s : s + bs]
+                for i, f in zip(chunk, self._run([grays[i] for i in chunk])):
+                    result[i] = f
+        return result  # type: ignore[return-value]
+
+
+class OrbExtractor(Extractor):
+    """OpenCV ORB (oriented FAST + rotated BRIEF): the classical DBoW2-style baseline."""
+
+    kind = "orb"
+    descriptor_dim = 32
+    descriptor_dtype = np.uint8
+
+    def __init__(self, conf: FeaturesConfig):
+        super().__init__(conf)
+        self.orb = cv2.ORB_create(
+            nfeatures=conf.orb_n_features,
+            scaleFactor=conf.orb_scale_factor,
+            nlevels=conf.orb_n_levels,
+            fastThreshold=conf.orb_fast_threshold,
+        )
+
+    def identity(self) -> dict:
+        c = self.conf
+        return {
+            "kind": self.kind,
+            "n_features": c.orb_n_features,
+            "scale_factor": c.orb_scale_factor,
+            "n_levels": c.orb_n_levels,
+            "fast_threshold": c.orb_fast_threshold,
+            "opencv": cv2.__version__,
+        }
+
+    def extract(self, image: np.ndarray) -> Features:
+        gray = to_gray_uint8(image)
+        kps, desc = self.orb.detectAndCompute(gray, None)
+        h, w = gray.shape
+        if desc is None or not kps:
+            return Features(np.zeros((0, 2), np.float32), np.zeros(0, np.float32),
+                            np.zeros((0, 32), np.uint8), (w, h), kind=self.kind)
+        xy = np.array([k.pt for k in kps], np.float32)
+        scores = np.array([k.response for k in kps], np.float32)
+        order = np.argsort(-scores, kind="stable")
+        return Features(xy[order], scores[order], np.ascontiguousarray(desc[order]), (w, h), kind=self.kind)
+
+
+def load_extractor(conf: FeaturesConfig | None = None, *, weights: str | Path | None = None,
+                   device: str = "auto") -> Extractor:
+    """Build the extractor named by ``conf.kind``.
+
+    ``weights`` overrides ``conf.weights``; ``device`` overrides ``conf.device`` unless it is 'auto'.
+    """
+    conf = conf or FeaturesConfig()
+    if conf.kind == "orb":
+        return OrbExtractor(conf)
+    if conf.kind == "superpoint":
+        return SuperPointExtractor(conf, weights=weights, device=device if device != "auto" else conf.device)
+    raise ConfigError(f"features.kind must be 'superpoint' or 'orb', got {conf.kind!r}")
+
+
+def with_overrides(conf: FeaturesConfig, **changes) -> FeaturesConfig:
+    return dataclasses.replace(conf, **changes)

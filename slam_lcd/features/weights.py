@@ -1,0 +1,161 @@
+"""Finding, downloading and loading SuperPoint weights.
+
+Resolution order (first hit wins):
+
+1. an explicit path (``--weights PATH`` / ``FeaturesConfig.weights``);
+2. ``$SLAM_LCD_SUPERPOINT_WEIGHTS``;
+3. ``superpoint_v1.pth`` in the user cache directory (``$SLAM_LCD_CACHE_DIR`` or
+   ``~/.cache/slam-lcd``);
+4. a download of the official Magic Leap release, checked against its sha256, into that
+   cache directory (written atomically, so an interrupted download leaves nothing).
+
+An explicit path or environment variable that points nowhere is an error, never silently
+skipped: a user who names a file means that file.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+import urllib.error
+import urllib.request
+from pathlib import Path
+
+import torch
+
+from ..atomic import atomic_path
+from ..errors import DownloadError, WeightsError
+from .config import SUPERPOINT_SHA256, SUPERPOINT_URL
+
+ENV_WEIGHTS = "SLAM_LCD_SUPERPOINT_WEIGHTS"
+ENV_CACHE = "SLAM_LCD_CACHE_DIR"
+WEIGHTS_NAME = "superpoint_v1.pth"
+
+
+class WeightsDownloadError(WeightsError, DownloadError):
+    """The download of the weights failed (offline, HTTP error, checksum mismatch)."""
+
+
+def cache_dir(override: str | Path | None = None) -> Path:
+    """The user cache directory: ``override``, ``$SLAM_LCD_CACHE_DIR`` or ``~/.cache/slam-lcd``."""
+    if override:
+        return Path(override).expanduser()
+    env = os.environ.get(ENV_CACHE)
+    if env:
+        return Path(env).expanduser()
+    return Path.home() / ".cache" / "slam-lcd"
+
+
+def sha256_of(path: str | Path, chunk: int = 1 << 20) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        while block := fh.read(chunk):
+            h.update(block)
+    return h.hexdigest()
+
+
+def download_weights(url: str, target: Path, sha256: str | None, timeout: float = 30.0) -> Path:
+    """Fetch ``url`` into ``target`` atomically; refuse it if its sha256 differs."""
+    target = Path(target)
+    try:
+        with atomic_path(target) as tmp:
+            h = hashlib.sha256()
+            with urllib.request.urlopen(url, timeout=timeout) as resp, open(tmp, "wb") as fh:
+                while block := resp.read(1 << 20):
+                    h.update(block)
+                    fh.write(block)
+            digest = h.hexdigest()
+            if sha256 and digest != sha256.lower():
+                raise WeightsDownloadError(
+                    f"checksum mismatch for download from {url}: got sha256 {digest}, expected {sha256}; file discarded",
+                    target,
+                )
+    except (urllib.error.URLError, OSError, ValueError) as e:
+        reason = getattr(e, "reason", None) or e
+        raise WeightsDownloadError(
+            f"SuperPoint weights not found locally and the download from {url} failed ({reason}). "
+            f"Put the official weights file at {target}, or pass --weights PATH, "
+            f"or set ${ENV_WEIGHTS}",
+            target,
+        ) from None
+    return target
+
+
+def resolve_weights(
+    path: str | Path | None = None,
+    *,
+    cache: str | Path | None = None,
+    url: str = SUPERPOINT_URL,
+    sha256: str | None = SUPERPOINT_SHA256,
+    allow_download: bool = True,
+) -> Path:
+    """Return the path of a SuperPoint weights file (see the module docstring for the order)."""
+    if path:
+        p = Path(path).expanduser()
+        if not p.is_file():
+            raise WeightsError("SuperPoint weights file not found (given with --weights / features.weights)", p)
+        return p
+    env = os.environ.get(ENV_WEIGHTS)
+    if env:
+        p = Path(env).expanduser()
+        if not p.is_file():
+            raise WeightsError(f"SuperPoint weights file named by ${ENV_WEIGHTS} not found", p)
+        return p
+    target = cache_dir(cache) / WEIGHTS_NAME
+    if target.is_file():
+        return target
+    if not allow_download:
+        raise WeightsError(
+            f"SuperPoint weights not found and downloading is disabled. Put the official weights file "
+            f"({WEIGHTS_NAME}) at {target}, or pass --weights PATH, or set ${ENV_WEIGHTS}",
+            target,
+        )
+    return download_weights(url, target, sha256)
+
+
+def _unwrap(obj):
+    """Accept a bare state dict or the common wrappers ({'state_dict': ...}, 'module.' prefixes)."""
+    if isinstance(obj, dict):
+        for key in ("state_dict", "model_state_dict", "model"):
+            if key in obj and isinstance(obj[key], dict):
+                obj = obj[key]
+                break
+    if isinstance(obj, dict) and obj and all(isinstance(k, str) for k in obj):
+        if all(k.startswith("module.") for k in obj):
+            obj = {k[len("module.") :]: v for k, v in obj.items()}
+    return obj
+
+
+def load_state_dict_checked(model: torch.nn.Module, path: str | Path) -> None:
+    """Load ``path`` into ``model`` with ``strict=True``; any problem is a one-line WeightsError."""
+    path = Path(path)
+    try:
+        obj = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as e:  # corrupt zip/pickle, truncated file, not a torch file
+        first = str(e).strip().splitlines()[0] if str(e).strip() else ""
+        raise WeightsError(f"not a readable PyTorch weights file ({type(e).__name__}: {first[:160]})", path) from None
+    sd = _unwrap(obj)
+    if not isinstance(sd, dict) or not all(isinstance(v, torch.Tensor) for v in sd.values()):
+        raise WeightsError(f"does not hold a state dict of tensors (found {type(sd).__name__})", path)
+    expected = model.state_dict()
+    missing = [k for k in expected if k not in sd]
+    unexpected = [k for k in sd if k not in expected]
+    wrong = [
+        f"{k} has shape {tuple(sd[k].shape)} in the file but {tuple(v.shape)} in SuperPoint"
+        for k, v in expected.items()
+        if k in sd and tuple(sd[k].shape) != tuple(v.shape)
+    ]
+    problems = []
+    if wrong:
+        problems.append("; ".join(wrong[:3]) + (f" (+{len(wrong) - 3} more)" if len(wrong) > 3 else ""))
+    if missing:
+        problems.append(f"missing keys {missing[:4]}" + (f" (+{len(missing) - 4} more)" if len(missing) > 4 else ""))
+    if unexpected:
+        problems.append(
+            f"unexpected keys {unexpected[:4]}" + (f" (+{len(unexpected) - 4} more)" if len(unexpected) > 4 else "")
+        )
+    if problems:
+        raise WeightsError("not SuperPoint weights: " + "; ".join(problems), path)
+    bad = [k for k, v in sd.items() if not torch.isfinite(v).all()]
+    if bad:
+        raise WeightsError(f"weights contain NaN/inf values in {bad[:4]}", path)
+    model.load_state_dict({k: v.float() for k, v in sd.items()}, strict=True)

@@ -1,0 +1,106 @@
+"""3-D points (and their covariances) for keypoints, from a depth image or a stereo pair.
+
+Shared by the visual odometry (tracking keyframes) and by loop verification, which needs
+``Keyframe.landmarks``. Noise model: the keypoint's pixel noise spreads the point
+laterally; depth noise runs along the ray, ``sigma_z = vo_depth_sigma_per_m2 * z^2`` for a
+depth camera and ``z^2 / (f b) * sigma_disparity`` for stereo.
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from ..types import CameraModel, Features, Keyframe
+from .camera import undistort_points
+from .config import FrontendConfig
+
+
+def _covariances(camera: CameraModel, rays: np.ndarray, z: np.ndarray, sz: np.ndarray, ok: np.ndarray,
+                 conf: FrontendConfig) -> np.ndarray:
+    f = 0.5 * (camera.fx + camera.fy)
+    lat = (conf.vo_pixel_sigma / f) ** 2
+    zz = np.where(ok, z, 1.0)
+    s = np.where(ok, sz, 1.0)
+    cov = (s**2)[:, None, None] * np.einsum("ni,nj->nij", rays, rays)
+    cov[:, 0, 0] += lat * zz**2
+    cov[:, 1, 1] += lat * zz**2
+    cov[~ok] = np.eye(3)
+    return cov
+
+
+def points_from_depth(camera: CameraModel, feats: Features, depth: np.ndarray,
+                      conf: FrontendConfig | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``(points (N,3), covariances (N,3,3))`` in the camera frame; NaN rows where depth is unusable.
+
+    ``depth``: float metres or uint16 millimetres, registered to the image. Keypoints on a
+    depth discontinuity (3x3 neighbourhood disagreeing by more than 3 sigma) are dropped.
+    """
+    c = conf or FrontendConfig()
+    d = np.asarray(depth)
+    d = d.astype(np.float32) * (0.001 if d.dtype == np.uint16 else 1.0)
+    n = len(feats)
+    pts = np.full((n, 3), np.nan)
+    if n == 0:
+        return pts, np.zeros((0, 3, 3))
+    h, w = d.shape[:2]
+    kp = feats.keypoints
+    u = np.clip(np.round(kp[:, 0]).astype(int), 0, w - 1)
+    v = np.clip(np.round(kp[:, 1]).astype(int), 0, h - 1)
+    z = d[v, u].astype(np.float64)
+    zmin = cv2.erode(d, np.ones((3, 3), np.uint8))[v, u]
+    zmax = cv2.dilate(d, np.ones((3, 3), np.uint8))[v, u]
+    with np.errstate(invalid="ignore"):
+        sz = c.vo_depth_sigma_per_m2 * z**2 + 1e-3
+        ok = np.isfinite(z) & (z > c.vo_min_depth) & (z < c.vo_max_depth) & ((zmax - zmin) < 3 * sz + 0.01 * z)
+    rays = np.column_stack([undistort_points(camera, kp, normalized=True), np.ones(n)])
+    pts[ok] = rays[ok] * z[ok, None]
+    return pts, _covariances(camera, rays, z, sz, ok, c)
+
+
+def points_from_stereo(camera: CameraModel, baseline: float, feats: Features, left: np.ndarray,
+                       right: np.ndarray, extractor, conf: FrontendConfig | None = None
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """Like :func:`points_from_depth`, with depth ``f b / disparity`` from a rectified pair."""
+    from .stereo import stereo_disparities
+
+    c = conf or FrontendConfig()
+    n = len(feats)
+    pts = np.full((n, 3), np.nan)
+    if n == 0:
+        return pts, np.zeros((0, 3, 3))
+    disp = stereo_disparities(feats, left, right, extractor, c)
+    fx = camera.fx
+    with np.errstate(invalid="ignore", divide="ignore"):
+        z = fx * baseline / disp
+        ok = np.isfinite(z) & (z > c.vo_min_depth) & (z < c.vo_max_depth)
+        sz = z**2 / (fx * baseline) * c.vo_disparity_sigma_px
+    rays = np.column_stack([undistort_points(camera, feats.keypoints, normalized=True), np.ones(n)])
+    pts[ok] = rays[ok] * z[ok, None]
+    return pts, _covariances(camera, rays, z, sz, ok, c)
+
+
+def landmarks_from_sensor(kf: Keyframe, conf: FrontendConfig | None = None, extractor=None) -> np.ndarray:
+    """Fill ``kf.landmarks`` from the keyframe's own depth image or right image.
+
+    RGB-D and stereo keyframes need no neighbours for loop verification's 3-D points; a
+    monocular keyframe uses :func:`slam_lcd.frontend.triangulate_landmarks` instead.
+    """
+    if kf.features is None or kf.camera is None:
+        raise ValueError("landmarks_from_sensor needs a keyframe with features and a camera model")
+    if kf.depth is not None:
+        pts, _ = points_from_depth(kf.camera, kf.features, kf.depth, conf)
+    elif kf.right_image is not None and kf.image is not None:
+        if not kf.camera.baseline:
+            raise ValueError("stereo keyframe without a baseline in its camera model")
+        if extractor is None:
+            from .vo import default_extractor
+
+            extractor = default_extractor(conf or FrontendConfig())
+        from .vo import _gray
+
+        pts, _ = points_from_stereo(kf.camera, kf.camera.baseline, kf.features, _gray(kf.image),
+                                    _gray(kf.right_image), extractor, conf)
+    else:
+        raise ValueError("keyframe has neither a depth image nor a right image")
+    kf.landmarks = pts
+    return pts

@@ -1,0 +1,274 @@
+"""``LoopDetector``: the loop-closure plugin (keyframes in, verified loops out).
+
+Chain per keyframe: features (extracted if missing) -> Bag-of-Words candidates (top-K,
+recent keyframes excluded) -> one-to-one descriptor matches -> verification
+(``conf.verify``: 'none', 'ransac', 'graph' or 'graph+ransac') -> metric relative pose ->
+optional temporal consistency. Every candidate, accepted or not, is appended to
+``detector.records`` with the reason and the evidence, so a run can be audited and
+evaluated (``slam-lcd eval-lcd``).
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..errors import InputError
+from ..types import CameraModel, Features, Keyframe, LoopClosure
+from .config import LcdConfig
+from .geometry import EpipolarVerdict, PoseVerdict, default_camera, estimate_loop_pose, keyframe_points3d, verify_epipolar
+from .graph import GraphVerdict, verify_graph
+from .matching import match_mutual
+from .temporal import TemporalConsistency
+
+log = logging.getLogger(__name__)
+
+VERIFY_MODES = ("none", "ransac", "graph", "graph+ransac")
+
+
+@dataclass
+class CandidateRecord:
+    """One BoW candidate of one query, with every check that ran on it."""
+
+    query_id: int
+    match_id: int
+    rank: int  # 0 = best BoW score
+    bow_score: float
+    n_matches: int = 0
+    graph: GraphVerdict | None = None
+    ransac: EpipolarVerdict | None = None  # on all mutual matches
+    ransac_on_graph: EpipolarVerdict | None = None  # on the graph's surviving nodes
+    pose: PoseVerdict | None = None
+    accepted: bool = False
+    reason: str = "not_checked"
+    query_stamp: int | None = None
+    match_stamp: int | None = None
+
+    def passes(self, mode: str) -> bool:
+        """Would this candidate pass verification ``mode`` (pose and temporal checks excluded)?"""
+        if mode == "none":
+            return True
+        if mode == "ransac":
+            return bool(self.ransac and self.ransac.accepted)
+        if mode == "graph":
+            return bool(self.graph and self.graph.accepted)
+        if mode == "graph+ransac":
+            return bool(self.graph and self.graph.accepted and self.ransac_on_graph and self.ransac_on_graph.accepted)
+        raise ValueError(f"unknown verification mode {mode!r}")
+
+    def support(self, mode: str) -> float:
+        """Verified correspondences under ``mode`` (BoW score for 'none'): picks the best of a query's passing candidates."""
+        if mode == "ransac" and self.ransac is not None:
+            return float(self.ransac.inliers)
+        if mode == "graph" and self.graph is not None:
+            return float(self.graph.n_nodes)
+        if mode == "graph+ransac" and self.ransac_on_graph is not None:
+            return float(self.ransac_on_graph.inliers)
+        return float(self.bow_score)
+
+    def row(self) -> dict[str, Any]:
+        """Flat dict for CSV/JSON output."""
+        out: dict[str, Any] = {
+            "query_id": self.query_id,
+            "match_id": self.match_id,
+            "rank": self.rank,
+            "bow_score": round(float(self.bow_score), 6),
+            "n_matches": self.n_matches,
+            "accepted": self.accepted,
+            "reason": self.reason,
+            "graph_nodes": self.graph.n_nodes if self.graph else "",
+            "graph_score": round(self.graph.score, 4) if self.graph else "",
+            "graph_reason": self.graph.reason if self.graph else "",
+            "ransac_inliers": self.ransac.inliers if self.ransac else "",
+            "ransac_reason": self.ransac.reason if self.ransac else "",
+            "graph_ransac_inliers": self.ransac_on_graph.inliers if self.ransac_on_graph else "",
+            "graph_ransac_reason": self.ransac_on_graph.reason if self.ransac_on_graph else "",
+            "pose_inliers": self.pose.inliers if self.pose else "",
+            "pose_rms_px": (round(self.pose.rms, 4) if self.pose and np.isfinite(self.pose.rms) else ""),
+            "pose_reason": self.pose.reason if self.pose else "",
+        }
+        return out
+
+
+@dataclass
+class _Entry:
+    """What the detector keeps of a past keyframe (no images: features and 3-D points only)."""
+
+    id: int
+    stamp: int
+    position: int
+    features: Features
+    camera: CameraModel
+    T_body_camera: np.ndarray
+    points3d: np.ndarray | None
+    points_source: str
+    keyframe: Keyframe = field(repr=False, default=None)  # light copy without images
+
+
+class LoopDetector:
+    """Loop-closure detection usable on its own: ``add(keyframe) -> list[LoopClosure]``.
+
+    ``vocab``: a :class:`slam_lcd.vocab.Vocabulary`, or None for the online (incremental)
+    vocabulary. ``extractor``: a :class:`slam_lcd.features.Extractor` used when a keyframe
+    arrives without features. ``run_all_checks``: run graph and RANSAC verification on every
+    candidate whatever ``conf.verify`` is (evaluation compares the modes on one run).
+    """
+
+    def __init__(self, conf: LcdConfig | None = None, vocab=None, extractor=None, *, vocab_conf=None,
+                 run_all_checks: bool = False):
+        from ..vocab import BowDatabase
+
+        self.conf = conf or LcdConfig()
+        if self.conf.verify not in VERIFY_MODES:
+            raise InputError(f"lcd.verify must be one of {list(VERIFY_MODES)}, got {self.conf.verify!r}")
+        self.db = BowDatabase(vocab, vocab_conf)
+        self.extractor = extractor
+        self.run_all_checks = run_all_checks
+        self.records: list[CandidateRecord] = []
+        self.closures: list[LoopClosure] = []
+        self._entries: dict[int, _Entry] = {}
+        self._temporal = TemporalConsistency(self.conf.temporal_k, self.conf.temporal_window)
+        self._kind: str | None = None
+
+    def __len__(self) -> int:
+        return len(self._entries)
+
+    # ------------------------------------------------------------------ helpers
+    def _features(self, kf: Keyframe) -> Features:
+        if kf.features is not None:
+            return kf.features
+        if kf.image is None:
+            raise InputError(f"keyframe {kf.id} has neither features nor an image")
+        if self.extractor is None:
+            from ..features import load_extractor
+
+            self.extractor = load_extractor()
+        kf.features = self.extractor.extract(kf.image)
+        return kf.features
+
+    def _match(self, fq: Features, fm: Features) -> np.ndarray:
+        c = self.conf
+        binary = fq.descriptors.dtype == np.uint8
+        max_d = c.match_max_distance_orb if binary else c.match_max_distance_sp
+        return match_mutual(fq.descriptors, fm.descriptors, ratio=c.match_ratio, max_distance=max_d)
+
+    def _camera(self, kf: Keyframe, feats: Features) -> CameraModel:
+        if kf.camera is not None:
+            return kf.camera
+        w, h = feats.image_size
+        return default_camera(w, h, self.conf.default_focal_factor)
+
+    # ------------------------------------------------------------------ main entry
+    def add(self, kf: Keyframe) -> list[LoopClosure]:
+        """Query the database with ``kf``, verify its candidates, then insert it; returns accepted loops."""
+        if kf.id in self._entries:
+            raise InputError(f"keyframe id {kf.id} was already added to the loop detector")
+        feats = self._features(kf)
+        if self._kind is None:
+            self._kind = feats.kind
+        elif feats.kind != self._kind:
+            raise InputError(f"keyframe {kf.id} has {feats.kind} features but the detector holds {self._kind}")
+        camera = self._camera(kf, feats)
+        c = self.conf
+        points3d, source = (None, "none")
+        if c.pose and kf.camera is not None:
+            points3d, source = keyframe_points3d(kf, c)
+        position = len(self._entries)
+        light = Keyframe(id=kf.id, stamp=kf.stamp, T_world_body=kf.T_world_body, camera=camera,
+                         T_body_camera=np.asarray(kf.T_body_camera, float), features=feats,
+                         landmarks=kf.landmarks)
+        entry = _Entry(kf.id, int(kf.stamp), position, feats, camera, light.T_body_camera, points3d, source, light)
+
+        closures: list[LoopClosure] = []
+        candidates = []
+        if len(self.db) and len(feats):
+            candidates = self.db.query(
+                feats.descriptors, top_k=c.top_k, exclude_recent_s=c.exclude_recent_s,
+                exclude_recent_n=c.exclude_recent_n, query_id=kf.id, stamp_ns=int(kf.stamp),
+            )
+        records = [self._verify(entry, cand, rank) for rank, cand in enumerate(candidates)]
+        self.records.extend(records)
+
+        accepted = [r for r in records if r.accepted]
+        # the candidate with the most verified correspondences (ties: higher BoW score)
+        best = max(accepted, key=lambda r: (r.support(c.verify), r.bow_score)) if accepted else None
+        for r in accepted:
+            if r is not best:
+                r.accepted, r.reason = False, "not_best"
+        ok, run = self._temporal.update(position, self._entries[best.match_id].position if best else None)
+        if best is not None and not ok:
+            best.accepted, best.reason = False, f"temporal_pending({run}/{c.temporal_k})"
+        elif best is not None:
+            closures.append(self._closure(best))
+        self.closures.extend(closures)
+        self.db.add(kf.id, int(kf.stamp), feats.descriptors)
+        self._entries[kf.id] = entry
+        return closures
+
+    def _verify(self, q: _Entry, cand, rank: int) -> CandidateRecord:
+        c = self.conf
+        m = self._entries[cand.match_id]
+        rec = CandidateRecord(q.id, m.id, rank, float(cand.bow_score), query_stamp=q.stamp, match_stamp=m.stamp)
+        if cand.bow_score < c.min_bow_score:
+            rec.reason = "low_bow_score"
+            return rec
+        matches = self._match(q.features, m.features)
+        rec.n_matches = len(matches)
+        mode = c.verify
+        need_graph = self.run_all_checks or mode in ("graph", "graph+ransac")
+        need_ransac = self.run_all_checks or mode == "ransac"
+        kq, km = q.features.keypoints, m.features.keypoints
+        if need_graph:
+            rec.graph = verify_graph(kq, km, matches, c)
+            if rec.graph.accepted or self.run_all_checks:
+                kept = matches[rec.graph.kept] if rec.graph.accepted else matches[:0]
+                if self.run_all_checks or mode == "graph+ransac":
+                    rec.ransac_on_graph = verify_epipolar(kq, km, kept, q.camera, m.camera, c)
+        if need_ransac:
+            rec.ransac = verify_epipolar(kq, km, matches, q.camera, m.camera, c)
+        if not rec.passes(mode):
+            rec.reason = {
+                "ransac": lambda: f"ransac:{rec.ransac.reason}",
+                "graph": lambda: f"graph:{rec.graph.reason}",
+                "graph+ransac": lambda: (f"graph:{rec.graph.reason}" if not rec.graph.accepted
+                                         else f"ransac:{rec.ransac_on_graph.reason}"),
+            }[mode]()
+            return rec
+        if c.pose:
+            used = matches
+            if mode in ("graph", "graph+ransac") and rec.graph is not None:
+                used = matches[rec.graph.kept]
+            if mode == "ransac" and rec.ransac is not None:
+                used = matches[rec.ransac.mask]
+            if mode == "graph+ransac" and rec.ransac_on_graph is not None:
+                used = used[rec.ransac_on_graph.mask]
+            rec.pose = estimate_loop_pose(q.keyframe, m.keyframe, used, c, points3d_m=m.points3d,
+                                          source=m.points_source) if m.points3d is not None else \
+                estimate_loop_pose(q.keyframe, m.keyframe, used, c)
+            if not rec.pose.ok and c.require_pose:
+                rec.reason = f"pose:{rec.pose.reason}"
+                return rec
+        rec.accepted, rec.reason = True, "ok"
+        return rec
+
+    def _closure(self, r: CandidateRecord) -> LoopClosure:
+        evidence: dict[str, Any] = {"bow_score": r.bow_score, "n_matches": r.n_matches, "verify": self.conf.verify}
+        if r.graph is not None:
+            evidence.update(r.graph.evidence())
+            evidence["structural_score"] = r.graph.score
+        if r.ransac is not None:
+            evidence.update(r.ransac.evidence())
+        if r.ransac_on_graph is not None:
+            evidence["graph_ransac_inliers"] = r.ransac_on_graph.inliers
+        pose_ok = r.pose is not None and r.pose.ok
+        if r.pose is not None:
+            evidence.update(r.pose.evidence())
+        T = r.pose.T_match_query if pose_ok else np.full((4, 4), np.nan)
+        info = r.pose.information if pose_ok else np.zeros((6, 6))
+        evidence["inliers"] = (r.pose.inliers if pose_ok else
+                               (r.ransac_on_graph.inliers if r.ransac_on_graph else
+                                (r.ransac.inliers if r.ransac else (r.graph.n_nodes if r.graph else r.n_matches))))
+        return LoopClosure(query_id=r.query_id, match_id=r.match_id, T_match_query=T, information=info,
+                           evidence=evidence, query_stamp=r.query_stamp, match_stamp=r.match_stamp)

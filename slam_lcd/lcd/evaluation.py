@@ -1,0 +1,273 @@
+"""Loop-closure evaluation: ground truth loading, precision-recall, recall at 100% precision.
+
+Protocol (documented in docs/lcd.md):
+- every query keyframe yields at most one detection: among its BoW candidates that pass the
+  verification mode, the one with the most verified correspondences (graph nodes, RANSAC
+  inliers; for BoW only: the highest BoW score); its score is its BoW score;
+- a detection is a true positive when the ground truth marks (query, match) as a loop;
+- the positives are the queries that have at least one ground-truth loop with a keyframe
+  old enough to be a candidate (outside the excluded recent window);
+- the precision-recall curve sweeps a threshold over the detection scores; recall at 100%
+  precision is the largest recall whose precision is exactly 1.
+"""
+from __future__ import annotations
+
+import csv
+import io
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from ..atomic import atomic_path, write_text
+from ..errors import FileMissingError, InputError, UnsupportedFormatError
+from .detector import CandidateRecord
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".pgm", ".ppm", ".tif", ".tiff")
+
+
+def natural_key(name: str):
+    """Sort '2.jpg' before '10.jpg' (and timestamps numerically)."""
+    parts = re.split(r"(\d+(?:\.\d+)?)", name)
+    return [(0, float(t), "") if re.fullmatch(r"\d+(\.\d+)?", t) else (1, 0.0, t) for t in parts if t]
+
+
+def list_images(folder: str | Path, exclude: Iterable[str | Path] = ()) -> list[Path]:
+    """Image files of ``folder`` in natural order, without the files in ``exclude`` (e.g. a GT image)."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise FileMissingError("image folder not found", folder)
+    skip = {Path(e).resolve() for e in exclude if e is not None}
+    files = [p for p in folder.iterdir()
+             if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES and p.resolve() not in skip]
+    files.sort(key=lambda p: natural_key(p.name))
+    return files
+
+
+# ----------------------------------------------------------------------------- ground truth
+
+
+def load_loop_matrix(path: str | Path, names: Sequence[str]) -> np.ndarray:
+    """Ground-truth loop matrix (N, N) bool, ``gt[i, j]`` = keyframe i closes a loop with keyframe j.
+
+    Formats: an image (RTAB-Map ``samples_GT.bmp`` style, non-zero = loop), ``.npy`` (bool or
+    0/1 matrix), ``.csv``/``.txt`` pairs ``query,match`` given as file stems of ``names`` or as
+    0-based indices. The matrix is made symmetric.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileMissingError("ground-truth file not found", path)
+    n = len(names)
+    suffix = path.suffix.lower()
+    if suffix in IMAGE_SUFFIXES:
+        import cv2
+
+        img = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+        if img is None:
+            raise UnsupportedFormatError("cannot read the ground-truth image", path)
+        gt = img > 127
+    elif suffix == ".npy":
+        try:
+            gt = np.load(path, allow_pickle=False)
+        except (ValueError, OSError) as e:
+            raise UnsupportedFormatError(f"not a readable .npy matrix ({e.__class__.__name__})", path) from None
+        if gt.ndim != 2:
+            raise InputError(f"ground-truth matrix must be 2-D, got shape {gt.shape}", path)
+        gt = gt.astype(bool)
+    elif suffix in (".csv", ".txt"):
+        gt = np.zeros((n, n), bool)
+        stems = {Path(s).stem: k for k, s in enumerate(names)}
+        text = path.read_text(encoding="utf-8", errors="replace")
+        for line_no, row in enumerate(csv.reader(io.StringIO(text.replace(" ", ","))), 1):
+            row = [c for c in row if c.strip()]
+            if not row or row[0].startswith("#"):
+                continue
+            if len(row) < 2:
+                raise InputError(f"line {line_no}: expected 'query,match'", path)
+            ij = []
+            for tok in row[:2]:
+                tok = tok.strip()
+                if tok in stems:
+                    ij.append(stems[tok])
+                elif re.fullmatch(r"\d+", tok):
+                    ij.append(int(tok))
+                else:
+                    ij = None
+                    break
+            if ij is None:
+                if line_no == 1:
+                    continue  # header
+                raise InputError(f"line {line_no}: {row[:2]} are neither file stems nor indices", path)
+            i, j = ij
+            if not (0 <= i < n and 0 <= j < n):
+                raise InputError(f"line {line_no}: index out of range for {n} images", path)
+            gt[i, j] = True
+    else:
+        raise UnsupportedFormatError("ground truth must be an image (.bmp/.png), .npy or .csv pairs", path)
+    if gt.shape != (n, n):
+        raise InputError(f"ground-truth matrix is {gt.shape[0]}x{gt.shape[1]} but there are {n} images", path)
+    return gt | gt.T
+
+
+def loops_from_poses(poses: np.ndarray, max_dist: float, max_angle_deg: float) -> np.ndarray:
+    """Loop matrix from ground-truth poses (N, 4, 4): closer than ``max_dist`` metres and ``max_angle_deg``."""
+    p = poses[:, :3, 3]
+    d = np.linalg.norm(p[:, None] - p[None], axis=2)
+    R = poses[:, :3, :3]
+    tr = np.einsum("iab,jab->ij", R, R)  # trace(Ri^T Rj)
+    ang = np.degrees(np.arccos(np.clip((tr - 1) / 2, -1, 1)))
+    gt = (d <= max_dist) & (ang <= max_angle_deg)
+    np.fill_diagonal(gt, False)
+    return gt
+
+
+# ----------------------------------------------------------------------------- metrics
+
+
+@dataclass
+class PRResult:
+    mode: str
+    precision: np.ndarray  # at each threshold (detections sorted by score, best first)
+    recall: np.ndarray
+    thresholds: np.ndarray
+    recall_at_100p: float
+    precision_all: float  # precision of every detection (the detector's own operating point)
+    recall_all: float
+    n_detections: int
+    n_true: int
+    n_positives: int
+
+    def summary(self) -> dict:
+        return {
+            "mode": self.mode,
+            "recall_at_100_precision": round(self.recall_at_100p, 4),
+            "precision": round(self.precision_all, 4),
+            "recall": round(self.recall_all, 4),
+            "detections": self.n_detections,
+            "true_detections": self.n_true,
+            "positives": self.n_positives,
+        }
+
+
+def detections(records: Iterable[CandidateRecord], mode: str) -> dict[int, CandidateRecord]:
+    """Per query, the candidate passing ``mode`` with the most verified correspondences (as the detector picks)."""
+    best: dict[int, CandidateRecord] = {}
+    for r in records:
+        if r.reason == "low_bow_score" or not r.passes(mode):
+            continue
+        b = best.get(r.query_id)
+        if b is None or (r.support(mode), r.bow_score) > (b.support(mode), b.bow_score):
+            best[r.query_id] = r
+    return best
+
+
+def positives(gt: np.ndarray, exclude_recent_n: int) -> np.ndarray:
+    """Queries (positions) having a ground-truth loop with an older keyframe outside the recent window."""
+    n = len(gt)
+    pos = np.zeros(n, bool)
+    for i in range(n):
+        upto = i - max(exclude_recent_n, 0)
+        if upto > 0:
+            pos[i] = bool(gt[i, :upto].any())
+    return pos
+
+
+def precision_recall(records: Sequence[CandidateRecord], gt: np.ndarray, mode: str, exclude_recent_n: int) -> PRResult:
+    """PR curve of ``mode`` over the detections (keyframe ids must be positions 0..N-1 of ``gt``)."""
+    det = sorted(detections(records, mode).values(), key=lambda r: -r.bow_score)
+    n_pos = int(positives(gt, exclude_recent_n).sum())
+    correct = np.array([bool(gt[r.query_id, r.match_id]) for r in det], dtype=bool)
+    scores = np.array([r.bow_score for r in det], dtype=np.float64)
+    tp = np.cumsum(correct)
+    k = np.arange(1, len(det) + 1)
+    precision = tp / np.maximum(k, 1)
+    recall = tp / max(n_pos, 1)
+    # thresholds: only the last detection of a run of equal scores is a valid cut
+    valid = np.ones(len(det), bool)
+    if len(det) > 1:
+        valid[:-1] = scores[:-1] != scores[1:]
+    perfect = valid & (precision >= 1.0)
+    r100 = float(recall[perfect].max()) if perfect.any() else 0.0
+    return PRResult(
+        mode=mode,
+        precision=precision[valid],
+        recall=recall[valid],
+        thresholds=scores[valid],
+        recall_at_100p=r100,
+        precision_all=float(precision[-1]) if len(det) else 1.0,
+        recall_all=float(recall[-1]) if len(det) else 0.0,
+        n_detections=len(det),
+        n_true=int(correct.sum()),
+        n_positives=n_pos,
+    )
+
+
+# ----------------------------------------------------------------------------- outputs
+
+
+def format_table(results: Sequence[PRResult], features: str) -> str:
+    lines = [f"{'features':<11} {'verification':<16} {'R@100P':>7} {'precision':>9} {'recall':>7} {'detections':>10}"]
+    for r in results:
+        label = "BoW only" if r.mode == "none" else f"BoW+{r.mode.replace('+', '+')}"
+        lines.append(
+            f"{features:<11} {label:<16} {r.recall_at_100p:7.3f} {r.precision_all:9.3f} {r.recall_all:7.3f} "
+            f"{r.n_true:>4}/{r.n_detections:<5}"
+        )
+    return "\n".join(lines)
+
+
+def write_candidates_csv(path: str | Path, records: Sequence[CandidateRecord], gt: np.ndarray | None,
+                         names: Sequence[str] | None = None) -> None:
+    rows = []
+    for r in records:
+        row = r.row()
+        if names is not None:
+            row = {"query": Path(names[r.query_id]).name, "match": Path(names[r.match_id]).name, **row}
+        if gt is not None:
+            row["gt_loop"] = bool(gt[r.query_id, r.match_id])
+        for mode in ("ransac", "graph", "graph+ransac"):
+            row[f"pass_{mode}"] = r.passes(mode)
+        rows.append(row)
+    buf = io.StringIO()
+    if rows:
+        w = csv.DictWriter(buf, fieldnames=list(rows[0].keys()))
+        w.writeheader()
+        w.writerows(rows)
+    write_text(path, buf.getvalue())
+
+
+def write_pr_csv(path: str | Path, results: Sequence[PRResult]) -> None:
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(["mode", "threshold", "precision", "recall"])
+    for r in results:
+        for t, p, rc in zip(r.thresholds, r.precision, r.recall):
+            w.writerow([r.mode, f"{t:.6f}", f"{p:.6f}", f"{rc:.6f}"])
+    write_text(path, buf.getvalue())
+
+
+def plot_pr(path: str | Path, results: Sequence[PRResult], title: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5.5, 4.5), dpi=120)
+    for r in results:
+        if len(r.recall):
+            rec = np.concatenate([[0.0], r.recall])
+            pre = np.concatenate([[1.0], r.precision])
+            ax.plot(rec, pre, marker=".", label=f"{r.mode} (R@100P {r.recall_at_100p:.2f})")
+    ax.set_xlabel("recall")
+    ax.set_ylabel("precision")
+    ax.set_xlim(0, 1.02)
+    ax.set_ylim(0, 1.02)
+    ax.grid(alpha=0.3)
+    ax.set_title(title)
+    ax.legend(loc="lower left", fontsize=8)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png")
+    plt.close(fig)

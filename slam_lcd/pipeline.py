@@ -1,0 +1,254 @@
+"""The whole chain as one object: odometry + images in, loop closures and a corrected trajectory out.
+
+:class:`Pipeline` is the plugin API: a user's own front end feeds it odometry samples and
+camera frames (or ready-made keyframes) and gets loop closures through a callback and the
+corrected trajectory at any time. :func:`slam_lcd.runner.run_log` drives it from a recorded
+log and writes every output file.
+
+Stages and who does them:
+  keyframe selection (:mod:`slam_lcd.frontend`) → SuperPoint / ORB features
+  (:mod:`slam_lcd.features`) → Bag of SuperPoints candidates + graph verification + metric
+  pose (:mod:`slam_lcd.lcd`, :mod:`slam_lcd.vocab`) → GTSAM iSAM2 pose graph with robust loop
+  handling (:mod:`slam_lcd.backend`) → full-rate correction.
+"""
+from __future__ import annotations
+
+import time
+from collections import defaultdict
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from .backend import PoseGraph, correct_full_rate
+from .config import Config
+from .errors import InvalidPoseError, UnsortedStampsError
+from .frontend import KeyframeSelector
+from .geometry import interpolate_poses
+from .lcd import LoopDetector
+from .types import CameraModel, Keyframe, LoopClosure, Trajectory
+
+
+@dataclass
+class _Frame:
+    stamp: int
+    image: np.ndarray
+    depth: np.ndarray | None = None
+    right_image: np.ndarray | None = None
+
+
+@dataclass
+class StageTimer:
+    """Wall time and call count per named stage (for reports and tools/bench_pipeline.py)."""
+
+    seconds: dict = field(default_factory=lambda: defaultdict(float))
+    calls: dict = field(default_factory=lambda: defaultdict(int))
+
+    @contextmanager
+    def __call__(self, stage: str):
+        t0 = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.seconds[stage] += time.perf_counter() - t0
+            self.calls[stage] += 1
+
+    def as_dict(self) -> dict:
+        return {k: {"seconds": round(v, 4), "calls": self.calls[k]} for k, v in self.seconds.items()}
+
+
+class Pipeline:
+    """Incremental loop-closing back end.
+
+    Feed :meth:`add_odometry` with every odometry sample (any rate) and :meth:`add_image`
+    with camera frames; frames wait until odometry covers their stamp, then the keyframe
+    selector decides, loop detection runs on each keyframe and verified loops go to iSAM2.
+    Or skip our front end and call :meth:`add_keyframe` directly.
+
+    ``on_loop(closure, record)`` is called for every loop the back end accepts.
+    """
+
+    def __init__(
+        self,
+        config: Config | None = None,
+        *,
+        camera: CameraModel | None = None,
+        T_body_camera: np.ndarray | None = None,
+        extractor=None,
+        vocab=None,
+        on_loop: Callable[[LoopClosure, object], None] | None = None,
+    ):
+        self.config = config or Config()
+        self.camera = camera
+        self.T_body_camera = np.eye(4) if T_body_camera is None else np.asarray(T_body_camera, float)
+        if extractor is None:
+            from .features import load_extractor
+
+            extractor = load_extractor(self.config.features)
+        self.extractor = extractor
+        self.selector = KeyframeSelector(self.config.frontend, camera=camera, T_body_camera=self.T_body_camera)
+        self.detector = LoopDetector(self.config.lcd, vocab=vocab, extractor=extractor)
+        self.graph = PoseGraph(self.config.backend)
+        self.on_loop = on_loop
+        # optional (stamp, image) -> Features, e.g. an on-disk cache keyed by log/topic/stamp
+        self.feature_source: Callable[[int, np.ndarray], object] | None = None
+        self.timer = StageTimer()
+        self.keyframes: list[Keyframe] = []
+        self.closures: list[LoopClosure] = []
+        self._odom_stamps: list[int] = []
+        self._odom_poses: list[np.ndarray] = []
+        self._odom_covs: list[np.ndarray | None] = []
+        self._pending: list[_Frame] = []
+        self._finalized = False
+
+    # ------------------------------------------------------------------ inputs
+    def set_camera(self, camera: CameraModel, T_body_camera: np.ndarray | None = None) -> None:
+        self.camera = camera
+        self.selector.camera = camera
+        if T_body_camera is not None:
+            self.T_body_camera = np.asarray(T_body_camera, float)
+            self.selector.T_body_camera = self.T_body_camera.copy()
+
+    def add_odometry(self, stamp_ns: int, T_world_body: np.ndarray, covariance: np.ndarray | None = None) -> list[LoopClosure]:
+        """One odometry sample; returns the loops found on frames this sample released."""
+        T = np.asarray(T_world_body, dtype=np.float64).reshape(4, 4)
+        if not np.all(np.isfinite(T)):
+            raise InvalidPoseError(f"odometry pose at stamp {stamp_ns} has NaN/inf values")
+        if self._odom_stamps and stamp_ns < self._odom_stamps[-1]:
+            raise UnsortedStampsError(f"odometry stamp {stamp_ns} is earlier than the previous one ({self._odom_stamps[-1]})")
+        self._odom_stamps.append(int(stamp_ns))
+        self._odom_poses.append(T)
+        self._odom_covs.append(None if covariance is None else np.asarray(covariance, float).reshape(6, 6))
+        return self._release(final=False)
+
+    def add_image(self, stamp_ns: int, image: np.ndarray, *, depth: np.ndarray | None = None,
+                  right_image: np.ndarray | None = None) -> list[LoopClosure]:
+        """One camera frame (grayscale or RGB); processed once odometry reaches its stamp."""
+        self._pending.append(_Frame(int(stamp_ns), image, depth, right_image))
+        return self._release(final=False)
+
+    def attach_depth(self, stamp_ns: int, depth: np.ndarray) -> None:
+        """Attach a depth image to a frame still waiting (logs may write depth after the image)."""
+        for f in self._pending:
+            if f.stamp == stamp_ns:
+                f.depth = depth
+
+    def add_keyframe(self, kf: Keyframe) -> list[LoopClosure]:
+        """Plugin entry for a user's own front end: a ready keyframe (pose = odometry)."""
+        kf.id = len(self.keyframes)
+        if kf.camera is None:
+            kf.camera = self.camera
+        if kf.features is None and kf.image is not None:
+            kf.features = self._extract(kf.stamp, kf.image)
+        with self.timer("backend"):
+            self.graph.add_keyframe(kf.id, kf.stamp, kf.T_world_body, kf.covariance_since_last)
+        with self.timer("loop_detection"):
+            closures = self.detector.add(kf)
+        accepted = []
+        for c in closures:
+            if not np.all(np.isfinite(c.T_match_query)):
+                continue  # verified by appearance but no metric pose: nothing to add to the graph
+            with self.timer("backend"):
+                rec = self.graph.add_loop(c)
+            self.closures.append(c)
+            if getattr(rec, "verdict", "") == "accepted":
+                accepted.append(c)
+                if self.on_loop is not None:
+                    self.on_loop(c, rec)
+        # keep memory bounded: the detector stores what it needs of past keyframes
+        kf.image = None
+        kf.right_image = None
+        kf.depth = None
+        self.keyframes.append(kf)
+        return accepted
+
+    # ------------------------------------------------------------------ internals
+    def _extract(self, stamp: int, image: np.ndarray):
+        with self.timer("features"):
+            if self.feature_source is not None:
+                return self.feature_source(stamp, image)
+            return self.extractor.extract(image)
+
+    def _odom_at(self, stamp: int):
+        st = np.asarray(self._odom_stamps, dtype=np.int64)
+        T = interpolate_poses(st, np.asarray(self._odom_poses), np.array([stamp]))[0]
+        j = int(np.clip(np.searchsorted(st, stamp), 0, len(st) - 1))
+        return T, self._odom_covs[j]
+
+    def _release(self, final: bool) -> list[LoopClosure]:
+        out: list[LoopClosure] = []
+        if not self._odom_stamps:
+            if final:
+                self._pending.clear()
+            return out
+        last = self._odom_stamps[-1]
+        keep = []
+        for f in self._pending:
+            if f.stamp <= last or final:
+                if f.stamp < self._odom_stamps[0]:
+                    continue  # before the first odometry sample: no pose to attach
+                out += self._process(f)
+            else:
+                keep.append(f)
+        self._pending = keep
+        return out
+
+    def _process(self, f: _Frame) -> list[LoopClosure]:
+        T, cov = self._odom_at(f.stamp)
+        features = None
+        if self.config.frontend.kf_min_overlap > 0:
+            features = self._extract(f.stamp, f.image)
+        with self.timer("keyframe_selection"):
+            is_kf = self.selector.push(f.stamp, T, cov, image=f.image, features=features,
+                                       depth=f.depth, right_image=f.right_image)
+        if not is_kf:
+            return []
+        kf = self.selector.keyframes[-1]
+        # the selector's list is only for its own bookkeeping: drop heavy fields there
+        self.selector.keyframes[-1] = Keyframe(
+            id=kf.id, stamp=kf.stamp, T_world_body=kf.T_world_body, features=kf.features,
+            covariance_since_last=kf.covariance_since_last)
+        return self.add_keyframe(kf)
+
+    # ------------------------------------------------------------------ results
+    def flush(self) -> list[LoopClosure]:
+        """Process frames still waiting for odometry (uses the last odometry pose)."""
+        return self._release(final=True)
+
+    def finalize(self):
+        """Flush waiting frames and run the back end's final batch re-check (idempotent)."""
+        self.flush()
+        if not self._finalized:
+            with self.timer("backend"):
+                self.graph.finalize()
+            self._finalized = True
+        return self
+
+    def odometry_trajectory(self) -> Trajectory:
+        return Trajectory(np.asarray(self._odom_stamps, np.int64), np.asarray(self._odom_poses).reshape(-1, 4, 4))
+
+    def keyframe_trajectory(self) -> Trajectory:
+        """Corrected keyframe poses (current iSAM2 estimate)."""
+        return self.graph.keyframe_trajectory()
+
+    def keyframe_odometry(self) -> Trajectory:
+        return Trajectory(np.array([k.stamp for k in self.keyframes], np.int64),
+                          np.array([k.T_world_body for k in self.keyframes]).reshape(-1, 4, 4))
+
+    def corrected_trajectory(self) -> Trajectory:
+        """Every odometry stamp with the loop correction carried from the keyframes."""
+        odom = self.odometry_trajectory()
+        if len(self.keyframes) == 0:
+            return odom
+        kf_odom = self.keyframe_odometry()
+        kf_corr = self.keyframe_trajectory()
+        return correct_full_rate(odom, kf_odom.stamps, kf_odom.poses, kf_corr.poses)
+
+    @property
+    def loop_records(self):
+        return self.graph.loop_records
+
+    @property
+    def candidate_records(self):
+        return self.detector.records

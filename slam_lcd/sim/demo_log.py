@@ -1,0 +1,349 @@
+"""Write the demo world as a real log (MCAP, rosbag2, ROS1 bag) or as a plain folder.
+
+Topics (camera 10 Hz, odometry and ground truth 50 Hz; every message's log time is its
+header stamp; messages are written in time order):
+
+=============================== =========================== ======================================
+topic                           type                        content
+=============================== =========================== ======================================
+/camera/image_raw               sensor_msgs/Image           mono8 (rgb8 with ``color``), left camera
+/camera/image_raw/compressed    sensor_msgs/CompressedImage instead of the above with ``compressed``
+/camera/camera_info             sensor_msgs/CameraInfo      pinhole, no distortion
+/camera/depth                   sensor_msgs/Image           32FC1 metric z, 1/1024 m steps (``depth``)
+/camera/right/image_raw         sensor_msgs/Image           rectified right camera (``stereo``)
+/camera/right/camera_info       sensor_msgs/CameraInfo      P[0,3] = -fx * baseline (``stereo``)
+/odom                           nav_msgs/Odometry           drifting wheel odometry, odom -> base_link
+/ground_truth/pose              geometry_msgs/PoseStamped   exact base_link pose in 'world'
+/tf_static                      tf2_msgs/TFMessage          base_link -> camera(s); world -> odom
+=============================== =========================== ======================================
+
+The odometry frame coincides with 'world' at the first stamp (identity world -> odom).
+Beside the log, ``<name>_loops.csv`` lists the ground-truth loop pairs of the camera frames.
+The same arguments give byte-identical files.
+"""
+from __future__ import annotations
+
+import logging
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from ..atomic import atomic_path
+from ..errors import InputError
+from ..types import CameraModel, Trajectory
+from . import rig
+from .loops import gt_loop_pairs, write_loop_pairs
+from .odometry import end_drift, simulate_odometry
+from .render import render
+from .trajectory import START_NS, make_path, path_trajectory, sample_stamps
+from .world import build_world
+
+log = logging.getLogger(__name__)
+
+FORMATS = ("mcap", "rosbag2", "rosbag1", "folder")
+DEPTH_STEP = 1.0 / 1024.0  # depth quantisation (m): like a sensor's millimetre steps, and compresses 40x
+NOISE_SIGMA = 1.5  # image noise (grey levels)
+NOISE_BANK = 16
+
+
+@dataclass
+class DemoLogInfo:
+    """What :func:`make_demo_log` wrote."""
+
+    path: Path
+    format: str
+    frames: int
+    duration_s: float
+    path_length_m: float
+    topics: dict[str, dict] = field(default_factory=dict)  # topic -> {type, count, rate_hz}
+    loop_pairs_path: Path | None = None
+    n_loop_pairs: int = 0
+    drift: dict = field(default_factory=dict)
+    camera: CameraModel | None = None
+    T_body_camera: np.ndarray | None = None
+    wall_s: float = 0.0
+    seed: int = 0
+    kind: str = "laps"
+
+    def summary(self) -> str:
+        lines = [
+            f"wrote {self.path} ({self.format}): {self.frames} frames, {self.duration_s:.1f} s, "
+            f"{self.path_length_m:.1f} m ({self.kind}, seed {self.seed}) in {self.wall_s:.1f} s",
+            f"odometry end drift {self.drift.get('end_error_m', float('nan')):.2f} m = "
+            f"{self.drift.get('drift_percent', float('nan')):.2f} % of the path "
+            f"(yaw {self.drift.get('end_yaw_error_deg', float('nan')):+.1f} deg)",
+            f"ground-truth loop pairs: {self.n_loop_pairs} -> {self.loop_pairs_path}",
+        ]
+        for t, d in self.topics.items():
+            lines.append(f"  {t:32s} {d['type']:30s} {d['count']:6d} msgs  {d['rate_hz']:5.1f} Hz")
+        return "\n".join(lines)
+
+
+@dataclass
+class _Scenario:
+    camera: CameraModel
+    T_bc: np.ndarray
+    cam_stamps: np.ndarray
+    odo_stamps: np.ndarray
+    gt_cam: Trajectory
+    gt_odo: Trajectory
+    odom: Trajectory
+    laps: np.ndarray  # lighting epoch per camera frame
+    world: object
+
+
+def _scenario(frames, seed, kind, laps, width, height, camera_rate, odom_rate, stereo, hfov_deg=70.0) -> _Scenario:
+    if camera_rate <= 0 or odom_rate <= 0:
+        raise InputError("camera and odometry rates must be positive")
+    path = make_path(kind, laps=laps, seed=seed)
+    cam_period = int(round(1e9 / camera_rate))
+    if frames is None:
+        cam_stamps = sample_stamps(path.duration_s, camera_rate)
+    else:
+        if frames < 2:
+            raise InputError(f"--frames must be at least 2, got {frames}")
+        need = (frames - 1) * cam_period * 1e-9
+        while path.duration_s < need:
+            path = make_path(kind, laps=path.distance[-1] / path.lap_length * need / path.duration_s * 1.05 + 0.05, seed=seed)
+        cam_stamps = START_NS + cam_period * np.arange(frames, dtype=np.int64)
+    end_s = (cam_stamps[-1] - START_NS) * 1e-9
+    odo_stamps = sample_stamps(end_s, odom_rate)
+    if not 20.0 <= hfov_deg <= 150.0:
+        raise InputError(f"horizontal field of view must be within 20-150 degrees, got {hfov_deg}")
+    camera = rig.demo_camera(width, height, hfov_deg=hfov_deg, baseline=rig.STEREO_BASELINE if stereo else None)
+    gt_cam = path_trajectory(path, cam_stamps)
+    gt_odo = path_trajectory(path, odo_stamps)
+    odom = simulate_odometry(gt_odo, seed=seed, frame_id=rig.ODOM_FRAME, child_frame_id=rig.BODY_FRAME)
+    laps_at = path.laps_at((cam_stamps - START_NS) * 1e-9)
+    return _Scenario(camera, rig.T_body_camera(), cam_stamps, odo_stamps, gt_cam, gt_odo, odom, laps_at, build_world(seed))
+
+
+def _noise_bank(seed: int, shape) -> np.ndarray:
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 0x401CE]))
+    return np.round(rng.normal(0.0, NOISE_SIGMA, size=(NOISE_BANK, *shape))).astype(np.int16)
+
+
+def _add_noise(img: np.ndarray, noise: np.ndarray) -> np.ndarray:
+    return np.clip(img.astype(np.int16) + noise, 0, 255).astype(np.uint8)
+
+
+def _render_one(sc: _Scenario, i: int, bank: np.ndarray, *, color: bool, depth: bool, stereo: bool):
+    T_wc = sc.gt_cam.poses[i] @ sc.T_bc
+    img, dep = render(sc.world, sc.camera, T_wc, epoch=float(sc.laps[i]), color=color, with_depth=depth)
+    img = _add_noise(img, bank[(7 * i) % NOISE_BANK])
+    if dep is not None:
+        dep = (np.round(dep / DEPTH_STEP) * DEPTH_STEP).astype(np.float32)
+    right = None
+    if stereo:
+        T_lr = rig.T_left_right(rig.STEREO_BASELINE)
+        right, _ = render(sc.world, sc.camera, T_wc @ T_lr, epoch=float(sc.laps[i]), color=color, with_depth=False)
+        right = _add_noise(right, bank[(7 * i + 3) % NOISE_BANK])
+    return i, img, dep, right
+
+
+def render_frames(sc: _Scenario, *, color: bool, depth: bool, stereo: bool, seed: int, workers: int = 1):
+    """Yield ``(index, image, depth | None, right | None)`` for every camera frame, in order.
+
+    With ``workers >= 1`` frames are rendered ahead in that many threads (OpenCV and numpy
+    release the GIL) while the caller serialises and compresses; the output is identical
+    either way. Threads, not forked processes: forking after OpenCV started its thread pool
+    can deadlock the child.
+    """
+    shape = (sc.camera.height, sc.camera.width) + ((3,) if color else ())
+    bank = _noise_bank(seed, shape)
+    flags = dict(color=color, depth=depth, stereo=stereo)
+    n = len(sc.cam_stamps)
+    if workers < 1 or n < 8:
+        for i in range(n):
+            yield _render_one(sc, i, bank, **flags)
+        return
+    from collections import deque
+    from concurrent.futures import ThreadPoolExecutor
+
+    ahead = 4 * workers
+    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="demo-render") as pool:
+        pending: deque = deque()
+        nxt = 0
+        try:
+            while nxt < n or pending:
+                while nxt < n and len(pending) < ahead:
+                    pending.append(pool.submit(_render_one, sc, nxt, bank, **flags))
+                    nxt += 1
+                yield pending.popleft().result()
+        finally:
+            for f in pending:
+                f.cancel()
+
+
+def loops_path_for(out: Path) -> Path:
+    """Where the loop-pairs CSV of a log goes: beside it, ``<stem>_loops.csv``."""
+    out = Path(out)
+    stem = out.name[: -len(out.suffix)] if out.suffix and not out.is_dir() else out.name
+    return out.with_name(f"{stem}_loops.csv")
+
+
+def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int = 0, stereo: bool = False,
+                  depth: bool = True, *, compressed: bool = False, color: bool = False, kind: str = "laps",
+                  laps: float = 2.0, width: int = 640, height: int = 480, camera_rate: float = 10.0,
+                  odom_rate: float = 50.0, loops_csv: str | Path | None = None, progress: bool = False,
+                  io_conf=None, workers: int | None = None, hfov_deg: float = 70.0) -> DemoLogInfo:
+    """Render the demo world along a trajectory and write it as ``fmt`` at ``out``.
+
+    ``frames`` None means ``laps`` laps (default 2 laps of block A: ~850 frames at 10 Hz);
+    otherwise exactly ``frames`` camera frames. ``workers``: render threads running ahead of
+    the writer (default 1 on a machine with 2+ cores; 0 = render inline).
+    Returns a :class:`DemoLogInfo`.
+    """
+    t_start = time.perf_counter()
+    out = Path(out)
+    if fmt not in FORMATS:
+        raise InputError(f"unknown demo-log format {fmt!r}; use one of {list(FORMATS)}", out)
+    if kind not in ("laps", "figure8"):
+        raise InputError(f"unknown trajectory kind {kind!r}; use 'laps' or 'figure8'")
+    sc = _scenario(frames, seed, kind, laps, width, height, camera_rate, odom_rate, stereo, hfov_deg)
+    if workers is None:
+        workers = 1 if (os.cpu_count() or 1) >= 2 else 0
+    frames_iter = render_frames(sc, color=color, depth=depth, stereo=stereo, seed=seed, workers=workers)
+    if progress:
+        from tqdm import tqdm
+
+        frames_iter = tqdm(frames_iter, total=len(sc.cam_stamps), unit="frame", desc="rendering", leave=False)
+    if fmt == "folder":
+        counts = _write_folder(out, sc, frames_iter, color=color, depth=depth, stereo=stereo)
+    else:
+        counts = _write_log(out, fmt, sc, frames_iter, depth=depth, stereo=stereo, compressed=compressed,
+                            color=color, io_conf=io_conf)
+    pairs = gt_loop_pairs(sc.gt_cam, T_body_camera=sc.T_bc)
+    lp = Path(loops_csv) if loops_csv is not None else (out / "loop_pairs.csv" if fmt == "folder" else loops_path_for(out))
+    write_loop_pairs(lp, sc.gt_cam, pairs, T_body_camera=sc.T_bc)
+    duration = (sc.cam_stamps[-1] - sc.cam_stamps[0]) * 1e-9
+    topics = {}
+    for t, (typ, n) in counts.items():
+        topics[t] = {"type": typ, "count": n, "rate_hz": (n - 1) / duration if n > 1 and duration > 0 else 0.0}
+    return DemoLogInfo(path=out, format=fmt, frames=len(sc.cam_stamps), duration_s=float(duration),
+                       path_length_m=sc.gt_odo.path_length(), topics=topics, loop_pairs_path=lp,
+                       n_loop_pairs=len(pairs), drift=end_drift(sc.gt_odo, sc.odom), camera=sc.camera,
+                       T_body_camera=sc.T_bc, wall_s=time.perf_counter() - t_start, seed=seed, kind=kind)
+
+
+def _write_log(out, fmt, sc: _Scenario, frames_iter, *, depth, stereo, compressed, color, io_conf):
+    try:
+        from ..io import messages as M
+        from ..io.config import IOConfig
+        from ..io.writers import open_writer
+    except ImportError as e:  # pragma: no cover - the io package is part of slam-lcd
+        raise InputError(f"log writers unavailable ({e}); use --format folder") from None
+    conf = io_conf
+    if conf is None:
+        conf = IOConfig()
+        if conf.rosbag1_compression == "none":
+            conf.rosbag1_compression = "lz4"  # 1 GB of raw depth otherwise
+    cam_frame, right_frame = rig.CAMERA_FRAME, rig.RIGHT_CAMERA_FRAME
+    right_cam = CameraModel(**{**sc.camera.__dict__}) if stereo else None
+    left_cam = CameraModel(**{**sc.camera.__dict__, "baseline": None})
+    types: dict[str, str] = {}
+    odo = sc.odom
+    gt = sc.gt_odo
+    cam_index = {int(s): i for i, s in enumerate(sc.cam_stamps)}
+
+    def put(w, topic, msg, stamp):
+        types.setdefault(topic, msg.__msgtype__)
+        w.write(topic, msg, int(stamp))
+
+    with open_writer(out, fmt, conf=conf) as w:
+        t0 = int(min(sc.cam_stamps[0], sc.odo_stamps[0]))
+        statics = [(sc.T_bc, t0, rig.BODY_FRAME, cam_frame), (np.eye(4), t0, rig.WORLD_FRAME, rig.ODOM_FRAME)]
+        if stereo:
+            statics.append((sc.T_bc @ rig.T_left_right(rig.STEREO_BASELINE), t0, rig.BODY_FRAME, right_frame))
+        put(w, "/tf_static", M.tf_message(statics), t0)
+        # merge camera frames and odometry samples in time order (camera first at equal stamps)
+        events = [(int(s), 0, i) for i, s in enumerate(sc.cam_stamps)] + [(int(s), 1, i) for i, s in enumerate(sc.odo_stamps)]
+        events.sort()
+        frames_iter = iter(frames_iter)
+        for stamp, kind, i in events:
+            if kind == 0:
+                fi, img, dep, right = next(frames_iter)
+                assert fi == cam_index[stamp]
+                put(w, "/camera/camera_info", M.camera_info_msg(left_cam, stamp, cam_frame), stamp)
+                if compressed:
+                    put(w, "/camera/image_raw/compressed", M.compressed_image_msg(img, stamp, cam_frame, "jpeg", conf.jpeg_quality), stamp)
+                else:
+                    put(w, "/camera/image_raw", M.image_msg(img, stamp, cam_frame), stamp)
+                if dep is not None:
+                    put(w, "/camera/depth", M.image_msg(dep, stamp, cam_frame, "32FC1"), stamp)
+                if right is not None:
+                    put(w, "/camera/right/camera_info", M.camera_info_msg(right_cam, stamp, right_frame), stamp)
+                    if compressed:
+                        put(w, "/camera/right/image_raw/compressed",
+                            M.compressed_image_msg(right, stamp, right_frame, "jpeg", conf.jpeg_quality), stamp)
+                    else:
+                        put(w, "/camera/right/image_raw", M.image_msg(right, stamp, right_frame), stamp)
+            else:
+                put(w, "/odom", M.odometry_msg(odo.poses[i], odo.covariances[i], stamp, rig.ODOM_FRAME, rig.BODY_FRAME), stamp)
+                put(w, "/ground_truth/pose", M.pose_stamped_msg(gt.poses[i], stamp, rig.WORLD_FRAME), stamp)
+        counts = dict(w.counts)
+    return {t: (types[t], n) for t, n in counts.items()}
+
+
+def _stamp_name(stamp_ns: int) -> str:
+    return f"{stamp_ns // 1_000_000_000}.{(stamp_ns % 1_000_000_000) // 1000:06d}"
+
+
+def _write_tum(path: Path, traj: Trajectory) -> None:
+    """TUM lines ``t x y z qx qy qz qw`` (uses slam_lcd.io when present)."""
+    from ..io.trajectory_files import write_tum
+
+    write_tum(path, traj)
+
+
+def _write_folder(out: Path, sc: _Scenario, frames_iter, *, color, depth, stereo):
+    import yaml
+
+    counts: dict[str, tuple[str, int]] = {}
+    with atomic_path(out, directory=True) as tmp:
+        tmp.mkdir()
+        (tmp / "image").mkdir()
+        lists = {"image": []}
+        if depth:
+            (tmp / "depth").mkdir()
+            lists["depth"] = []
+        if stereo:
+            (tmp / "right").mkdir()
+            lists["right"] = []
+        for i, img, dep, right in frames_iter:
+            name = _stamp_name(int(sc.cam_stamps[i]))
+            bgr = cv2.cvtColor(img, cv2.COLOR_RGB2BGR) if img.ndim == 3 else img
+            cv2.imwrite(str(tmp / "image" / f"{name}.png"), bgr)
+            lists["image"].append(name)
+            if dep is not None:
+                mm = np.clip(np.round(dep * 1000.0), 0, 65535).astype(np.uint16)
+                cv2.imwrite(str(tmp / "depth" / f"{name}.png"), mm)
+                lists["depth"].append(name)
+            if right is not None:
+                cv2.imwrite(str(tmp / "right" / f"{name}.png"), cv2.cvtColor(right, cv2.COLOR_RGB2BGR) if right.ndim == 3 else right)
+                lists["right"].append(name)
+        for key, names in lists.items():
+            text = f"# {key} images of the slam-lcd demo world\n# timestamp filename\n"
+            text += "".join(f"{n} {key}/{n}.png\n" for n in names)
+            (tmp / f"{key}.txt").write_text(text, encoding="utf-8")
+            counts[f"{key}/"] = ("png", len(names))
+        _write_tum(tmp / "groundtruth.txt", sc.gt_odo)
+        _write_tum(tmp / "odometry.txt", sc.odom)
+        counts["groundtruth.txt"] = ("tum", len(sc.gt_odo))
+        counts["odometry.txt"] = ("tum", len(sc.odom))
+        cam = sc.camera
+        meta = {
+            "width": cam.width, "height": cam.height, "fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy,
+            "distortion_model": "none", "baseline_m": cam.baseline if stereo else None,
+            "depth_scale": 1000.0,  # depth PNG value / depth_scale = metres (0 = no depth)
+            "T_body_camera": [[float(v) for v in row] for row in sc.T_bc],
+            "frame_rate_hz": float(1e9 / (sc.cam_stamps[1] - sc.cam_stamps[0])) if len(sc.cam_stamps) > 1 else None,
+            "groundtruth": "base_link pose in 'world' (TUM: t x y z qx qy qz qw)",
+            "odometry": "drifting base_link pose in 'odom' (= 'world' at the first stamp)",
+        }
+        (tmp / "camera.yaml").write_text(yaml.safe_dump(meta, sort_keys=False), encoding="utf-8")
+    return counts

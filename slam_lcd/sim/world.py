@@ -1,0 +1,384 @@
+"""The demo world: textured rectangles forming corridors around two solid blocks.
+
+Layout (metres, z up, floor at z=0, ceiling at z=3)::
+
+    y=14 +-----------------------------------------------+
+         |   corridor (3 m)                              |
+    y=11 |   +-----------+   +-----------+               |
+         |   |  block A  |   |  block B  |               |
+         |   | 8 x 8 m   |   | 8 x 8 m   |               |
+    y=3  |   +-----------+   +-----------+               |
+         |                                               |
+    y=0  +-----------------------------------------------+
+         x=0 3          11  14          22              25
+
+The robot can circle block A (a 44 m loop) or run a figure eight around both blocks
+through the middle corridor. Walls carry a base material (plaster, bricks, wood, tiles)
+with posters, doors and notice boards pasted on; pillars stand out of the outer walls;
+free-standing panels cut the four outer corners. A few decal groups (a door with its
+posters) are pasted unchanged at several places: that is deliberate perceptual aliasing.
+
+Static lighting from ceiling lamps is baked into the textures; each plane also keeps its
+weights over the lamps so that the renderer can dim or brighten lamps between laps.
+Every number comes from ``numpy.random.default_rng(seed)``: the same seed gives the
+same world, bit for bit.
+"""
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from . import textures as tx
+
+HEIGHT = 3.0  # wall height (m)
+OUTER = (0.0, 0.0, 25.0, 14.0)  # x0, y0, x1, y1 of the outer walls
+BLOCKS = ((3.0, 3.0, 11.0, 11.0), (14.0, 3.0, 22.0, 11.0))  # solid blocks A and B
+WALL_RES = 160.0  # texels per metre on walls and panels (6 mm texels)
+FLOOR_RES = 80.0
+CEIL_RES = 40.0
+MAX_SEGMENT = 2.5  # walls are cut into pieces at most this wide (culling, mip choice)
+N_LIGHT_EPOCHS = 12  # lighting states prepared (laps); later epochs repeat the last one
+
+
+@dataclass
+class Plane:
+    """A textured rectangle ``origin + a*u + b*v`` for ``a in [0, width]``, ``b in [0, height]``.
+
+    Mip levels carry a one-texel border: texel (row r, column c) of level L (shape
+    ``(H_L + 2, W_L + 2)``) sits at ``a = (c - 0.5) * width / W_L``, ``b = (r - 0.5) * height / H_L``.
+    ``normal = v x u`` points into free space, towards the viewer: seen from there, ``u`` runs
+    to the right and ``v`` down, so textures appear upright and unmirrored.
+    """
+
+    name: str
+    origin: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+    width: float
+    height: float
+    gray: list[np.ndarray]  # mip pyramid, level 0 first
+    rgb: list[np.ndarray]
+    lamp_weights: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    double_sided: bool = False
+
+    @property
+    def normal(self) -> np.ndarray:
+        return np.cross(self.v, self.u)
+
+    @property
+    def corners(self) -> np.ndarray:
+        o, a, b = self.origin, self.u * self.width, self.v * self.height
+        return np.array([o, o + a, o + a + b, o + b])
+
+    def point(self, a: float, b: float) -> np.ndarray:
+        return self.origin + a * self.u + b * self.v
+
+
+@dataclass
+class DemoWorld:
+    """All planes of the world plus lamp positions and per-epoch lamp gains."""
+
+    seed: int
+    planes: list[Plane]
+    lamps: np.ndarray  # (L, 3)
+    lamp_gains: np.ndarray  # (N_LIGHT_EPOCHS, L) multiplicative gain per lamp and lighting epoch
+    exposure: np.ndarray  # (N_LIGHT_EPOCHS,) global gain per epoch
+    alias_sites: list[dict] = field(default_factory=list)  # repeated decal groups: group, wall, centre, normal
+    # stacked geometry for vectorised culling
+    corners: np.ndarray = field(init=False)
+    normals: np.ndarray = field(init=False)
+    origins: np.ndarray = field(init=False)
+
+    def __post_init__(self):
+        self.corners = np.stack([p.corners for p in self.planes])
+        self.normals = np.stack([p.normal for p in self.planes])
+        self.origins = np.stack([p.origin for p in self.planes])
+        self._weights = np.stack([p.lamp_weights for p in self.planes])
+
+    def plane_gains(self, epoch: float) -> np.ndarray:
+        """Per-plane brightness gain for a lighting epoch (lap number; fractional values blend)."""
+        e = float(np.clip(epoch, 0.0, N_LIGHT_EPOCHS - 1))
+        i0 = int(np.floor(e))
+        i1 = min(i0 + 1, N_LIGHT_EPOCHS - 1)
+        f = e - i0
+        lamp = (1 - f) * self.lamp_gains[i0] + f * self.lamp_gains[i1]
+        expo = (1 - f) * self.exposure[i0] + f * self.exposure[i1]
+        return (self._weights @ lamp) * expo
+
+    def is_free(self, xy: np.ndarray, margin: float = 0.0) -> np.ndarray:
+        """True where a floor point is inside the outer walls and outside both blocks (with margin)."""
+        xy = np.atleast_2d(xy)
+        x, y = xy[:, 0], xy[:, 1]
+        x0, y0, x1, y1 = OUTER
+        ok = (x > x0 + margin) & (x < x1 - margin) & (y > y0 + margin) & (y < y1 - margin)
+        for bx0, by0, bx1, by1 in BLOCKS:
+            ok &= ~((x > bx0 - margin) & (x < bx1 + margin) & (y > by0 - margin) & (y < by1 + margin))
+        return ok
+
+
+# --------------------------------------------------------------------------- lighting
+
+def _lamp_positions() -> np.ndarray:
+    """Ceiling lamps every 3 m along the corridor centre lines."""
+    pts = []
+    for y in (1.5, 12.5):
+        pts += [(x, y) for x in np.arange(1.5, 25.0, 3.0)]
+    for x in (1.5, 12.5, 23.5):
+        pts += [(x, y) for y in np.arange(4.5, 11.0, 3.0)]
+    xy = np.unique(np.round(np.array(pts), 3), axis=0)
+    return np.column_stack([xy, np.full(len(xy), HEIGHT - 0.05)])
+
+
+def _irradiance(points: np.ndarray, normal: np.ndarray, lamps: np.ndarray) -> np.ndarray:
+    """(N, L) lamp contributions at points with the given normal (cosine law, soft falloff)."""
+    d = lamps[None, :, :] - points[:, None, :]
+    dist2 = (d ** 2).sum(-1)
+    cos = np.clip((d @ normal) / np.sqrt(dist2 + 1e-9), 0.0, 1.0)
+    return (0.25 + cos) / (1.0 + dist2 / 4.0)
+
+
+def _bake(plane: Plane, tex: np.ndarray, lamps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Multiply baked lamp light into ``tex``; return (lit texture, lamp weights at the centre)."""
+    h, w = tex.shape[:2]
+    gh, gw = max(2, int(plane.height * 5) + 1), max(2, int(plane.width * 5) + 1)
+    a = np.linspace(0, plane.width, gw)
+    b = np.linspace(0, plane.height, gh)
+    A, B = np.meshgrid(a, b)
+    pts = plane.origin + A.reshape(-1, 1) * plane.u + B.reshape(-1, 1) * plane.v
+    contrib = _irradiance(pts, plane.normal, lamps)
+    light = contrib.sum(1).reshape(gh, gw)
+    light = 0.35 + 0.65 * light / 2.2
+    light = cv2.resize(light.astype(np.float32), (w, h), interpolation=cv2.INTER_LINEAR)
+    lit = np.clip(tex.astype(np.float32) * np.clip(light, 0.3, 1.15)[..., None], 0, 255).astype(np.uint8)
+    centre = plane.origin + 0.5 * plane.width * plane.u + 0.5 * plane.height * plane.v
+    wts = _irradiance(centre[None], plane.normal, lamps)[0]
+    return lit, wts / wts.sum()
+
+
+def _mips(img: np.ndarray) -> list[np.ndarray]:
+    """Box-filtered pyramid (INTER_AREA halving) down to ~8 texels, each level padded by one
+    replicated texel on every side (so bilinear lookups at a plane's edge never blend with black)."""
+    levels = [np.ascontiguousarray(img)]
+    while min(levels[-1].shape[:2]) >= 16:
+        h, w = levels[-1].shape[:2]
+        levels.append(cv2.resize(levels[-1], ((w + 1) // 2, (h + 1) // 2), interpolation=cv2.INTER_AREA))
+    return [cv2.copyMakeBorder(m, 1, 1, 1, 1, cv2.BORDER_REPLICATE) for m in levels]
+
+
+# --------------------------------------------------------------------------- wall painting
+
+def _decal_groups(rng: np.random.Generator) -> list[np.ndarray]:
+    """Decal groups pasted at several places (aliasing): a door flanked by posters, a sign board."""
+    r = WALL_RES
+    groups = []
+    for _ in range(3):
+        g = np.zeros((int(2.3 * r), int(2.2 * r), 3), np.uint8)
+        g[:] = tx.random_color(rng, 90, 200)
+        tx.paste(g, tx.door(rng, int(2.1 * r), int(0.9 * r), r), int(0.65 * r), int(0.2 * r))
+        tx.paste(g, tx.poster(rng, int(0.6 * r), int(0.45 * r), r), int(0.05 * r), int(0.5 * r))
+        tx.paste(g, tx.poster(rng, int(0.6 * r), int(0.45 * r), r), int(1.65 * r), int(0.7 * r))
+        groups.append(g)
+    return groups
+
+
+def _paint_wall(rng: np.random.Generator, length: float, material: str, groups, group_slots) -> np.ndarray:
+    """Paint one full wall (base material + decals). ``group_slots``: [(a_m, group_index)]."""
+    r = WALL_RES
+    h, w = int(round(HEIGHT * r)), int(round(length * r))
+    base = {"plaster": tx.plaster, "bricks": tx.bricks, "wood": tx.wood, "tiles": tx.tiles}[material]
+    img = base(rng, h, w, r) if material != "tiles" else tx.tiles(rng, h, w, r, tile_m=0.2)
+    if material == "plaster" and rng.random() < 0.6:  # wooden dado on the lower metre
+        dado = tx.wood(rng, int(0.9 * r), w, r)
+        img[h - dado.shape[0]:] = dado
+    reserved = [(a - 0.1, a + 2.3) for a, _ in group_slots]
+    for a, gi in group_slots:
+        g = groups[gi]
+        tx.paste(img, g, int(a * r), h - g.shape[0])
+    a = float(rng.uniform(0.2, 0.8))
+    while a < length - 0.4:
+        kind = rng.choice(["poster", "poster", "poster", "door", "board", "gap"])
+        wid = {"poster": rng.uniform(0.45, 1.1), "door": 0.9, "board": rng.uniform(1.2, 1.8), "gap": rng.uniform(0.2, 0.8)}[kind]
+        if a + wid > length - 0.1 or any(a < e and a + wid > s for s, e in reserved):
+            a += 0.3
+            continue
+        if kind == "poster":
+            ph = float(rng.uniform(0.5, 1.2))
+            top = float(rng.uniform(0.4, HEIGHT - 0.9 - ph + 0.4))
+            tx.paste(img, tx.poster(rng, int(ph * r), int(wid * r), r), int(a * r), int(top * r))
+        elif kind == "door":
+            tx.paste(img, tx.door(rng, int(2.1 * r), int(0.9 * r), r), int(a * r), h - int(2.1 * r))
+        elif kind == "board":
+            bh = float(rng.uniform(0.8, 1.1))
+            board = np.empty((int(bh * r), int(wid * r), 3), np.uint8)
+            board[:] = tx.random_color(rng, 60, 160)
+            for _ in range(int(rng.integers(4, 9))):
+                pw, ph = rng.uniform(0.15, 0.35), rng.uniform(0.15, 0.3)
+                tx.paste(board, tx.poster(rng, int(ph * r), int(pw * r), r),
+                         int(rng.uniform(0, wid - pw) * r), int(rng.uniform(0, bh - ph) * r))
+            tx.paste(img, board, int(a * r), int(0.8 * r))
+        a += wid + float(rng.uniform(0.15, 0.9))
+    return img
+
+
+def _wall_planes(name, p0, p1, tex, lamps, z_top=HEIGHT, double_sided=False) -> list[Plane]:
+    """Cut a wall from floor point p0 to p1 (free space on the left of p0->p1) into segments.
+
+    Seen from the free side, p1 is on the viewer's left: texture column 0 is at p1 and the
+    wall's ``u`` runs from p1 to p0 (so posters read left to right).
+    """
+    p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
+    length = float(np.linalg.norm(p1 - p0))
+    u = np.array([*((p0 - p1) / length), 0.0])
+    v = np.array([0.0, 0.0, -1.0])
+    n_seg = int(np.ceil(length / MAX_SEGMENT - 1e-9))
+    cuts = np.round(np.linspace(0, tex.shape[1], n_seg + 1)).astype(int)
+    out = []
+    for k in range(n_seg):
+        a0, a1 = cuts[k] / tex.shape[1] * length, cuts[k + 1] / tex.shape[1] * length
+        seg_tex = np.ascontiguousarray(tex[:, cuts[k]:cuts[k + 1]])
+        origin = np.array([*(p1[:2] + u[:2] * a0), z_top])
+        pl = Plane(f"{name}#{k}", origin, u, v, a1 - a0, z_top, [], [], double_sided=double_sided)
+        lit, pl.lamp_weights = _bake(pl, seg_tex, lamps)
+        pl.rgb = _mips(lit)
+        pl.gray = [cv2.cvtColor(m, cv2.COLOR_RGB2GRAY) for m in pl.rgb]
+        out.append(pl)
+    return out
+
+
+def _horizontal_planes(name, tex_full, res, z, lamps, facing_up: bool) -> list[Plane]:
+    """Floor (facing up) or ceiling tiles over the free area, cut on the layout grid."""
+    xs = [0.0, 3.0, 5.67, 8.33, 11.0, 14.0, 16.67, 19.33, 22.0, 25.0]
+    ys = [0.0, 3.0, 5.67, 8.33, 11.0, 14.0]
+    out = []
+    for i in range(len(xs) - 1):
+        for j in range(len(ys) - 1):
+            x0, x1, y0, y1 = xs[i], xs[i + 1], ys[j], ys[j + 1]
+            cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
+            if any(bx0 < cx < bx1 and by0 < cy < by1 for bx0, by0, bx1, by1 in BLOCKS):
+                continue
+            c0, c1 = int(round(x0 * res)), int(round(x1 * res))
+            # texture rows run from y=14 (row 0) downwards in y
+            r0, r1 = int(round((OUTER[3] - y1) * res)), int(round((OUTER[3] - y0) * res))
+            seg = np.ascontiguousarray(tex_full[r0:r1, c0:c1])
+            if facing_up:  # u=+x, v=-y (rows from y1 down): normal v x u = +z
+                origin, u, v = np.array([x0, y1, z]), np.array([1.0, 0, 0]), np.array([0, -1.0, 0])
+            else:  # ceiling seen from below: u=+x, v=+y, normal -z
+                origin, u, v = np.array([x0, y0, z]), np.array([1.0, 0, 0]), np.array([0, 1.0, 0])
+                seg = np.ascontiguousarray(seg[::-1])
+            pl = Plane(f"{name}[{i},{j}]", origin, u, v, x1 - x0, y1 - y0, [], [])
+            lit, pl.lamp_weights = _bake(pl, seg, lamps)
+            pl.rgb = _mips(lit)
+            pl.gray = [cv2.cvtColor(m, cv2.COLOR_RGB2GRAY) for m in pl.rgb]
+            out.append(pl)
+    return out
+
+
+def _pillar_planes(name, x, y, inward, along, tex_front, tex_side, lamps) -> list[Plane]:
+    """A 0.4 m wide, 0.3 m deep pillar standing out of a wall at (x, y) (front and two sides)."""
+    inward, along = np.asarray(inward, float), np.asarray(along, float)
+    base = np.array([x, y])
+    half, depth = 0.2, 0.3
+    a, b = base - along * half, base + along * half
+    fa, fb = a + inward * depth, b + inward * depth
+    planes = _wall_planes(f"{name}.front", fa, fb, tex_front, lamps)
+    planes += _wall_planes(f"{name}.left", a, fa, tex_side, lamps)
+    planes += _wall_planes(f"{name}.right", fb, b, tex_side, lamps)
+    return planes
+
+
+def _corner_panel(name, corner, dx, dy, tex, lamps) -> list[Plane]:
+    """Free-standing panel across an outer corner, 1.3 m from it along both walls, 2.2 m tall."""
+    c = np.asarray(corner, float)
+    p0 = c + np.array([0.0, 1.3 * dy])
+    p1 = c + np.array([1.3 * dx, 0.0])
+    # free space must be on the left of p0->p1
+    d = p1 - p0
+    left = np.array([-d[1], d[0]])
+    if np.dot(left, np.array([dx, dy])) < 0:
+        p0, p1 = p1, p0
+    return _wall_planes(name, p0, p1, tex, lamps, z_top=2.2)
+
+
+@functools.lru_cache(maxsize=4)
+def build_world(seed: int = 0) -> DemoWorld:
+    """Build (and cache) the demo world for ``seed``; ~1 s, ~100 MB of textures."""
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 0x5EED]))
+    lamps = _lamp_positions()
+    groups = _decal_groups(rng)
+    planes: list[Plane] = []
+    X0, Y0, X1, Y1 = OUTER
+    # outer walls, counter-clockwise seen from above so free space (inside) is on the left
+    outer = [((X0, Y0), (X1, Y0)), ((X1, Y0), (X1, Y1)), ((X1, Y1), (X0, Y1)), ((X0, Y1), (X0, Y0))]
+    # aliasing: each group appears on two or three walls at different places
+    slots = {
+        "outer0": [(4.0, 0), (15.0, 1)],
+        "outer2": [(2.2, 0), (8.0, 2)],
+        "A1": [(2.5, 1)],
+        "B3": [(3.0, 2)],
+        "outer3": [(1.8, 0)],
+    }
+    sites: list[dict] = []
+
+    def record_sites(name, p0, p1):
+        p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
+        d = (p0 - p1) / np.linalg.norm(p1 - p0)  # texture columns run from p1 towards p0
+        for a, gi in slots.get(name, []):
+            w_m, h_m = groups[gi].shape[1] / WALL_RES, groups[gi].shape[0] / WALL_RES
+            centre = np.array([*(p1 + d * (a + w_m / 2)), h_m / 2])
+            sites.append({"group": gi, "wall": name, "centre": centre, "normal": np.array([d[1], -d[0], 0.0])})
+
+    materials = ["plaster", "plaster", "plaster", "plaster"]
+    for k, (p0, p1) in enumerate(outer):
+        L = float(np.hypot(p1[0] - p0[0], p1[1] - p0[1]))
+        tex = _paint_wall(rng, L, materials[k], groups, slots.get(f"outer{k}", []))
+        planes += _wall_planes(f"outer{k}", p0, p1, tex, lamps)
+        record_sites(f"outer{k}", p0, p1)
+    for bi, (bx0, by0, bx1, by1) in enumerate(BLOCKS):
+        name = "AB"[bi]
+        # block faces clockwise seen from above so free space (outside) is on the left
+        faces = [((bx0, by0), (bx0, by1)), ((bx0, by1), (bx1, by1)), ((bx1, by1), (bx1, by0)), ((bx1, by0), (bx0, by0))]
+        mats = ["bricks", "plaster", "bricks", "wood"] if bi == 0 else ["tiles", "plaster", "tiles", "bricks"]
+        for k, (p0, p1) in enumerate(faces):
+            L = float(np.hypot(p1[0] - p0[0], p1[1] - p0[1]))
+            tex = _paint_wall(rng, L, mats[k], groups, slots.get(f"{name}{k}", []))
+            planes += _wall_planes(f"{name}{k}", p0, p1, tex, lamps)
+            record_sites(f"{name}{k}", p0, p1)
+    # pillars out of the outer walls (identical textures: more aliasing)
+    front = tx.plaster(rng, int(HEIGHT * WALL_RES), int(0.4 * WALL_RES), WALL_RES)
+    tx.paste(front, tx.poster(rng, int(0.3 * WALL_RES), int(0.3 * WALL_RES), WALL_RES), int(0.05 * WALL_RES), int(0.9 * WALL_RES))
+    side = tx.plaster(rng, int(HEIGHT * WALL_RES), int(0.3 * WALL_RES), WALL_RES)
+    for x in (7.0, 18.0):
+        planes += _pillar_planes(f"pillarS{x:g}", x, Y0, (0, 1), (1, 0), front, side, lamps)
+        planes += _pillar_planes(f"pillarN{x:g}", x, Y1, (0, -1), (-1, 0), front, side, lamps)
+    planes += _pillar_planes("pillarW", X0, 7.0, (1, 0), (0, -1), front, side, lamps)
+    planes += _pillar_planes("pillarE", X1, 7.0, (-1, 0), (0, 1), front, side, lamps)
+    # free-standing panels across the outer corners
+    for k, (corner, dx, dy) in enumerate([((X0, Y0), 1, 1), ((X1, Y0), -1, 1), ((X1, Y1), -1, -1), ((X0, Y1), 1, -1)]):
+        ptex = np.empty((int(2.2 * WALL_RES), int(1.84 * WALL_RES), 3), np.uint8)
+        ptex[:] = tx.random_color(rng, 40, 120)
+        tx.paste(ptex, tx.poster(rng, int(1.6 * WALL_RES), int(1.5 * WALL_RES), WALL_RES), int(0.17 * WALL_RES), int(0.15 * WALL_RES))
+        planes += _corner_panel(f"panel{k}", corner, dx, dy, ptex, lamps)
+    # floor and ceiling
+    fh, fw = int(round((Y1 - Y0) * FLOOR_RES)), int(round((X1 - X0) * FLOOR_RES))
+    floor = tx.tiles(rng, fh, fw, FLOOR_RES, tile_m=0.5)
+    for _ in range(60):  # scuffs and markings make the floor less periodic
+        c = (int(rng.integers(0, fw)), int(rng.integers(0, fh)))
+        cv2.ellipse(floor, c, (int(rng.uniform(3, 25)), int(rng.uniform(2, 8))), float(rng.uniform(0, 180)),
+                    0, 360, tx.random_color(rng, 20, 120), -1, cv2.LINE_AA)
+    planes += _horizontal_planes("floor", floor, FLOOR_RES, 0.0, lamps, facing_up=True)
+    ch, cw = int(round((Y1 - Y0) * CEIL_RES)), int(round((X1 - X0) * CEIL_RES))
+    ceil = tx.ceiling_panels(rng, ch, cw, CEIL_RES)
+    for lx, ly, _ in lamps:  # lamp panels: bright rectangles
+        c, r_ = int(lx * CEIL_RES), int((Y1 - ly) * CEIL_RES)
+        cv2.rectangle(ceil, (c - 12, r_ - 5), (c + 12, r_ + 5), (250, 250, 245), -1)
+    planes += _horizontal_planes("ceiling", ceil, CEIL_RES, HEIGHT, lamps, facing_up=False)
+    # lighting epochs: epoch 0 nominal; later epochs dim/brighten lamps and change exposure
+    n_l = len(lamps)
+    gains = np.ones((N_LIGHT_EPOCHS, n_l))
+    gains[1:] = rng.uniform(0.7, 1.15, size=(N_LIGHT_EPOCHS - 1, n_l))
+    expo = np.ones(N_LIGHT_EPOCHS)
+    expo[1:] = rng.uniform(0.88, 1.08, size=N_LIGHT_EPOCHS - 1)
+    return DemoWorld(seed=seed, planes=planes, lamps=lamps, lamp_gains=gains, exposure=expo, alias_sites=sites)

@@ -1,0 +1,319 @@
+"""Bag-of-words keyframe database: tf-idf vectors, L1 score, inverted index, top-K queries.
+
+A keyframe's vector has weight ``tf_w * idf_w`` per word, L1-normalised. The similarity of
+two such vectors is ``s = 1 - 0.5 * ||v1 - v2||_1``, which for non-negative unit-L1 vectors
+equals ``sum_w min(v1_w, v2_w)`` over the words they share: a query only visits the posting
+lists (inverted index) of its own words, whatever the database size.
+
+idf comes from the vocabulary's training images, or (``idf_source='database'``, and always in
+online mode) from the database so far, smoothed as ``ln((1+N)/(1+n_w)) + 1``. Postings store
+raw term counts and each keyframe's normaliser is kept up to date incrementally as document
+frequencies change, so old keyframes stay consistent while words and keyframes are added.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError
+from ..types import LoopCandidate
+from .config import VocabConfig
+from .descriptors import as_unit_vectors, descriptor_kind
+from .vocabulary import Vocabulary
+from .words import IncrementalWords
+
+
+@dataclass
+class BowVector:
+    """Sparse bag of words: sorted unique word ids and their term counts."""
+
+    words: np.ndarray  # (M,) int64, sorted unique
+    counts: np.ndarray  # (M,) float64
+
+    @classmethod
+    def from_word_ids(cls, ids: np.ndarray) -> "BowVector":
+        w, c = np.unique(np.asarray(ids, dtype=np.int64), return_counts=True)
+        return cls(w, c.astype(np.float64))
+
+    def weights(self, idf: np.ndarray) -> np.ndarray:
+        """L1-normalised tf-idf weights aligned with ``words``."""
+        v = self.counts * idf[self.words]
+        s = v.sum()
+        return v / s if s > 0 else v
+
+    def __len__(self) -> int:
+        return len(self.words)
+
+
+def bow_similarity(a: BowVector, b: BowVector, idf: np.ndarray) -> float:
+    """Direct ``1 - 0.5 * ||va - vb||_1`` (reference for the inverted-index scores)."""
+    n = int(max(a.words.max(initial=-1), b.words.max(initial=-1))) + 1
+    va, vb = np.zeros(n), np.zeros(n)
+    va[a.words] = a.weights(idf)
+    vb[b.words] = b.weights(idf)
+    if va.sum() == 0 or vb.sum() == 0:
+        return 0.0
+    return float(1.0 - 0.5 * np.abs(va - vb).sum())
+
+
+class _Postings:
+    """Per-word growable arrays of (keyframe index, term count)."""
+
+    def __init__(self):
+        self.kf: dict[int, np.ndarray] = {}
+        self.tf: dict[int, np.ndarray] = {}
+        self.size: dict[int, int] = {}
+
+    def append(self, kf_index: int, bow: BowVector) -> None:
+        kf, tf, size = self.kf, self.tf, self.size
+        for w, c in zip(bow.words.tolist(), bow.counts.tolist()):
+            n = size.get(w, 0)
+            if n == 0:
+                kf[w] = np.empty(4, dtype=np.int64)
+                tf[w] = np.empty(4, dtype=np.float64)
+            elif n == len(kf[w]):
+                kf[w] = np.concatenate([kf[w], np.empty(n, dtype=np.int64)])
+                tf[w] = np.concatenate([tf[w], np.empty(n, dtype=np.float64)])
+            kf[w][n] = kf_index
+            tf[w][n] = c
+            size[w] = n + 1
+
+    def gather(self, words: np.ndarray):
+        """Concatenated postings of ``words``: (keyframe index, term count, position of the word in ``words``)."""
+        ks, ts, lens = [], [], []
+        kf, tf, size = self.kf, self.tf, self.size
+        for w in words.tolist():
+            n = size.get(w, 0)
+            lens.append(n)
+            if n:
+                ks.append(kf[w][:n])
+                ts.append(tf[w][:n])
+        if not ks:
+            e = np.zeros(0, dtype=np.int64)
+            return e, np.zeros(0), e
+        pos = np.repeat(np.arange(len(words)), lens)
+        return np.concatenate(ks), np.concatenate(ts), pos
+
+
+class _Growable:
+    def __init__(self, dtype, fill=0):
+        self.a = np.full(64, fill, dtype=dtype)
+        self.fill = fill
+        self.n = 0
+
+    def ensure(self, n: int) -> None:
+        if n > len(self.a):
+            b = np.full(max(n, 2 * len(self.a)), self.fill, dtype=self.a.dtype)
+            b[: len(self.a)] = self.a
+            self.a = b
+
+    def push(self, v) -> None:
+        self.ensure(self.n + 1)
+        self.a[self.n] = v
+        self.n += 1
+
+    @property
+    def view(self) -> np.ndarray:
+        return self.a[: self.n]
+
+
+class BowDatabase:
+    """Keyframe database over a vocabulary, or (``vocab=None``) online mode growing its own words.
+
+    ``add(kf_id, stamp_ns, descriptors) -> BowVector``;
+    ``query(descriptors_or_bow, top_k, exclude_recent_s, exclude_recent_n, ...) -> list[LoopCandidate]``.
+    """
+
+    def __init__(self, vocab: Vocabulary | None = None, conf: VocabConfig | None = None):
+        self.vocab = vocab
+        self.conf = conf or VocabConfig()
+        self.online = vocab is None
+        self.idf_from_database = self.online or self.conf.idf_source == "database"
+        self.words: IncrementalWords | None = None  # online mode's growing vocabulary
+        self._desc_kind: str | None = vocab.desc_kind if vocab else None
+        self._desc_dim: int | None = vocab.desc_dim if vocab else None
+        self.kf_ids: list[int] = []
+        self._index_of: dict[int, int] = {}
+        self._stamps = _Growable(np.int64)
+        self._total = _Growable(np.float64)  # sum of term counts per keyframe
+        self._norm_fixed = _Growable(np.float64)  # sum tf*idf per keyframe (vocabulary idf)
+        self._logdf_sum = _Growable(np.float64)  # sum tf*ln(1+df) per keyframe (database idf)
+        self._df = _Growable(np.float64)  # keyframes containing each word (database idf)
+        self._post = _Postings()
+        self._bows: list[BowVector] = []
+
+    def __len__(self) -> int:
+        return len(self.kf_ids)
+
+    @property
+    def n_words(self) -> int:
+        if self.vocab is not None:
+            return len(self.vocab)
+        return self.words.n_words if self.words is not None else 0
+
+    # ---------------------------------------------------------------- weights
+    def idf(self, words: np.ndarray | None = None) -> np.ndarray:
+        """Current idf of ``words`` (all words when None)."""
+        if not self.idf_from_database:
+            return self.vocab.idf if words is None else self.vocab.idf[words]
+        self._df.ensure(self.n_words)
+        df = self._df.a[: max(self.n_words, self._df.n)] if words is None else self._df.a[words]
+        return np.log((1.0 + len(self)) / (1.0 + df)) + 1.0
+
+    def _norms(self) -> np.ndarray:
+        if not self.idf_from_database:
+            return self._norm_fixed.view
+        return (np.log(1.0 + len(self)) + 1.0) * self._total.view - self._logdf_sum.view
+
+    # ------------------------------------------------------------- quantising
+    def _check(self, desc: np.ndarray) -> np.ndarray:
+        d = np.asarray(desc)
+        if d.ndim != 2:
+            raise InputError(f"descriptors must be (N, D), got shape {d.shape}")
+        kind = descriptor_kind(d)
+        if self._desc_kind is None:
+            self._desc_kind, self._desc_dim = kind, d.shape[1]
+        elif (kind, d.shape[1]) != (self._desc_kind, self._desc_dim):
+            raise InputError(f"descriptors {d.dtype}{tuple(d.shape)} differ from the database's "
+                             f"({self._desc_kind}, {self._desc_dim} columns)")
+        return d
+
+    def transform(self, descriptors: np.ndarray) -> BowVector:
+        """Bag of words of descriptors without adding them (online mode: nearest existing word)."""
+        d = self._check(descriptors)
+        if self.vocab is not None:
+            return BowVector.from_word_ids(self.vocab.quantize(d))
+        if self.words is None or self.words.n_words == 0 or len(d) == 0:
+            return BowVector.from_word_ids(np.zeros(0, dtype=np.int64))
+        # online: nearest existing word, as add() would assign it; a feature farther than the word
+        # radius would found a new word that no keyframe holds yet, so it is left out
+        u = as_unit_vectors(d)
+        sims = u @ self.words.centres.T
+        best = sims.argmax(axis=1)
+        dist = np.sqrt(np.maximum(2.0 - 2.0 * sims[np.arange(len(u)), best], 0.0))
+        return BowVector.from_word_ids(best[dist < self.conf.online_word_radius])
+
+    # ------------------------------------------------------------------- add
+    def add(self, kf_id: int, stamp_ns: int, descriptors: np.ndarray) -> BowVector:
+        """Insert a keyframe (online mode also grows the words from it); returns its bag of words."""
+        if kf_id in self._index_of:
+            raise InputError(f"keyframe id {kf_id} is already in the database")
+        if self._stamps.n and stamp_ns < self._stamps.view[-1]:
+            raise InputError(f"keyframe {kf_id}: stamp {stamp_ns} is older than the previous keyframe's")
+        d = self._check(descriptors)
+        if self.vocab is not None:
+            bow = BowVector.from_word_ids(self.vocab.quantize(d))
+        else:
+            u = as_unit_vectors(d)
+            if self.words is None:
+                self.words = IncrementalWords(u.shape[1], self.conf.match_ratio, self.conf.match_max_distance,
+                                              self._desc_kind, radius=self.conf.online_word_radius)
+            bow = BowVector.from_word_ids(self.words.add_image(u))
+        self._insert(kf_id, stamp_ns, bow)
+        return bow
+
+    def add_bow(self, kf_id: int, stamp_ns: int, bow: BowVector) -> BowVector:
+        """Insert a keyframe whose bag of words is already known (word ids of this database's vocabulary)."""
+        if kf_id in self._index_of:
+            raise InputError(f"keyframe id {kf_id} is already in the database")
+        if self._stamps.n and stamp_ns < self._stamps.view[-1]:
+            raise InputError(f"keyframe {kf_id}: stamp {stamp_ns} is older than the previous keyframe's")
+        if len(bow) and (bow.words.min() < 0 or bow.words.max() >= self.n_words):
+            raise InputError(f"keyframe {kf_id}: word ids outside the vocabulary (0..{self.n_words - 1})")
+        self._insert(kf_id, stamp_ns, bow)
+        return bow
+
+    def _insert(self, kf_id: int, stamp_ns: int, bow: BowVector) -> None:
+        index = len(self.kf_ids)
+        if self.idf_from_database:
+            self._df.ensure(self.n_words)
+            self._df.n = max(self._df.n, self.n_words)
+            # df of this keyframe's words rises by one: refresh the normalisers of keyframes that share them
+            kf, tf, pos = self._post.gather(bow.words)
+            old = self._df.a[bow.words]
+            delta = np.log(2.0 + old) - np.log(1.0 + old)
+            if len(kf):
+                n = self._logdf_sum.n
+                self._logdf_sum.a[:n] += np.bincount(kf, weights=tf * delta[pos], minlength=n)
+            self._df.a[bow.words] = old + 1.0
+            self._logdf_sum.push(float((bow.counts * np.log(2.0 + old)).sum()))
+            self._norm_fixed.push(0.0)
+        else:
+            self._norm_fixed.push(float((bow.counts * self.vocab.idf[bow.words]).sum()))
+            self._logdf_sum.push(0.0)
+        self._total.push(float(bow.counts.sum()))
+        self._stamps.push(int(stamp_ns))
+        self._post.append(index, bow)
+        self.kf_ids.append(kf_id)
+        self._index_of[kf_id] = index
+        self._bows.append(bow)
+
+    def bow(self, kf_id: int) -> BowVector:
+        return self._bows[self._index_of[kf_id]]
+
+    # ----------------------------------------------------------------- query
+    def scores(self, bow: BowVector) -> np.ndarray:
+        """Similarity ``1 - 0.5 ||v_q - v_k||_1`` of ``bow`` with every keyframe (inverted index)."""
+        n = len(self)
+        out = np.zeros(n)
+        if n == 0 or len(bow) == 0:
+            return out
+        words = bow.words[bow.words < max(self.n_words, 1)] if self.online else bow.words
+        counts = bow.counts[: len(words)] if self.online else bow.counts
+        idf_q = self.idf(words)
+        wq = counts * idf_q
+        sq = wq.sum()
+        if sq <= 0:
+            return out
+        a = wq / sq
+        kf, tf, pos = self._post.gather(words)
+        if not len(kf):
+            return out
+        norms = self._norms()
+        nk = norms[kf]
+        b = np.divide(tf * idf_q[pos], nk, out=np.zeros_like(tf), where=nk > 0)
+        return np.bincount(kf, weights=np.minimum(a[pos], b), minlength=n)
+
+    def query(self, descriptors_or_bow, top_k: int | None = None, exclude_recent_s: float | None = None,
+              exclude_recent_n: int | None = None, *, query_id: int | None = None, stamp_ns: int | None = None,
+              normalise_by_previous: bool | None = None) -> list[LoopCandidate]:
+        """Top-K keyframes by score, best first, skipping the recent window (and the query itself).
+
+        The window is relative to ``stamp_ns`` (default: the newest keyframe's stamp). With
+        ``normalise_by_previous`` scores are divided by the score against the newest keyframe
+        that is not the query (DBoW2's alpha); below ``min_previous_score`` nothing is returned.
+        """
+        c = self.conf
+        top_k = c.top_k if top_k is None else top_k
+        ex_s = c.exclude_recent_s if exclude_recent_s is None else exclude_recent_s
+        ex_n = c.exclude_recent_n if exclude_recent_n is None else exclude_recent_n
+        norm_prev = c.normalise_by_previous if normalise_by_previous is None else normalise_by_previous
+        bow = descriptors_or_bow if isinstance(descriptors_or_bow, BowVector) else self.transform(descriptors_or_bow)
+        n = len(self)
+        if n == 0 or top_k <= 0:
+            return []
+        s = self.scores(bow)
+        keep = np.ones(n, dtype=bool)
+        self_index = self._index_of.get(query_id) if query_id is not None else None
+        if self_index is not None:
+            keep[self_index] = False
+        if ex_n > 0:
+            keep[max(0, n - ex_n):] = False
+        stamps = self._stamps.view
+        ref = stamps[-1] if stamp_ns is None else int(stamp_ns)
+        if ex_s > 0:
+            keep &= stamps < ref - int(round(ex_s * 1e9))
+        if norm_prev:
+            prev = n - 1 if self_index != n - 1 else n - 2
+            if prev < 0 or s[prev] < c.min_previous_score:
+                return []
+            s = s / s[prev]
+        cand = np.flatnonzero(keep & (s > 0))
+        if not len(cand):
+            return []
+        if len(cand) > top_k:
+            cand = cand[np.argpartition(-s[cand], top_k - 1)[:top_k]]
+        cand = cand[np.argsort(-s[cand], kind="stable")]
+        qid = -1 if query_id is None else int(query_id)
+        return [LoopCandidate(query_id=qid, match_id=int(self.kf_ids[i]), bow_score=float(s[i])) for i in cand]

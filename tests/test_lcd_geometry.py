@@ -1,0 +1,128 @@
+"""Essential-matrix verification and metric loop pose (PnP + refinement + information)."""
+from __future__ import annotations
+
+import numpy as np
+
+from slam_lcd.lcd import LcdConfig, estimate_loop_pose, verify_epipolar
+from slam_lcd.lcd.geometry import _exp_se3, _inv, _residuals_and_jacobian, adjoint
+from slam_lcd.types import CameraModel, Features, Keyframe
+
+CAM = CameraModel(width=640, height=480, fx=500.0, fy=500.0, cx=320.0, cy=240.0)
+
+
+def _project(T_world_cam, X):
+    T = _inv(T_world_cam)
+    P = X @ T[:3, :3].T + T[:3, 3]
+    uv = P[:, :2] / P[:, 2:3] * [CAM.fx, CAM.fy] + [CAM.cx, CAM.cy]
+    return uv, P[:, 2]
+
+
+def _rgbd_pair(seed=0, noise_px=0.3, T_body_camera=np.eye(4)):
+    rng = np.random.default_rng(seed)
+    T_wb_m = np.eye(4)
+    T_wb_q = T_body_camera @ _exp_se3(np.array([0.02, -0.1, 0.03, 0.4, -0.1, 0.3])) @ _inv(T_body_camera)
+    T_wc_m, T_wc_q = T_wb_m @ T_body_camera, T_wb_q @ T_body_camera
+    Xc = rng.uniform([-3, -2, 3], [3, 2, 8], size=(300, 3))  # points in front of the match camera
+    X = Xc @ T_wc_m[:3, :3].T + T_wc_m[:3, 3]
+    uv_m, z_m = _project(T_wc_m, X)
+    uv_q, _ = _project(T_wc_q, X)
+    uv_q = uv_q + rng.normal(0, noise_px, uv_q.shape)
+    ok = (uv_m[:, 0] > 1) & (uv_m[:, 0] < 638) & (uv_m[:, 1] > 1) & (uv_m[:, 1] < 478)
+    ok &= (uv_q[:, 0] > 1) & (uv_q[:, 0] < 638) & (uv_q[:, 1] > 1) & (uv_q[:, 1] < 478)
+    X, uv_m, uv_q, z_m = X[ok], uv_m[ok], uv_q[ok], z_m[ok]
+    depth = np.zeros((480, 640), np.float32)
+    # keypoints at pixel centres of the match image so that nearest-pixel depth lookup is exact
+    uv_m = np.round(uv_m)
+    xn = (uv_m - [CAM.cx, CAM.cy]) / [CAM.fx, CAM.fy]
+    Pm = np.column_stack([xn * z_m[:, None], z_m])  # camera-m points for the rounded pixels
+    Xw = Pm @ T_wc_m[:3, :3].T + T_wc_m[:3, 3]
+    uv_q, _ = _project(T_wc_q, Xw)
+    uv_q = uv_q + rng.normal(0, noise_px, uv_q.shape)
+    depth[uv_m[:, 1].astype(int), uv_m[:, 0].astype(int)] = z_m
+    n = len(X)
+    fm = Features(uv_m.astype(np.float32), np.ones(n, np.float32), np.zeros((n, 4), np.float32), (640, 480))
+    fq = Features(uv_q.astype(np.float32), np.ones(n, np.float32), np.zeros((n, 4), np.float32), (640, 480))
+    kf_m = Keyframe(0, 0, T_wb_m, camera=CAM, depth=depth, features=fm, T_body_camera=T_body_camera)
+    kf_q = Keyframe(1, 1, T_wb_q, camera=CAM, features=fq, T_body_camera=T_body_camera)
+    matches = np.column_stack([np.arange(n), np.arange(n)])
+    return kf_q, kf_m, matches, _inv(T_wb_m) @ T_wb_q
+
+
+def _pose_error(T, T_gt):
+    D = _inv(T_gt) @ T
+    ang = np.degrees(np.arccos(np.clip((np.trace(D[:3, :3]) - 1) / 2, -1, 1)))
+    return float(np.linalg.norm(D[:3, 3])), float(ang)
+
+
+def test_rgbd_pose_recovered_with_information():
+    kf_q, kf_m, matches, T_gt = _rgbd_pair()
+    v = estimate_loop_pose(kf_q, kf_m, matches, LcdConfig())
+    assert v.ok, v.reason
+    t_err, r_err = _pose_error(v.T_match_query, T_gt)
+    assert t_err < 0.01 and r_err < 0.1
+    assert v.source == "rgbd" and v.inliers > 0.9 * len(matches) and v.rms < 1.0
+    assert v.information.shape == (6, 6)
+    assert np.all(np.linalg.eigvalsh(v.information) > 0)
+
+
+def test_outliers_and_body_frame():
+    T_bc = np.array([[0, 0, 1, 0.2], [-1, 0, 0, 0.0], [0, -1, 0, 0.5], [0, 0, 0, 1.0]])  # camera looks along body x
+    kf_q, kf_m, matches, T_gt = _rgbd_pair(seed=1, T_body_camera=T_bc)
+    rng = np.random.default_rng(5)
+    bad = rng.choice(len(matches), len(matches) // 4, replace=False)
+    matches = matches.copy()
+    matches[bad, 1] = rng.permutation(matches[bad, 1])  # 25% wrong correspondences
+    v = estimate_loop_pose(kf_q, kf_m, matches, LcdConfig())
+    assert v.ok, v.reason
+    t_err, r_err = _pose_error(v.T_match_query, T_gt)
+    assert t_err < 0.01 and r_err < 0.1
+    assert v.inliers < 0.8 * len(matches)
+
+
+def test_no_depth_means_no_pose():
+    kf_q, kf_m, matches, _ = _rgbd_pair()
+    kf_m.depth = None
+    v = estimate_loop_pose(kf_q, kf_m, matches, LcdConfig())
+    assert not v.ok and v.reason == "no_3d_points"
+
+
+def test_query_depth_used_when_match_has_none():
+    kf_q, kf_m, matches, T_gt = _rgbd_pair(seed=2)
+    # swap roles: the keyframe with depth becomes the query
+    v = estimate_loop_pose(kf_m, kf_q, matches[:, ::-1], LcdConfig())
+    assert v.ok, v.reason
+    t_err, r_err = _pose_error(v.T_match_query, _inv(T_gt))
+    assert t_err < 0.01 and r_err < 0.1
+    assert np.all(np.linalg.eigvalsh(v.information) > 0)
+
+
+def test_refinement_jacobian_matches_finite_differences():
+    rng = np.random.default_rng(0)
+    T = _exp_se3(rng.normal(size=6) * 0.2)
+    X = rng.normal(size=(12, 3)) + [0, 0, 5]
+    xn = rng.normal(size=(12, 2)) * 0.1
+    _, J, r = _residuals_and_jacobian(T, X, xn, 500.0)
+    Jn = np.zeros_like(J)
+    for k in range(6):
+        d = np.zeros(6)
+        d[k] = 1e-6
+        Jn[:, k] = (_residuals_and_jacobian(T @ _exp_se3(d), X, xn, 500.0)[2] - r) / 1e-6
+    assert np.abs(J - Jn).max() < 1e-3 * np.abs(J).max()
+
+
+def test_adjoint_identity():
+    T = _exp_se3(np.array([0.3, -0.2, 0.1, 1.0, 2.0, -0.5]))
+    xi = np.array([0.01, 0.02, -0.03, 0.1, -0.05, 0.02])
+    assert np.allclose(T @ _exp_se3(xi) @ _inv(T), _exp_se3(adjoint(T) @ xi), atol=1e-9)
+
+
+def test_epipolar_accepts_rigid_motion_and_rejects_random():
+    kf_q, kf_m, matches, _ = _rgbd_pair(seed=3)
+    kq, km = kf_q.features.keypoints, kf_m.features.keypoints
+    v = verify_epipolar(kq, km, matches, CAM, CAM, LcdConfig())
+    assert v.accepted and v.inliers > 0.9 * len(matches)
+    rng = np.random.default_rng(0)
+    shuffled = matches.copy()
+    shuffled[:, 1] = rng.permutation(shuffled[:, 1])
+    v2 = verify_epipolar(kq, km, shuffled, CAM, CAM, LcdConfig())
+    assert not v2.accepted and v2.reason in ("too_few_inliers", "low_inlier_ratio")
