@@ -44,6 +44,10 @@ class RunConfig:
     write_mcap: bool = True
     # copy image topics into corrected.mcap too (large); false copies every non-image topic
     copy_images: bool = False
+    # also take keyframes on image overlap (frontend.kf_min_overlap): needs features of EVERY
+    # frame, not only of keyframes (about 5x the SuperPoint cost at 10 Hz); odometry
+    # thresholds alone are the default
+    keyframe_on_overlap: bool = False
 
 
 @dataclass

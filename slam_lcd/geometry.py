@@ -1,8 +1,21 @@
-"""Small SE(3) helpers on 4x4 numpy matrices (no gtsam here: this is used by every stage)."""
+"""SE(3) / SO(3) / quaternion helpers on numpy arrays, shared by every stage (no gtsam here).
+
+Conventions (the same everywhere in slam-lcd):
+
+* poses are 4x4 float64 ``T_a_b``; most helpers also take a stack ``(..., 4, 4)``;
+* quaternions are ``(x, y, z, w)`` (ROS / scipy order);
+* tangent vectors are ``[omega, v]`` (rotation first), exactly like ``gtsam.Pose3``, with
+  perturbations on the right: ``T = T_hat @ Exp(xi)``; the adjoint is
+  ``Ad(T) = [[R, 0], [skew(t) R, R]]`` so that ``T Exp(xi) T^-1 = Exp(Ad(T) xi)``.
+"""
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
+
+# ----------------------------------------------------------------------------- rigid transforms
 
 
 def inv(T: np.ndarray) -> np.ndarray:
@@ -24,10 +37,197 @@ def make_T(R: np.ndarray, t) -> np.ndarray:
     return T
 
 
-def rotation_angle_deg(R: np.ndarray) -> float:
-    """Angle of a rotation matrix in degrees (robust to rounding)."""
-    c = (np.trace(R[:3, :3]) - 1.0) / 2.0
-    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+def nearest_rotation(M: np.ndarray) -> np.ndarray:
+    """Closest rotation matrix (Frobenius norm) to nearly orthonormal 3x3 matrix/matrices."""
+    u, _, vt = np.linalg.svd(M)
+    d = np.sign(np.linalg.det(u @ vt))
+    D = np.zeros(np.shape(M))
+    D[..., 0, 0] = 1.0
+    D[..., 1, 1] = 1.0
+    D[..., 2, 2] = d
+    return u @ D @ vt
+
+
+def project_to_se3(T: np.ndarray) -> np.ndarray:
+    """Nearest proper rigid transform (re-orthonormalises the rotation block)."""
+    T = np.asarray(T, dtype=np.float64)
+    return make_T(nearest_rotation(T[:3, :3]), T[:3, 3])
+
+
+# ----------------------------------------------------------------------------- SO(3)
+
+
+def skew(w: np.ndarray) -> np.ndarray:
+    """3x3 cross-product matrix ``[w]x``."""
+    x, y, z = np.asarray(w, dtype=np.float64).reshape(3)
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+
+
+def rotation_angle(R: np.ndarray):
+    """Angle (rad) of one rotation matrix (a float) or of a stack ``(..., 3, 3)`` (an array).
+
+    Only the top-left 3x3 block is read, so 4x4 poses work too. ``atan2(sin, cos)`` stays
+    accurate for tiny angles, where ``arccos`` of the trace loses ~1e-8 rad.
+    """
+    R = np.asarray(R)[..., :3, :3]
+    cos = (np.trace(R, axis1=-2, axis2=-1) - 1.0) / 2.0
+    axis = np.stack([R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]], axis=-1)
+    sin = np.linalg.norm(axis, axis=-1) / 2.0
+    ang = np.arctan2(sin, cos)
+    return float(ang) if np.ndim(ang) == 0 else ang
+
+
+def rotation_angle_deg(R: np.ndarray):
+    """Angle (degrees) of one rotation matrix (a float) or of a stack (an array); see :func:`rotation_angle`."""
+    ang = np.degrees(rotation_angle(R))
+    return float(ang) if np.ndim(ang) == 0 else ang
+
+
+def so3_exp(w: np.ndarray) -> np.ndarray:
+    """Rotation matrix ``Exp(w)`` of a rotation vector (Rodrigues)."""
+    w = np.asarray(w, dtype=np.float64).reshape(3)
+    th = np.linalg.norm(w)
+    K = skew(w)
+    if th < 1e-10:
+        return np.eye(3) + K
+    return np.eye(3) + np.sin(th) / th * K + (1 - np.cos(th)) / th**2 * (K @ K)
+
+
+def so3_log(R: np.ndarray) -> np.ndarray:
+    """Rotation vector ``Log(R)``; exact near 0 and near pi."""
+    c = np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)
+    th = np.arccos(c)
+    v = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    if th < 1e-8:
+        return 0.5 * v
+    if np.pi - th < 1e-4:  # near pi: the axis from the symmetric part cos^2(th/2) I + sin^2(th/2) a a^T
+        B = (R + R.T) / 4.0 + 0.5 * np.eye(3)
+        axis = np.sqrt(np.maximum(np.diag(B), 0.0))
+        i = int(np.argmax(axis))
+        axis = B[i] / max(axis[i], 1e-12)
+        axis /= np.linalg.norm(axis)
+        if axis @ v < 0:
+            axis = -axis
+        return axis * th
+    return th / (2 * np.sin(th)) * v
+
+
+# ----------------------------------------------------------------------------- SE(3) Lie algebra
+
+
+def se3_exp(xi: np.ndarray) -> np.ndarray:
+    """``Exp([omega, v])`` as a 4x4 matrix (GTSAM Pose3::Expmap)."""
+    xi = np.asarray(xi, dtype=np.float64).reshape(6)
+    w, v = xi[:3], xi[3:]
+    th = np.linalg.norm(w)
+    K = skew(w)
+    if th < 1e-10:
+        V = np.eye(3) + 0.5 * K
+    else:
+        V = np.eye(3) + (1 - np.cos(th)) / th**2 * K + (th - np.sin(th)) / th**3 * (K @ K)
+    T = np.eye(4)
+    T[:3, :3] = so3_exp(w)
+    T[:3, 3] = V @ v
+    return T
+
+
+def se3_log(T: np.ndarray) -> np.ndarray:
+    """``Log(T)`` as ``[omega, v]`` (GTSAM Pose3::Logmap)."""
+    w = so3_log(T[:3, :3])
+    th = np.linalg.norm(w)
+    K = skew(w)
+    if th < 1e-3:  # series: the closed form below cancels catastrophically for small angles
+        Vinv = np.eye(3) - 0.5 * K + (1.0 / 12.0 + th**2 / 720.0) * (K @ K)
+    else:
+        Vinv = np.eye(3) - 0.5 * K + (1 / th**2) * (1 - (th * np.sin(th)) / (2 * (1 - np.cos(th)))) * (K @ K)
+    return np.concatenate([w, Vinv @ T[:3, 3]])
+
+
+def adjoint(T: np.ndarray) -> np.ndarray:
+    """Adjoint of one 4x4 or a stack (..., 4, 4) in [rot, trans] order: ``[[R, 0], [t^ R, R]]``."""
+    R = T[..., :3, :3]
+    t = T[..., :3, 3]
+    tx = np.zeros(T.shape[:-2] + (3, 3))
+    tx[..., 0, 1], tx[..., 0, 2] = -t[..., 2], t[..., 1]
+    tx[..., 1, 0], tx[..., 1, 2] = t[..., 2], -t[..., 0]
+    tx[..., 2, 0], tx[..., 2, 1] = -t[..., 1], t[..., 0]
+    A = np.zeros(T.shape[:-2] + (6, 6))
+    A[..., :3, :3] = R
+    A[..., 3:, 3:] = R
+    A[..., 3:, :3] = tx @ R
+    return A
+
+
+# ----------------------------------------------------------------------------- quaternions (x, y, z, w)
+
+
+def quat_to_rot(q_xyzw: np.ndarray) -> np.ndarray:
+    """Quaternion(s) ``(x, y, z, w)``, shape (4,) or (..., 4), normalised first -> rotation matrix/matrices."""
+    q = np.asarray(q_xyzw, dtype=np.float64)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    R = np.empty(q.shape[:-1] + (3, 3))
+    R[..., 0, 0] = 1 - 2 * (y * y + z * z)
+    R[..., 0, 1] = 2 * (x * y - z * w)
+    R[..., 0, 2] = 2 * (x * z + y * w)
+    R[..., 1, 0] = 2 * (x * y + z * w)
+    R[..., 1, 1] = 1 - 2 * (x * x + z * z)
+    R[..., 1, 2] = 2 * (y * z - x * w)
+    R[..., 2, 0] = 2 * (x * z - y * w)
+    R[..., 2, 1] = 2 * (y * z + x * w)
+    R[..., 2, 2] = 1 - 2 * (x * x + y * y)
+    return R
+
+
+def rot_to_quat(R: np.ndarray, w_nonnegative: bool = False) -> np.ndarray:
+    """Rotation matrix/matrices (3, 3) or (N, 3, 3) -> unit quaternion(s) (x, y, z, w).
+
+    Shepperd's method: of the four algebraically equal formulas, each matrix uses the one
+    dividing by its largest quaternion component (which comes out positive), so every angle
+    (180° included) is exact. ``w_nonnegative`` flips the sign of those with ``w < 0``.
+    """
+    m = np.asarray(R, dtype=np.float64)
+    single = m.ndim == 2
+    m = m.reshape(-1, 3, 3)
+    d0, d1, d2 = m[:, 0, 0], m[:, 1, 1], m[:, 2, 2]
+    tr = d0 + d1 + d2
+    cands = np.stack([tr, d0, d1, d2], axis=1)
+    case = np.argmax(cands, axis=1)
+    q = np.empty((len(m), 4))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        s = 2.0 * np.sqrt(np.maximum(1.0 + np.choose(case, [tr, 2 * d0 - tr, 2 * d1 - tr, 2 * d2 - tr]), 0.0))
+        a21, a12 = m[:, 2, 1], m[:, 1, 2]
+        a02, a20 = m[:, 0, 2], m[:, 2, 0]
+        a10, a01 = m[:, 1, 0], m[:, 0, 1]
+        cases = [
+            np.stack([(a21 - a12) / s, (a02 - a20) / s, (a10 - a01) / s, 0.25 * s], axis=1),
+            np.stack([0.25 * s, (a01 + a10) / s, (a02 + a20) / s, (a21 - a12) / s], axis=1),
+            np.stack([(a01 + a10) / s, 0.25 * s, (a12 + a21) / s, (a02 - a20) / s], axis=1),
+            np.stack([(a02 + a20) / s, (a12 + a21) / s, 0.25 * s, (a10 - a01) / s], axis=1),
+        ]
+    for k in range(4):
+        sel = case == k
+        q[sel] = cases[k][sel]
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    if w_nonnegative:
+        q[q[:, 3] < 0] *= -1.0
+    return q[0] if single else q
+
+
+def quat_slerp(q0: np.ndarray, q1: np.ndarray, a: float) -> np.ndarray:
+    """Spherical interpolation between unit quaternions (x, y, z, w), shortest arc."""
+    d = float(np.dot(q0, q1))
+    if d < 0:
+        q1, d = -q1, -d
+    if d > 0.9995:
+        q = q0 + a * (q1 - q0)
+        return q / np.linalg.norm(q)
+    th = math.acos(min(1.0, d))
+    s = math.sin(th)
+    return (math.sin((1 - a) * th) / s) * q0 + (math.sin(a * th) / s) * q1
+
+
+# ----------------------------------------------------------------------------- trajectories
 
 
 def interpolate_poses(stamps: np.ndarray, poses: np.ndarray, query: np.ndarray) -> np.ndarray:

@@ -88,7 +88,7 @@ class Pipeline:
             extractor = load_extractor(self.config.features)
         self.extractor = extractor
         self.selector = KeyframeSelector(self.config.frontend, camera=camera, T_body_camera=self.T_body_camera)
-        self.detector = LoopDetector(self.config.lcd, vocab=vocab, extractor=extractor)
+        self.detector = LoopDetector(self.config.lcd, vocab=vocab, extractor=extractor, vocab_conf=self.config.vocab)
         self.graph = PoseGraph(self.config.backend)
         self.on_loop = on_loop
         # optional (stamp, image) -> Features, e.g. an on-disk cache keyed by log/topic/stamp
@@ -197,7 +197,7 @@ class Pipeline:
     def _process(self, f: _Frame) -> list[LoopClosure]:
         T, cov = self._odom_at(f.stamp)
         features = None
-        if self.config.frontend.kf_min_overlap > 0:
+        if self.config.run.keyframe_on_overlap and self.config.frontend.kf_min_overlap > 0:
             features = self._extract(f.stamp, f.image)
         with self.timer("keyframe_selection"):
             is_kf = self.selector.push(f.stamp, T, cov, image=f.image, features=features,

@@ -77,3 +77,19 @@ def test_records_explain_rejections(sp_results):
     assert "ok" in reasons and any(x.startswith("graph:") for x in reasons)
     rejected = [r for r in det.records if r.graph is not None and not r.graph.accepted]
     assert rejected and all(r.graph.reason != "ok" for r in rejected)
+
+
+def test_temporal_consistency_filters_single_detections(corridor, superpoint_weights):
+    feats = corridor_features(str(corridor), "superpoint", str(superpoint_weights))
+    gt = load_loop_matrix(corridor / "samples_GT.bmp", [f"{i}.jpg" for i in range(1, 85)])
+    counts = {}
+    for k_req in (0, 3):
+        det = LoopDetector(LcdConfig(verify="graph", pose=False, temporal_k=k_req))
+        for k, f in enumerate(feats):
+            det.add(Keyframe(k, k * 1_000_000_000, np.eye(4), features=f))
+        assert all(gt[c.query_id, c.match_id] for c in det.closures)
+        counts[k_req] = len(det.closures)
+        if k_req:
+            assert any(r.reason.startswith("temporal_pending") for r in det.records)
+    # the first two detections of every run of consecutive loops wait for confirmation
+    assert 0 < counts[3] <= counts[0] - 2

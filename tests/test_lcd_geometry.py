@@ -4,14 +4,15 @@ from __future__ import annotations
 import numpy as np
 
 from slam_lcd.lcd import LcdConfig, estimate_loop_pose, verify_epipolar
-from slam_lcd.lcd.geometry import _exp_se3, _inv, _residuals_and_jacobian, adjoint
+from slam_lcd.geometry import adjoint, inv, se3_exp
+from slam_lcd.lcd.geometry import _residuals_and_jacobian
 from slam_lcd.types import CameraModel, Features, Keyframe
 
 CAM = CameraModel(width=640, height=480, fx=500.0, fy=500.0, cx=320.0, cy=240.0)
 
 
 def _project(T_world_cam, X):
-    T = _inv(T_world_cam)
+    T = inv(T_world_cam)
     P = X @ T[:3, :3].T + T[:3, 3]
     uv = P[:, :2] / P[:, 2:3] * [CAM.fx, CAM.fy] + [CAM.cx, CAM.cy]
     return uv, P[:, 2]
@@ -20,7 +21,7 @@ def _project(T_world_cam, X):
 def _rgbd_pair(seed=0, noise_px=0.3, T_body_camera=np.eye(4)):
     rng = np.random.default_rng(seed)
     T_wb_m = np.eye(4)
-    T_wb_q = T_body_camera @ _exp_se3(np.array([0.02, -0.1, 0.03, 0.4, -0.1, 0.3])) @ _inv(T_body_camera)
+    T_wb_q = T_body_camera @ se3_exp(np.array([0.02, -0.1, 0.03, 0.4, -0.1, 0.3])) @ inv(T_body_camera)
     T_wc_m, T_wc_q = T_wb_m @ T_body_camera, T_wb_q @ T_body_camera
     Xc = rng.uniform([-3, -2, 3], [3, 2, 8], size=(300, 3))  # points in front of the match camera
     X = Xc @ T_wc_m[:3, :3].T + T_wc_m[:3, 3]
@@ -45,11 +46,11 @@ def _rgbd_pair(seed=0, noise_px=0.3, T_body_camera=np.eye(4)):
     kf_m = Keyframe(0, 0, T_wb_m, camera=CAM, depth=depth, features=fm, T_body_camera=T_body_camera)
     kf_q = Keyframe(1, 1, T_wb_q, camera=CAM, features=fq, T_body_camera=T_body_camera)
     matches = np.column_stack([np.arange(n), np.arange(n)])
-    return kf_q, kf_m, matches, _inv(T_wb_m) @ T_wb_q
+    return kf_q, kf_m, matches, inv(T_wb_m) @ T_wb_q
 
 
 def _pose_error(T, T_gt):
-    D = _inv(T_gt) @ T
+    D = inv(T_gt) @ T
     ang = np.degrees(np.arccos(np.clip((np.trace(D[:3, :3]) - 1) / 2, -1, 1)))
     return float(np.linalg.norm(D[:3, 3])), float(ang)
 
@@ -91,14 +92,14 @@ def test_query_depth_used_when_match_has_none():
     # swap roles: the keyframe with depth becomes the query
     v = estimate_loop_pose(kf_m, kf_q, matches[:, ::-1], LcdConfig())
     assert v.ok, v.reason
-    t_err, r_err = _pose_error(v.T_match_query, _inv(T_gt))
+    t_err, r_err = _pose_error(v.T_match_query, inv(T_gt))
     assert t_err < 0.01 and r_err < 0.1
     assert np.all(np.linalg.eigvalsh(v.information) > 0)
 
 
 def test_refinement_jacobian_matches_finite_differences():
     rng = np.random.default_rng(0)
-    T = _exp_se3(rng.normal(size=6) * 0.2)
+    T = se3_exp(rng.normal(size=6) * 0.2)
     X = rng.normal(size=(12, 3)) + [0, 0, 5]
     xn = rng.normal(size=(12, 2)) * 0.1
     _, J, r = _residuals_and_jacobian(T, X, xn, 500.0)
@@ -106,14 +107,14 @@ def test_refinement_jacobian_matches_finite_differences():
     for k in range(6):
         d = np.zeros(6)
         d[k] = 1e-6
-        Jn[:, k] = (_residuals_and_jacobian(T @ _exp_se3(d), X, xn, 500.0)[2] - r) / 1e-6
+        Jn[:, k] = (_residuals_and_jacobian(T @ se3_exp(d), X, xn, 500.0)[2] - r) / 1e-6
     assert np.abs(J - Jn).max() < 1e-3 * np.abs(J).max()
 
 
 def test_adjoint_identity():
-    T = _exp_se3(np.array([0.3, -0.2, 0.1, 1.0, 2.0, -0.5]))
+    T = se3_exp(np.array([0.3, -0.2, 0.1, 1.0, 2.0, -0.5]))
     xi = np.array([0.01, 0.02, -0.03, 0.1, -0.05, 0.02])
-    assert np.allclose(T @ _exp_se3(xi) @ _inv(T), _exp_se3(adjoint(T) @ xi), atol=1e-9)
+    assert np.allclose(T @ se3_exp(xi) @ inv(T), se3_exp(adjoint(T) @ xi), atol=1e-9)
 
 
 def test_epipolar_accepts_rigid_motion_and_rejects_random():

@@ -6,7 +6,7 @@ import pytest
 
 from slam_lcd.lcd import LcdConfig, planar_graph, verify_graph
 from slam_lcd.lcd.graph import crossing_edges
-from slam_lcd.lcd.matching import match_mutual
+from slam_lcd.features.matching import mutual_nn_match_bf
 
 
 def _scene(n=80, seed=0):
@@ -82,7 +82,7 @@ def corridor_features(shared_data, superpoint_weights):
 def _verdict(feats, q, m, shuffle=False, conf=None):
     conf = conf or LcdConfig()
     fq, fm = feats[q], feats[m]
-    matches = match_mutual(fq.descriptors, fm.descriptors, conf.match_ratio, conf.match_max_distance_sp)
+    matches = mutual_nn_match_bf(fq.descriptors, fm.descriptors, conf.match_ratio, conf.match_max_distance_sp)
     if shuffle:
         matches = matches.copy()
         matches[:, 1] = np.random.default_rng(0).permutation(matches[:, 1])

@@ -19,8 +19,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..errors import InputError, UnsortedStampsError
+from ..geometry import inv
 from ..types import Trajectory
-from .lie import inverse
 
 
 def _interp_batch(M: np.ndarray, s: np.ndarray) -> np.ndarray:
@@ -55,7 +55,7 @@ def correct_full_rate(
     t = odometry.stamps
     if len(t) and np.any(np.diff(t) < 0):
         raise UnsortedStampsError("odometry stamps go backwards")
-    C = X @ inverse(O)  # world-frame corrections per keyframe
+    C = X @ inv(O)  # world-frame corrections per keyframe
     # Segment of each stamp: k0 = last keyframe with stamp <= t (clipped to the ends).
     seg = np.searchsorted(ks, t, side="right") - 1
     before = seg < 0
@@ -64,7 +64,7 @@ def correct_full_rate(
     out = C[k0] @ odometry.poses
     inside = ~(before | after)
     if np.any(inside) and len(ks) > 1:
-        M = inverse(C[:-1] @ O[1:]) @ X[1:]  # (K-1) mismatches
+        M = inv(C[:-1] @ O[1:]) @ X[1:]  # (K-1) mismatches
         k = k0[inside]
         s = (t[inside] - ks[k]).astype(np.float64) / (ks[k + 1] - ks[k]).astype(np.float64)
         out[inside] = out[inside] @ _interp_batch(M[k], s)

@@ -24,7 +24,7 @@ from scipy.spatial.transform import Rotation
 
 from ..atomic import atomic_write
 from ..errors import FileMissingError, TrajectoryFormatError, UnsupportedFormatError
-from .lie import matrix_to_quat_xyzw
+from ..geometry import quat_to_rot, rot_to_quat
 
 # g2o [t, r] <-> GTSAM [r, t]: the permutation is its own inverse.
 SWAP_TR = np.array([3, 4, 5, 0, 1, 2])
@@ -98,7 +98,7 @@ def _parse_block(path, rows, n_ids: int, rotation: str, info_kind: str | None):
         norm = np.linalg.norm(q, axis=1)
         if np.any(norm < 1e-9):
             raise TrajectoryFormatError("zero quaternion", path, line=rows[int(np.argmin(norm))][0])
-        T[:, :3, :3] = Rotation.from_quat(q / norm[:, None]).as_matrix()
+        T[:, :3, :3] = quat_to_rot(q)
         rest = vals[:, 7:]
     else:
         T[:, :3, :3] = Rotation.from_euler("ZYX", vals[:, [5, 4, 3]]).as_matrix()
@@ -130,10 +130,10 @@ def write_g2o(path: str | Path, poses: dict[int, np.ndarray], edges: list[G2oEdg
     with atomic_write(path, "w", encoding="utf-8") as fh:
         for k in sorted(poses):
             T = poses[k]
-            q = matrix_to_quat_xyzw(T[:3, :3])
+            q = rot_to_quat(T[:3, :3])
             fh.write(f"VERTEX_SE3:QUAT {k} " + " ".join(f"{x:.9g}" for x in (*T[:3, 3], *q)) + "\n")
         for e in edges:
-            q = matrix_to_quat_xyzw(e.T_i_j[:3, :3])
+            q = rot_to_quat(e.T_i_j[:3, :3])
             info = np.asarray(e.information)[np.ix_(SWAP_TR, SWAP_TR)]
             nums = (*e.T_i_j[:3, 3], *q, *info[iu])
             fh.write(f"EDGE_SE3:QUAT {e.i} {e.j} " + " ".join(f"{x:.9g}" for x in nums) + "\n")

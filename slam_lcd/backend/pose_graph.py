@@ -37,10 +37,11 @@ from scipy.stats import chi2 as chi2_dist
 import gtsam
 
 from ..errors import InputError, InvalidPoseError
+from ..geometry import adjoint, inv, project_to_se3
 from ..types import LoopClosure, Trajectory
 from .config import BackendConfig
 from .g2o import G2oEdge, write_g2o
-from .lie import adjoint, inverse, log, project_to_se3
+from .lie import log
 
 log_ = logging.getLogger(__name__)
 
@@ -177,7 +178,7 @@ class PoseGraph:
             self._prefix.append(np.zeros((6, 6)))
         else:
             prev = self._odom[-1]
-            step = inverse(prev) @ T
+            step = inv(prev) @ T
             cov = cov_since_last if (c.use_odometry_covariance and _valid_spd(cov_since_last)) else self._default_odom_cov
             cov = np.asarray(cov, dtype=np.float64)
             graph.add(gtsam.BetweenFactorPose3(k - 1, k, gtsam.Pose3(step), gtsam.noiseModel.Gaussian.Covariance(cov)))
@@ -199,11 +200,11 @@ class PoseGraph:
     def _chain_cov(self, a: int, b: int) -> np.ndarray:
         """Covariance of odometry ``O_a^-1 O_b`` in frame b (upper bound: ignores loops)."""
         lo, hi = (a, b) if a <= b else (b, a)
-        Ai = adjoint(inverse(self._odom[b]))
+        Ai = adjoint(inv(self._odom[b]))
         return Ai @ (self._prefix[hi] - self._prefix[lo]) @ Ai.T
 
     def _odom_rel(self, a: int, b: int) -> np.ndarray:
-        return inverse(self._odom[a]) @ self._odom[b]
+        return inv(self._odom[a]) @ self._odom[b]
 
     # ------------------------------------------------------------------ loops
     @property
@@ -267,7 +268,7 @@ class PoseGraph:
         rec = lp.record
         Xa = self._isam.calculateEstimatePose3(lp.a).matrix()
         Xb = self._isam.calculateEstimatePose3(lp.b).matrix()
-        e = log(inverse(lp.Z) @ inverse(Xa) @ Xb)
+        e = log(inv(lp.Z) @ inv(Xa) @ Xb)
         S = lp.cov + self._chain_cov(lp.a, lp.b)
         c2 = float(e @ np.linalg.solve(S, e))
         rec.chi2_gate, rec.chi2_threshold = c2, self._chi2_gate
@@ -291,7 +292,11 @@ class PoseGraph:
         rec.pairwise_checked, rec.pairwise_inconsistent = n_acc, n_acc_bad
         support = len(consistent)
         if unary_ok:
-            if n_acc and n_acc_bad > self.conf.gate_pairwise_max_inconsistent * n_acc:
+            # a veto needs a majority of the nearby accepted loops AND at least gate_min_support of
+            # them: one earlier loop (itself possibly false) must not lock out a loop that agrees
+            # with the estimate; conflicts it leaves are settled by the GNC re-check
+            if (n_acc_bad >= max(1, self.conf.gate_min_support)
+                    and n_acc_bad > self.conf.gate_pairwise_max_inconsistent * n_acc):
                 rec.stage = "pairwise"
                 rec.reason = f"inconsistent with {n_acc_bad} of {n_acc} nearby accepted loops (PCM)"
                 return False, []
@@ -329,9 +334,9 @@ class PoseGraph:
         A = self._odom_rel(l1.a, l2.a)
         C = self._odom_rel(l2.b, l1.b)
         X = A @ l2.Z @ C
-        e = log(inverse(l1.Z) @ X)
-        T1 = adjoint(inverse(l2.Z @ C))
-        T2 = adjoint(inverse(C))
+        e = log(inv(l1.Z) @ X)
+        T1 = adjoint(inv(l2.Z @ C))
+        T2 = adjoint(inv(C))
         S = (
             l1.cov
             + T1 @ self._chain_cov(l1.a, l2.a) @ T1.T

@@ -24,8 +24,8 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from ..errors import FileMissingError, TrajectoryFormatError
+from ..geometry import inv, project_to_se3
 from ..types import LoopClosure
-from .lie import inverse, project_to_se3
 
 
 @dataclass
@@ -105,7 +105,7 @@ def make_scenario(gt_path: str | Path, conf: ScenarioConfig | None = None, times
     s = c.stride
     # Odometry: true steps * Exp(bias + noise). KITTI camera frame: y points down, so the
     # vertical (yaw) axis is y.
-    steps = inverse(gt[:-1]) @ gt[1:]
+    steps = inv(gt[:-1]) @ gt[1:]
     sig = np.r_[[c.odom_sigma_rot * np.sqrt(s)] * 3, [c.odom_sigma_trans * np.sqrt(s)] * 3]
     noise = rng.normal(size=(n - 1, 6)) * sig
     noise[:, 1] += c.odom_bias_yaw * s
@@ -131,7 +131,7 @@ def make_scenario(gt_path: str | Path, conf: ScenarioConfig | None = None, times
         if not cand:
             continue
         m = min(cand, key=lambda m: np.linalg.norm(pos[m] - pos[q]))
-        Z = inverse(gt[m]) @ gt[q] @ _exp_small(rng.normal(size=(1, 6)) * loop_sig)[0]
+        Z = inv(gt[m]) @ gt[q] @ _exp_small(rng.normal(size=(1, 6)) * loop_sig)[0]
         loops.append((q, m, Z, True))
     n_true = len(loops)
     # False loops: random far-apart pairs with a loop-like relative pose.

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from ..atomic import write_text
 from ..errors import InputError
-from ..eval.cli_util import check_output_path, one_line_errors, write_guard
+from .util import check_output_path, one_line_errors, write_guard
 from ..io.trajectory_files import FORMATS
 
 

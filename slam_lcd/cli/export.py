@@ -8,7 +8,7 @@ The output is written atomically and never onto the input.
 from __future__ import annotations
 
 from ..errors import InputError, NotBuiltError
-from ..eval.cli_util import check_output_path, one_line_errors, write_guard
+from .util import check_output_path, one_line_errors, write_guard
 from ..io.trajectory_files import FORMATS
 
 TARGETS = (*FORMATS, "mcap")

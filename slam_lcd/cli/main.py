@@ -13,6 +13,7 @@ import sys
 
 from .. import __version__
 from ..errors import SlamLcdError
+from .util import one_line_errors
 
 # module name in slam_lcd.cli -> registered subcommands
 COMMAND_MODULES = [
@@ -39,6 +40,10 @@ def build_parser() -> argparse.ArgumentParser:
     for name in COMMAND_MODULES:
         mod = importlib.import_module(f".{name}", __package__)
         mod.register(sub)
+    # usage errors are one line too (exit status 2), for the root parser and every subcommand
+    one_line_errors(parser)
+    for p in sub.choices.values():
+        one_line_errors(p)
     return parser
 
 

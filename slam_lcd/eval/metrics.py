@@ -14,6 +14,7 @@ from typing import Literal
 
 import numpy as np
 
+from ..geometry import inv, rotation_angle_deg
 from ..types import Trajectory
 from .align import Alignment, fit_alignment
 from .associate import associate
@@ -48,16 +49,6 @@ class ErrorStats:
 
     def to_dict(self) -> dict:
         return {k: float(v) for k, v in self.__dict__.items()}
-
-
-def rotation_angle_deg(R: np.ndarray) -> np.ndarray:
-    """Rotation angle (degrees) of one 3x3 or a stack (N, 3, 3) of rotation matrices."""
-    # atan2(sin, cos) stays accurate for tiny angles, where arccos of the trace loses ~1e-8 rad
-    R = np.asarray(R)
-    cos = (np.trace(R, axis1=-2, axis2=-1) - 1.0) / 2.0
-    axis = np.stack([R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]], axis=-1)
-    sin = np.linalg.norm(axis, axis=-1) / 2.0
-    return np.degrees(np.arctan2(sin, cos))
 
 
 @dataclass
@@ -229,15 +220,6 @@ def pairs_by_distance(positions: np.ndarray, delta_m: float) -> np.ndarray:
     return np.stack([ids[:-1], ids[1:]], axis=1) if len(ids) > 1 else np.zeros((0, 2), dtype=np.int64)
 
 
-def _inverse(T: np.ndarray) -> np.ndarray:
-    Ti = np.zeros_like(T)
-    Rt = np.swapaxes(T[..., :3, :3], -1, -2)
-    Ti[..., :3, :3] = Rt
-    Ti[..., :3, 3] = -(Rt @ T[..., :3, 3:4])[..., 0]
-    Ti[..., 3, 3] = 1.0
-    return Ti
-
-
 def rpe(
     ref: Trajectory,
     est: Trajectory,
@@ -268,9 +250,9 @@ def rpe(
     else:
         raise AssociationError(f"unknown RPE delta unit {delta_unit!r}; use 'frames' or 'm'")
     i, j = pairs[:, 0], pairs[:, 1]
-    rel_ref = _inverse(ref_m.poses[i]) @ ref_m.poses[j]
-    rel_est = _inverse(est_a.poses[i]) @ est_a.poses[j]
-    E = _inverse(rel_ref) @ rel_est
+    rel_ref = inv(ref_m.poses[i]) @ ref_m.poses[j]
+    rel_est = inv(est_a.poses[i]) @ est_a.poses[j]
+    E = inv(rel_ref) @ rel_est
     return RpeResult(
         alignment=alignment,
         delta=float(delta),

@@ -13,6 +13,7 @@ import cv2
 import numpy as np
 
 from ..errors import ConfigError, InputError, MessageEncodingError, SlamLcdError
+from ..geometry import quat_to_rot
 from ..types import CameraModel
 
 log = logging.getLogger(__name__)
@@ -116,8 +117,6 @@ def distort_points(camera: CameraModel, normalized_pts: np.ndarray) -> np.ndarra
 
 def pose_from_list(values, where: str = "frontend.T_body_camera") -> np.ndarray:
     """A 4x4 pose from 16 row-major numbers or 7 numbers ``x y z qx qy qz qw``."""
-    from scipy.spatial.transform import Rotation
-
     v = np.asarray(values, dtype=np.float64).reshape(-1)
     if v.size == 16:
         T = v.reshape(4, 4)
@@ -129,7 +128,7 @@ def pose_from_list(values, where: str = "frontend.T_body_camera") -> np.ndarray:
         if np.linalg.norm(q) < 1e-9:
             raise ConfigError(f"{where}: zero quaternion")
         T = np.eye(4)
-        T[:3, :3] = Rotation.from_quat(q / np.linalg.norm(q)).as_matrix()
+        T[:3, :3] = quat_to_rot(q)
         T[:3, 3] = v[:3]
         return T
     raise ConfigError(f"{where}: expected 16 numbers (4x4 row-major) or 7 (x y z qx qy qz qw), got {v.size}")

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .se3 import inv, se3_exp
+from ..geometry import inv, se3_exp
 
 CHI2_2DOF_95 = 5.991
 

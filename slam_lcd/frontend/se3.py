@@ -1,69 +1,22 @@
-"""SE(3) algebra for the front end, in GTSAM's Pose3 conventions (numpy only).
+"""Covariance propagation for the front end, in GTSAM's Pose3 conventions (numpy only).
 
 A pose perturbation is on the right, ``T = T_hat @ Exp(xi)``, with ``xi = [omega, v]``
 (rotation first), exactly like ``gtsam.Pose3``. Covariances therefore live in the body
 frame of the pose they belong to, and relative motions compose with the adjoint
-``Ad(T) = [[R, 0], [skew(t) R, R]]``.
+``Ad(T) = [[R, 0], [skew(t) R, R]]``. The SE(3) algebra itself lives in
+:mod:`slam_lcd.geometry`; ``inv``, ``rotation_angle``, ``se3_exp``, ``se3_log`` (and the other
+names imported below) are re-exported here for existing callers.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from ..geometry import adjoint, inv, rotation_angle, se3_exp, se3_log, skew, so3_exp, so3_log
 
-def skew(w: np.ndarray) -> np.ndarray:
-    x, y, z = np.asarray(w, dtype=np.float64).reshape(3)
-    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-
-
-def inv(T: np.ndarray) -> np.ndarray:
-    """Inverse of a rigid transform."""
-    R = T[:3, :3]
-    out = np.eye(4)
-    out[:3, :3] = R.T
-    out[:3, 3] = -R.T @ T[:3, 3]
-    return out
-
-
-def so3_exp(w: np.ndarray) -> np.ndarray:
-    w = np.asarray(w, dtype=np.float64).reshape(3)
-    th = np.linalg.norm(w)
-    K = skew(w)
-    if th < 1e-10:
-        return np.eye(3) + K
-    return np.eye(3) + np.sin(th) / th * K + (1 - np.cos(th)) / th**2 * (K @ K)
-
-
-def so3_log(R: np.ndarray) -> np.ndarray:
-    c = np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)
-    th = np.arccos(c)
-    v = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
-    if th < 1e-8:
-        return 0.5 * v
-    if np.pi - th < 1e-4:  # near pi: use the symmetric part
-        B = (R + np.eye(3)) / 2.0
-        axis = np.sqrt(np.maximum(np.diag(B), 0.0))
-        i = int(np.argmax(axis))
-        axis = B[i] / max(axis[i], 1e-12)
-        axis /= np.linalg.norm(axis)
-        if axis @ v < 0:
-            axis = -axis
-        return axis * th
-    return th / (2 * np.sin(th)) * v
-
-
-def rotation_angle(R: np.ndarray) -> float:
-    """Angle (rad) of a rotation matrix."""
-    return float(np.arccos(np.clip((np.trace(R[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)))
-
-
-def adjoint(T: np.ndarray) -> np.ndarray:
-    """6x6 adjoint of ``T`` in [rot, trans] order: ``T Exp(xi) T^-1 = Exp(Ad(T) xi)``."""
-    R = T[:3, :3]
-    A = np.zeros((6, 6))
-    A[:3, :3] = R
-    A[3:, 3:] = R
-    A[3:, :3] = skew(T[:3, 3]) @ R
-    return A
+__all__ = [
+    "adjoint", "compose_covariance", "inv", "relative_covariance", "rotation_angle", "se3_exp", "se3_log",
+    "skew", "so3_exp", "so3_log", "transform_covariance",
+]
 
 
 def compose_covariance(cov_ab: np.ndarray, T_bc: np.ndarray, cov_bc: np.ndarray) -> np.ndarray:
@@ -94,50 +47,6 @@ def relative_covariance(T_wi: np.ndarray, cov_i: np.ndarray, T_wj: np.ndarray, c
     if floor is not None:
         d = d + np.diag(floor)
     return d
-
-
-def ros_to_gtsam_covariance(cov_ros: np.ndarray, T_world_body: np.ndarray) -> np.ndarray:
-    """ROS pose covariance ([x y z roll pitch yaw], about the parent frame's axes) to GTSAM order.
-
-    ROS perturbs position and orientation in the parent (world) frame; GTSAM perturbs on
-    the right, in the body frame: ``omega = R^T dtheta``, ``v = R^T dp``.
-    """
-    c = np.asarray(cov_ros, dtype=np.float64).reshape(6, 6)
-    perm = [3, 4, 5, 0, 1, 2]
-    c = c[np.ix_(perm, perm)]
-    R = T_world_body[:3, :3]
-    B = np.zeros((6, 6))
-    B[:3, :3] = R.T
-    B[3:, 3:] = R.T
-    return B @ c @ B.T
-
-
-def se3_exp(xi: np.ndarray) -> np.ndarray:
-    """``Exp([omega, v])`` as a 4x4 matrix (GTSAM Pose3::Expmap)."""
-    xi = np.asarray(xi, dtype=np.float64).reshape(6)
-    w, v = xi[:3], xi[3:]
-    th = np.linalg.norm(w)
-    K = skew(w)
-    if th < 1e-10:
-        V = np.eye(3) + 0.5 * K
-    else:
-        V = np.eye(3) + (1 - np.cos(th)) / th**2 * K + (th - np.sin(th)) / th**3 * (K @ K)
-    T = np.eye(4)
-    T[:3, :3] = so3_exp(w)
-    T[:3, 3] = V @ v
-    return T
-
-
-def se3_log(T: np.ndarray) -> np.ndarray:
-    """``Log(T)`` as ``[omega, v]`` (GTSAM Pose3::Logmap)."""
-    w = so3_log(T[:3, :3])
-    th = np.linalg.norm(w)
-    K = skew(w)
-    if th < 1e-10:
-        Vinv = np.eye(3) - 0.5 * K
-    else:
-        Vinv = np.eye(3) - 0.5 * K + (1 / th**2) * (1 - (th * np.sin(th)) / (2 * (1 - np.cos(th)))) * (K @ K)
-    return np.concatenate([w, Vinv @ T[:3, 3]])
 
 
 def transform_covariance(cov_c: np.ndarray, T_b_c: np.ndarray) -> np.ndarray:

@@ -16,7 +16,7 @@ from ..types import Keyframe
 from .camera import undistort_points
 from .config import FrontendConfig
 from .matching import match_descriptors
-from .se3 import inv
+from ..geometry import inv
 
 
 def _camera_pose(kf: Keyframe) -> np.ndarray:

@@ -28,7 +28,8 @@ from .config import FrontendConfig
 from .depth_points import points_from_depth, points_from_stereo
 from .matching import match_descriptors
 from .pnp import solve_pnp
-from .se3 import compose_covariance, inv, rotation_angle, transform_covariance
+from ..geometry import inv, rotation_angle
+from .se3 import compose_covariance, transform_covariance
 
 log = logging.getLogger(__name__)
 

@@ -16,8 +16,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError, InvalidPoseError
+from ..geometry import inv, quat_slerp, quat_to_rot
 from .decode import transform_to_matrix
-from .transforms import checked_quat, inverse, quat_to_rot, slerp, tq_from_pose
+from .transforms import checked_quat, tq_from_pose
 
 
 class TfLookupError(InputError):
@@ -64,7 +65,7 @@ class _Edge:
         elif 0 < i < len(st):
             a = (stamp - st[i - 1]) / (st[i] - st[i - 1])
             t = tt[i - 1] + a * (tt[i] - tt[i - 1])
-            q = slerp(qq[i - 1], qq[i], a)
+            q = quat_slerp(qq[i - 1], qq[i], a)
         elif i == 0 and st[0] - stamp <= tol:
             t, q = tt[0], qq[0]
         elif i == len(st) and stamp - st[-1] <= tol:
@@ -74,7 +75,7 @@ class _Edge:
                 f"transform {self.parent} -> {self.child} is known from {st[0]} to {st[-1]} ns, not at {stamp} ns"
             )
         T = np.eye(4)
-        T[:3, :3] = quat_to_rot(*q)
+        T[:3, :3] = quat_to_rot(q)
         T[:3, 3] = t
         return T
 
@@ -189,7 +190,7 @@ class TfBuffer:
         T = np.eye(4)
         for edge, forward in self.chain(parent, child):
             E = edge.at(int(stamp_ns), self.extrapolation_ns)
-            T = T @ (E if forward else inverse(E))
+            T = T @ (E if forward else inv(E))
         return T
 
     def stamps(self, parent: str, child: str) -> np.ndarray:

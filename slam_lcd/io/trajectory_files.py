@@ -37,6 +37,8 @@ from ..errors import (
     UnsortedStampsError,
     UnsupportedFormatError,
 )
+from ..geometry import nearest_rotation, quat_to_rot, rot_to_quat
+from ..geometry import rot_to_quat as rotation_to_quat  # noqa: F401  (public name kept for callers)
 from ..types import Trajectory
 
 __all__ = [
@@ -141,55 +143,6 @@ def _is_float(text: str) -> bool:
         return False
 
 
-def quat_to_rotation(q_xyzw: np.ndarray) -> np.ndarray:
-    """Unit quaternion(s) (x, y, z, w), shape (4,) or (N, 4) → rotation matrix/matrices."""
-    q = np.asarray(q_xyzw, dtype=np.float64)
-    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    R = np.empty(q.shape[:-1] + (3, 3))
-    R[..., 0, 0] = 1 - 2 * (y * y + z * z)
-    R[..., 0, 1] = 2 * (x * y - z * w)
-    R[..., 0, 2] = 2 * (x * z + y * w)
-    R[..., 1, 0] = 2 * (x * y + z * w)
-    R[..., 1, 1] = 1 - 2 * (x * x + z * z)
-    R[..., 1, 2] = 2 * (y * z - x * w)
-    R[..., 2, 0] = 2 * (x * z - y * w)
-    R[..., 2, 1] = 2 * (y * z + x * w)
-    R[..., 2, 2] = 1 - 2 * (x * x + y * y)
-    return R
-
-
-def rotation_to_quat(R: np.ndarray) -> np.ndarray:
-    """Rotation matrix/matrices (3, 3) or (N, 3, 3) → unit quaternion(s) (x, y, z, w).
-
-    Shepperd's method: of the four algebraically equal formulas, each matrix uses the one
-    dividing by its largest quaternion component, so every angle (180° included) is exact.
-    """
-    m = np.asarray(R, dtype=np.float64)
-    single = m.ndim == 2
-    m = m.reshape(-1, 3, 3)
-    d0, d1, d2 = m[:, 0, 0], m[:, 1, 1], m[:, 2, 2]
-    tr = d0 + d1 + d2
-    cands = np.stack([tr, d0, d1, d2], axis=1)
-    case = np.argmax(cands, axis=1)
-    q = np.empty((len(m), 4))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        s = 2.0 * np.sqrt(np.maximum(1.0 + np.choose(case, [tr, 2 * d0 - tr, 2 * d1 - tr, 2 * d2 - tr]), 0.0))
-        a21, a12 = m[:, 2, 1], m[:, 1, 2]
-        a02, a20 = m[:, 0, 2], m[:, 2, 0]
-        a10, a01 = m[:, 1, 0], m[:, 0, 1]
-        cases = [
-            np.stack([(a21 - a12) / s, (a02 - a20) / s, (a10 - a01) / s, 0.25 * s], axis=1),
-            np.stack([0.25 * s, (a01 + a10) / s, (a02 + a20) / s, (a21 - a12) / s], axis=1),
-            np.stack([(a01 + a10) / s, 0.25 * s, (a12 + a21) / s, (a02 - a20) / s], axis=1),
-            np.stack([(a02 + a20) / s, (a12 + a21) / s, 0.25 * s, (a10 - a01) / s], axis=1),
-        ]
-    for k in range(4):
-        sel = case == k
-        q[sel] = cases[k][sel]
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
-    return q[0] if single else q
-
-
 def _poses_from_quats(t: np.ndarray, q_xyzw: np.ndarray, lines: list[int], path: Path) -> np.ndarray:
     norm = np.linalg.norm(q_xyzw, axis=1)
     small = norm < _QUAT_MIN_NORM
@@ -197,20 +150,9 @@ def _poses_from_quats(t: np.ndarray, q_xyzw: np.ndarray, lines: list[int], path:
         i = int(np.flatnonzero(small)[0])
         raise InvalidPoseError(f"line {lines[i]}: quaternion norm {norm[i]:.3g} is too close to zero", path)
     T = np.tile(np.eye(4), (len(t), 1, 1))
-    T[:, :3, :3] = quat_to_rotation(q_xyzw / norm[:, None])
+    T[:, :3, :3] = quat_to_rot(q_xyzw)
     T[:, :3, 3] = t
     return T
-
-
-def nearest_rotation(M: np.ndarray) -> np.ndarray:
-    """Closest rotation matrix (Frobenius norm) to nearly orthonormal 3x3 matrix/matrices."""
-    u, _, vt = np.linalg.svd(M)
-    d = np.sign(np.linalg.det(u @ vt))
-    D = np.zeros(np.shape(M))
-    D[..., 0, 0] = 1.0
-    D[..., 1, 1] = 1.0
-    D[..., 2, 2] = d
-    return u @ D @ vt
 
 
 def _check_sorted(stamps, lines: list[int], path: Path) -> None:
@@ -281,7 +223,7 @@ def write_tum(path: str | Path, traj: Trajectory) -> None:
     """Write ``t tx ty tz qx qy qz qw`` lines (stamps as exact decimal seconds), atomically."""
     path = Path(path)
     _check_writable(traj, path)
-    quats = rotation_to_quat(traj.poses[:, :3, :3])
+    quats = rot_to_quat(traj.poses[:, :3, :3])
     with atomic_write(path, "w", encoding="utf-8") as fh:
         fh.write("# timestamp tx ty tz qx qy qz qw\n")
         for stamp, t, q in zip(traj.stamps.tolist(), traj.poses[:, :3, 3].tolist(), quats.tolist()):
@@ -364,7 +306,7 @@ def write_euroc(path: str | Path, traj: Trajectory) -> None:
     """Write a EuRoC CSV with integer-ns stamps and w-first quaternions, atomically."""
     path = Path(path)
     _check_writable(traj, path)
-    q_wxyz = rotation_to_quat(traj.poses[:, :3, :3])[:, [3, 0, 1, 2]]
+    q_wxyz = rot_to_quat(traj.poses[:, :3, :3])[:, [3, 0, 1, 2]]
     with atomic_write(path, "w", encoding="utf-8") as fh:
         fh.write(EUROC_HEADER + "\n")
         for stamp, t, q in zip(traj.stamps.tolist(), traj.poses[:, :3, 3].tolist(), q_wxyz.tolist()):

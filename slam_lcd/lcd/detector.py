@@ -16,11 +16,11 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError
+from ..features.matching import mutual_nn_match_bf
 from ..types import CameraModel, Features, Keyframe, LoopClosure
 from .config import LcdConfig
 from .geometry import EpipolarVerdict, PoseVerdict, default_camera, estimate_loop_pose, keyframe_points3d, verify_epipolar
 from .graph import GraphVerdict, verify_graph
-from .matching import match_mutual
 from .temporal import TemporalConsistency
 
 log = logging.getLogger(__name__)
@@ -152,7 +152,7 @@ class LoopDetector:
         c = self.conf
         binary = fq.descriptors.dtype == np.uint8
         max_d = c.match_max_distance_orb if binary else c.match_max_distance_sp
-        return match_mutual(fq.descriptors, fm.descriptors, ratio=c.match_ratio, max_distance=max_d)
+        return mutual_nn_match_bf(fq.descriptors, fm.descriptors, ratio=c.match_ratio, max_distance=max_d)
 
     def _camera(self, kf: Keyframe, feats: Features) -> CameraModel:
         if kf.camera is not None:

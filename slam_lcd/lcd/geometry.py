@@ -14,53 +14,9 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from ..geometry import adjoint, inv, se3_exp
 from ..types import CameraModel, Keyframe
 from .config import LcdConfig
-
-
-# ----------------------------------------------------------------------------- small SE(3) helpers
-
-
-def _inv(T: np.ndarray) -> np.ndarray:
-    R, t = T[:3, :3], T[:3, 3]
-    out = np.eye(4)
-    out[:3, :3] = R.T
-    out[:3, 3] = -R.T @ t
-    return out
-
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    return np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0.0]])
-
-
-def _exp_se3(xi: np.ndarray) -> np.ndarray:
-    """Exponential map of ``xi = [omega, v]`` (GTSAM Pose3 tangent order)."""
-    w, v = xi[:3], xi[3:]
-    th = np.linalg.norm(w)
-    W = _skew(w)
-    if th < 1e-10:
-        R = np.eye(3) + W
-        V = np.eye(3) + 0.5 * W
-    else:
-        a = np.sin(th) / th
-        b = (1 - np.cos(th)) / th**2
-        c = (th - np.sin(th)) / th**3
-        R = np.eye(3) + a * W + b * W @ W
-        V = np.eye(3) + b * W + c * W @ W
-    T = np.eye(4)
-    T[:3, :3] = R
-    T[:3, 3] = V @ v
-    return T
-
-
-def adjoint(T: np.ndarray) -> np.ndarray:
-    """Adjoint of ``T`` in [omega, v] order: ``T Exp(xi) T^-1 = Exp(Ad_T xi)``."""
-    R, t = T[:3, :3], T[:3, 3]
-    A = np.zeros((6, 6))
-    A[:3, :3] = R
-    A[3:, 3:] = R
-    A[3:, :3] = _skew(t) @ R
-    return A
 
 
 # ----------------------------------------------------------------------------- cameras
@@ -285,7 +241,7 @@ def estimate_loop_pose(
     T_cq_cm = np.eye(4)
     T_cq_cm[:3, :3] = R
     T_cq_cm[:3, 3] = tvec.reshape(3)
-    T_cm_cq, info_cam, rms, keep = refine_pose(_inv(T_cq_cm), X[idx], xn, f, inl, conf)
+    T_cm_cq, info_cam, rms, keep = refine_pose(inv(T_cq_cm), X[idx], xn, f, inl, conf)
     n_inl = int(keep.sum())
     mask = np.zeros(len(matches), bool)
     mask[idx[keep]] = True
@@ -295,7 +251,7 @@ def estimate_loop_pose(
         return PoseVerdict(False, None, None, n_inl, rms, "high_reprojection_rms", source, mask)
     # camera frames -> body frames: T_mq = B_m X B_q^-1 and xi_body = Ad_{B_q} xi_cam
     B_q, B_m = np.asarray(kf_q.T_body_camera, float), np.asarray(kf_m.T_body_camera, float)
-    T_mq = B_m @ T_cm_cq @ _inv(B_q)
+    T_mq = B_m @ T_cm_cq @ inv(B_q)
     A_inv = np.linalg.inv(adjoint(B_q))
     info = A_inv.T @ info_cam @ A_inv
     if swapped:
@@ -303,7 +259,7 @@ def estimate_loop_pose(
         A = adjoint(T_mq)
         A_inv = np.linalg.inv(A)
         info = A_inv.T @ info @ A_inv
-        T_mq = _inv(T_mq)
+        T_mq = inv(T_mq)
     info = 0.5 * (info + info.T)
     return PoseVerdict(True, T_mq, info, n_inl, rms, "ok", source, mask)
 
@@ -340,7 +296,7 @@ def refine_pose(
             dx = -np.linalg.solve(H + 1e-9 * np.eye(6), g)
         except np.linalg.LinAlgError:
             break
-        X = X @ _exp_se3(dx)
+        X = X @ se3_exp(dx)
         if np.linalg.norm(dx) < 1e-10:
             break
     # re-select inliers with the refined pose, then a final linearisation for the information
@@ -356,7 +312,7 @@ def refine_pose(
 
 
 def _reprojection_errors(T_cm_cq: np.ndarray, X_m: np.ndarray, xn_q: np.ndarray, focal: float) -> np.ndarray:
-    T = _inv(T_cm_cq)
+    T = inv(T_cm_cq)
     P = X_m @ T[:3, :3].T + T[:3, 3]
     with np.errstate(divide="ignore", invalid="ignore"):
         proj = P[:, :2] / P[:, 2:3]
@@ -367,7 +323,7 @@ def _reprojection_errors(T_cm_cq: np.ndarray, X_m: np.ndarray, xn_q: np.ndarray,
 
 def _residuals_and_jacobian(T_cm_cq: np.ndarray, X_m: np.ndarray, xn_q: np.ndarray, focal: float):
     """Stacked residuals (2N,) in pixels and their Jacobian (2N, 6) w.r.t. the right perturbation."""
-    T = _inv(T_cm_cq)
+    T = inv(T_cm_cq)
     P = X_m @ T[:3, :3].T + T[:3, 3]  # points in the query camera
     front = P[:, 2] > 1e-6
     P, xn = P[front], xn_q[front]

@@ -1,4 +1,4 @@
-"""Small helpers shared by the `ate` and `export` subcommands."""
+"""Small helpers shared by the subcommands (one-line usage errors, output-path checks)."""
 from __future__ import annotations
 
 import argparse

@@ -1,0 +1,80 @@
+"""The shared SE(3)/SO(3)/quaternion helpers of slam_lcd.geometry against scipy and GTSAM."""
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from slam_lcd import geometry as g
+
+
+def _poses(n, seed=0):
+    rng = np.random.default_rng(seed)
+    T = np.tile(np.eye(4), (n, 1, 1))
+    T[:, :3, :3] = Rotation.random(n, random_state=seed).as_matrix()
+    T[:, :3, 3] = rng.normal(size=(n, 3))
+    return T
+
+
+def test_inv_single_and_stacked():
+    T = _poses(50)
+    Ti = g.inv(T)
+    assert np.allclose(Ti @ T, np.eye(4), atol=1e-12)
+    assert np.allclose(g.inv(T[3]), np.linalg.inv(T[3]), atol=1e-12)
+
+
+def test_quaternions_match_scipy_and_round_trip():
+    R = Rotation.random(200, random_state=1)
+    q = R.as_quat()  # (x, y, z, w)
+    assert np.allclose(g.quat_to_rot(q), R.as_matrix(), atol=1e-12)
+    assert np.allclose(g.quat_to_rot(3.0 * q[0]), R.as_matrix()[0], atol=1e-12)  # normalised first
+    back = g.rot_to_quat(R.as_matrix())
+    assert np.allclose(np.abs(np.sum(back * q, axis=1)), 1.0, atol=1e-12)
+    pos = g.rot_to_quat(R.as_matrix(), w_nonnegative=True)
+    assert np.all(pos[:, 3] >= 0) and np.allclose(np.abs(pos), np.abs(back))
+    R180 = Rotation.from_rotvec([np.pi, 0, 0]).as_matrix()  # exact at 180 degrees
+    assert np.allclose(np.abs(g.rot_to_quat(R180)), [1, 0, 0, 0], atol=1e-15)
+
+
+def test_rotation_angle_accurate_for_tiny_and_stacked():
+    rv = np.array([3e-9, -1e-9, 2e-9])
+    assert abs(g.rotation_angle(Rotation.from_rotvec(rv).as_matrix()) - np.linalg.norm(rv)) < 1e-15
+    R = Rotation.random(20, random_state=2)
+    assert np.allclose(g.rotation_angle_deg(R.as_matrix()), np.degrees(R.magnitude()), atol=1e-9)
+    assert isinstance(g.rotation_angle_deg(np.eye(4)), float)
+
+
+def test_exp_log_adjoint_gtsam_conventions():
+    gtsam = __import__("pytest").importorskip("gtsam")
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        xi = rng.normal(size=6)
+        T = g.se3_exp(xi)
+        assert np.allclose(T, gtsam.Pose3.Expmap(xi).matrix(), atol=1e-12)
+        assert np.allclose(g.se3_log(T), gtsam.Pose3.Logmap(gtsam.Pose3(T)), atol=1e-9)
+        assert np.allclose(g.adjoint(T), gtsam.Pose3(T).AdjointMap(), atol=1e-12)
+    Ts = _poses(5)
+    assert np.allclose(g.adjoint(Ts)[2], g.adjoint(Ts[2]))
+
+
+def test_nearest_rotation_and_project():
+    T = _poses(1)[0]
+    noisy = T.copy()
+    noisy[:3, :3] += 1e-4 * np.random.default_rng(4).normal(size=(3, 3))
+    P = g.project_to_se3(noisy)
+    assert np.allclose(P[:3, :3] @ P[:3, :3].T, np.eye(3), atol=1e-12) and np.linalg.det(P[:3, :3]) > 0
+    assert np.allclose(P[:3, 3], T[:3, 3]) and np.allclose(P[:3, :3], T[:3, :3], atol=1e-3)
+
+
+def test_log_matches_gtsam_near_zero_and_pi():
+    gtsam = __import__("pytest").importorskip("gtsam")
+    rng = np.random.default_rng(5)
+    for k in range(300):
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        angle = 10 ** rng.uniform(-12, -2) if k % 2 else np.pi - 10 ** rng.uniform(-9, -2)
+        T = np.eye(4)
+        T[:3, :3] = Rotation.from_rotvec(angle * axis).as_matrix()
+        T[:3, 3] = rng.normal(size=3)
+        xi = g.se3_log(T)
+        assert np.all(np.isfinite(xi))
+        assert np.allclose(xi, gtsam.Pose3.Logmap(gtsam.Pose3(T)), atol=1e-6)
