@@ -100,6 +100,9 @@ class Pipeline:
         self._odom_poses: list[np.ndarray] = []
         self._odom_covs: list[np.ndarray | None] = []
         self._pending: list[_Frame] = []
+        # when the log carries depth, a frame waits for its depth image (or for the next frame):
+        # message order at equal stamps differs between log formats, the result must not
+        self.expect_depth = False
         self._finalized = False
 
     # ------------------------------------------------------------------ inputs
@@ -128,11 +131,12 @@ class Pipeline:
         self._pending.append(_Frame(int(stamp_ns), image, depth, right_image))
         return self._release(final=False)
 
-    def attach_depth(self, stamp_ns: int, depth: np.ndarray) -> None:
+    def attach_depth(self, stamp_ns: int, depth: np.ndarray) -> list[LoopClosure]:
         """Attach a depth image to a frame still waiting (logs may write depth after the image)."""
         for f in self._pending:
             if f.stamp == stamp_ns:
                 f.depth = depth
+        return self._release(final=False)
 
     def add_keyframe(self, kf: Keyframe) -> list[LoopClosure]:
         """Plugin entry for a user's own front end: a ready keyframe (pose = odometry)."""
@@ -184,8 +188,10 @@ class Pipeline:
             return out
         last = self._odom_stamps[-1]
         keep = []
+        newest = self._pending[-1] if self._pending else None
         for f in self._pending:
-            if f.stamp <= last or final:
+            complete = f.depth is not None or not self.expect_depth or f is not newest
+            if (f.stamp <= last and complete) or final:
                 if f.stamp < self._odom_stamps[0]:
                     continue  # before the first odometry sample: no pose to attach
                 out += self._process(f)

@@ -161,10 +161,14 @@ def run_log(
         gt_traj = _read_gt_file(gt_file) if gt_file is not None else None
         tf = TfBuffer()
         static_topics = [t for t, i in reader.topics.items() if i.msgtype == "tf2_msgs/msg/TFMessage" and "static" in t]
-        wanted = [t for t in (topics.image, topics.odom, topics.camera_info, topics.depth, topics.gt) if t] + static_topics
+        # static transforms first (tiny): the camera mounting must not depend on message order
+        for m in reader.messages(static_topics) if static_topics else ():
+            tf.add(m.msg, static=True)
+        wanted = [t for t in (topics.image, topics.odom, topics.camera_info, topics.depth, topics.gt) if t]
         from .pipeline import Pipeline  # imported late: topic errors need no model
 
         pipe = Pipeline(cfg, extractor=extractor)
+        pipe.expect_depth = topics.depth is not None
         if cfg.features.feature_cache:
             from .features import FeatureCache
 
@@ -172,21 +176,17 @@ def run_log(
             pipe.feature_source = lambda stamp, img: cache.extract(log_path, topics.image, stamp, img)
         save_config(cfg, out_dir / "config.yaml")
         gt_st, gt_T = [], []
+        # the body frame is the odometry's child frame (read once, before streaming)
+        first_odom = next(iter(reader.messages([topics.odom])), None)
+        body_frame = (getattr(first_odom.msg, "child_frame_id", None) or None) if first_odom else None
         n_img = reader.topics[topics.image].count
         camera_set = False
-        body_frame = None
         bar = tqdm(total=n_img, desc="frames", unit="img", disable=not progress, dynamic_ncols=True)
         depth_wait: dict[int, np.ndarray] = {}
         try:
             for m in reader.messages(wanted):
-                if m.topic in static_topics:
-                    tf.add(m.msg, static=True)
-                elif m.topic == topics.odom:
+                if m.topic == topics.odom:
                     T, cov = decode_pose(m.msg)
-                    if body_frame is None:
-                        body_frame = getattr(m.msg, "child_frame_id", None) or None
-                    with pipe.timer("decode"):
-                        pass
                     pipe.add_odometry(m.stamp, T, cov)
                 elif m.topic == topics.camera_info and not camera_set:
                     cam = decode_camera_info(m.msg)
