@@ -154,10 +154,13 @@ def run_log(
 
     with open_log(log_path, conf=cfg.io) as reader:
         topics = choose_topics(reader, image_topic, odom_topic, gt_topic, depth_topic)
+        vo_odometry = None
         if topics.odom is None:
-            raise PipelineError(
-                "log has no odometry topic (nav_msgs/Odometry); pass --odom-topic "
-                "(built-in visual odometry for odometry-free logs: see slam_lcd.frontend)", log_path)
+            if topics.depth is None:
+                raise PipelineError(
+                    "log has no odometry topic (nav_msgs/Odometry) and no depth image for the built-in "
+                    "visual odometry; pass --odom-topic", log_path)
+            vo_odometry = _visual_odometry(log_path, topics, cfg, progress)
         gt_traj = _read_gt_file(gt_file) if gt_file is not None else None
         tf = TfBuffer()
         static_topics = [t for t, i in reader.topics.items() if i.msgtype == "tf2_msgs/msg/TFMessage" and "static" in t]
@@ -177,8 +180,13 @@ def run_log(
         save_config(cfg, out_dir / "config.yaml")
         gt_st, gt_T = [], []
         # the body frame is the odometry's child frame (read once, before streaming)
-        first_odom = next(iter(reader.messages([topics.odom])), None)
+        first_odom = next(iter(reader.messages([topics.odom])), None) if topics.odom else None
         body_frame = (getattr(first_odom.msg, "child_frame_id", None) or None) if first_odom else None
+        if vo_odometry is not None:  # built-in VO ran first: its poses are the odometry
+            traj = vo_odometry.result.trajectory()
+            for k in range(len(traj)):
+                cov = None if traj.covariances is None else traj.covariances[k]
+                pipe.add_odometry(int(traj.stamps[k]), traj.poses[k], cov)
         n_img = reader.topics[topics.image].count
         camera_set = False
         bar = tqdm(total=n_img, desc="frames", unit="img", disable=not progress, dynamic_ncols=True)
@@ -204,8 +212,8 @@ def run_log(
                     with pipe.timer("decode"):
                         img = decode_compressed_image(m.msg) if m.msgtype.endswith("CompressedImage") else decode_image(m.msg)
                         gray = image_to_gray(img)
-                    result.n_frames += 1
                     pipe.add_image(m.stamp, gray, depth=depth_wait.pop(m.stamp, None))
+                    result.n_frames += 1
                     bar.update(1)
                     if len(depth_wait) > 64:
                         for k in sorted(depth_wait)[:-8]:
@@ -227,6 +235,15 @@ def run_log(
     result.wall_s = time.perf_counter() - t_start
     write_outputs(pipe, out_dir, result, gt_traj, log_path if (write_mcap and cfg.run.write_mcap) else None, topics)
     return result
+
+
+def _visual_odometry(log_path, topics: Topics, cfg, progress: bool):
+    """Built-in RGB-D visual odometry over the whole log (a first pass; see slam_lcd.frontend)."""
+    from .frontend.log_vo import visual_odometry_from_log
+
+    log.warning("%s: no odometry topic; running the built-in RGB-D visual odometry first", log_path)
+    return visual_odometry_from_log(log_path, cfg.frontend, image_topic=topics.image, depth_topic=topics.depth,
+                                    camera_info_topic=topics.camera_info)
 
 
 def _camera_mount(tf, body_frame, camera_frame, stamp, cfg) -> np.ndarray | None:
