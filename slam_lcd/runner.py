@@ -23,7 +23,7 @@ import numpy as np
 
 from .atomic import guard_not_input, write_text
 from .config import Config, save_config
-from .errors import FileMissingError, PipelineError, TopicNotFoundError
+from .errors import FileMissingError, PipelineError
 from .geometry import interpolate_poses, inv, rotation_angle_deg
 from .types import Trajectory
 
@@ -269,7 +269,7 @@ def _read_gt_file(path) -> Trajectory:
 
 # --------------------------------------------------------------------------- outputs
 def _gt_relative(gt: Trajectory, s_q: int, s_m: int):
-    """Ground-truth T_match_query (body frames) and the gap of each stamp to the nearest GT sample."""
+    """Ground-truth T_match_query (body frames) at the two keyframe stamps (GT interpolated)."""
     P = interpolate_poses(gt.stamps, gt.poses, np.array([s_q, s_m]))
     return inv(P[1]) @ P[0]
 

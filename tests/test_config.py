@@ -1,7 +1,7 @@
 import pytest
 import yaml
 
-from slam_lcd.config import Config, apply_override, dump_config, load_config, save_config
+from slam_lcd.config import Config, apply_override, load_config, save_config
 from slam_lcd.errors import ConfigError
 
 

@@ -21,7 +21,7 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ..demo import demo_log_path, ensure_demo_log
+    from ..demo import ensure_demo_log
     from ..features import load_extractor
     from ..runner import run_log
 

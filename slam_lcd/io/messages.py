@@ -15,6 +15,7 @@ import numpy as np
 
 from ..errors import InvalidPoseError, MessageEncodingError
 from ..types import CameraModel, Trajectory
+from .decode import IMAGE_ENCODINGS
 from .transforms import gtsam_cov_to_ros, tq_from_pose
 from .typestores import ros2_store
 
@@ -73,18 +74,8 @@ _AUTO_ENCODING = {
     (np.dtype(np.uint16), 1): "mono16",
     (np.dtype(np.float32), 1): "32FC1",
 }
-# encoding -> (dtype, channels)
-_LAYOUT = {
-    "mono8": (np.uint8, 1),
-    "8UC1": (np.uint8, 1),
-    "mono16": (np.uint16, 1),
-    "16UC1": (np.uint16, 1),
-    "32FC1": (np.float32, 1),
-    "rgb8": (np.uint8, 3),
-    "bgr8": (np.uint8, 3),
-    "rgba8": (np.uint8, 4),
-    "bgra8": (np.uint8, 4),
-}
+# the same encoding table as the decoder: what we write, we read back
+_LAYOUT = IMAGE_ENCODINGS
 
 
 def image_msg(img: np.ndarray, stamp_ns: int, frame_id: str, encoding: str | None = None):
