@@ -103,6 +103,7 @@ class Pipeline:
         # when the log carries depth, a frame waits for its depth image (or for the next frame):
         # message order at equal stamps differs between log formats, the result must not
         self.expect_depth = False
+        self._segment_from: int | None = None  # stamp of an odometry break not yet handed to a keyframe
         self._finalized = False
 
     # ------------------------------------------------------------------ inputs
@@ -113,8 +114,15 @@ class Pipeline:
             self.T_body_camera = np.asarray(T_body_camera, float)
             self.selector.T_body_camera = self.T_body_camera.copy()
 
-    def add_odometry(self, stamp_ns: int, T_world_body: np.ndarray, covariance: np.ndarray | None = None) -> list[LoopClosure]:
-        """One odometry sample; returns the loops found on frames this sample released."""
+    def add_odometry(self, stamp_ns: int, T_world_body: np.ndarray, covariance: np.ndarray | None = None,
+                     *, segment_start: bool = False) -> list[LoopClosure]:
+        """One odometry sample; returns the loops found on frames this sample released.
+
+        ``segment_start=True`` marks a break in the odometry (e.g. visual tracking lost): the
+        next keyframe is linked to the previous one by a large-noise factor, never by the jump.
+        """
+        if segment_start:
+            self._segment_from = int(stamp_ns)
         T = np.asarray(T_world_body, dtype=np.float64).reshape(4, 4)
         if not np.all(np.isfinite(T)):
             raise InvalidPoseError(f"odometry pose at stamp {stamp_ns} has NaN/inf values")
@@ -205,17 +213,24 @@ class Pipeline:
         features = None
         if self.config.run.keyframe_on_overlap and self.config.frontend.kf_min_overlap > 0:
             features = self._extract(f.stamp, f.image)
+        brk = self._segment_from is not None and f.stamp >= self._segment_from
+        if brk:
+            self._segment_from = None
         with self.timer("keyframe_selection"):
             is_kf = self.selector.push(f.stamp, T, cov, image=f.image, features=features,
-                                       depth=f.depth, right_image=f.right_image)
+                                       depth=f.depth, right_image=f.right_image, segment_start=brk)
         if not is_kf:
             return []
-        kf = self.selector.keyframes[-1]
-        # the selector's list is only for its own bookkeeping: drop heavy fields there
-        self.selector.keyframes[-1] = Keyframe(
-            id=kf.id, stamp=kf.stamp, T_world_body=kf.T_world_body, features=kf.features,
-            covariance_since_last=kf.covariance_since_last)
-        return self.add_keyframe(kf)
+        out: list[LoopClosure] = []
+        # usually one new keyframe; two on an odometry break (the frame before it is promoted)
+        for i in range(len(self.keyframes), len(self.selector.keyframes)):
+            kf = self.selector.keyframes[i]
+            # the selector's list is only for its own bookkeeping: drop heavy fields there
+            self.selector.keyframes[i] = Keyframe(
+                id=kf.id, stamp=kf.stamp, T_world_body=kf.T_world_body, features=kf.features,
+                covariance_since_last=kf.covariance_since_last)
+            out += self.add_keyframe(kf)
+        return out
 
     # ------------------------------------------------------------------ results
     def flush(self) -> list[LoopClosure]:

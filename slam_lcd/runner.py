@@ -184,9 +184,10 @@ def run_log(
         body_frame = (getattr(first_odom.msg, "child_frame_id", None) or None) if first_odom else None
         if vo_odometry is not None:  # built-in VO ran first: its poses are the odometry
             traj = vo_odometry.result.trajectory()
+            breaks = vo_odometry.result.segment_starts
             for k in range(len(traj)):
                 cov = None if traj.covariances is None else traj.covariances[k]
-                pipe.add_odometry(int(traj.stamps[k]), traj.poses[k], cov)
+                pipe.add_odometry(int(traj.stamps[k]), traj.poses[k], cov, segment_start=bool(breaks[k]) and k > 0)
         n_img = reader.topics[topics.image].count
         camera_set = False
         bar = tqdm(total=n_img, desc="frames", unit="img", disable=not progress, dynamic_ncols=True)

@@ -60,3 +60,27 @@ def test_log_without_odometry_uses_visual_odometry(small_log, tmp_path):
     assert len(odo) >= 70  # one VO pose per tracked frame
     # VO on the rendered RGB-D frames is accurate: a few cm over ~9 m
     assert res.ate_before is not None and res.ate_before < 0.1
+
+
+def test_odometry_break_becomes_large_noise_link_not_a_jump():
+    """A flagged odometry break (tracking lost) gives the next keyframe a large-noise link."""
+    from slam_lcd.geometry import make_T
+    from slam_lcd.pipeline import Pipeline
+
+    rng = np.random.default_rng(0)
+    cfg = _orb_config()
+    pipe = Pipeline(cfg)
+    t0 = 1_000_000_000
+    for k in range(40):
+        stamp = t0 + k * 100_000_000
+        x = 0.1 * k + (5.0 if k >= 20 else 0.0)  # the odometry jumps 5 m at the break
+        pipe.add_odometry(stamp, make_T(np.eye(3), [x, 0, 0]), segment_start=(k == 20))
+        pipe.add_image(stamp, (rng.random((120, 160)) * 255).astype(np.uint8))
+    pipe.finalize()
+    kf = [k for k in pipe.keyframes if k.stamp == t0 + 20 * 100_000_000]
+    assert len(kf) == 1, "the frame at the break is a keyframe"
+    sigma_t = np.sqrt(np.diag(kf[0].covariance_since_last)[3:])
+    assert sigma_t.min() >= 5.0
+    before = [k for k in pipe.keyframes if k.stamp == t0 + 19 * 100_000_000]
+    assert len(before) == 1, "the frame before the break is promoted to a keyframe"
+    assert len(pipe.graph) == len(pipe.keyframes)
