@@ -12,7 +12,7 @@ from pathlib import Path
 
 from ..atomic import write_text
 from ..errors import InputError
-from .util import check_output_path, one_line_errors, write_guard
+from .util import check_output_path, write_guard
 from ..io.trajectory_files import FORMATS
 
 
@@ -22,7 +22,6 @@ def register(sub) -> None:
         help="absolute trajectory error (and optional RPE) between two trajectories, evo-compatible",
         description="Absolute trajectory error of EST against REF (TUM / KITTI / EuRoC files or LOG:TOPIC).",
     )
-    one_line_errors(p)
     p.add_argument("ref", metavar="REF", help="reference trajectory: file or LOG:TOPIC")
     p.add_argument("est", metavar="EST", help="estimated trajectory: file or LOG:TOPIC")
     p.add_argument("-a", "--align", action="store_true", help="SE(3) Umeyama alignment (with -s: Sim(3))")

@@ -8,7 +8,7 @@ The output is written atomically and never onto the input.
 from __future__ import annotations
 
 from ..errors import InputError, NotBuiltError
-from .util import check_output_path, one_line_errors, write_guard
+from .util import check_output_path, write_guard
 from ..io.trajectory_files import FORMATS
 
 TARGETS = (*FORMATS, "mcap")
@@ -20,7 +20,6 @@ def register(sub) -> None:
         help="convert a trajectory (file or LOG:TOPIC) to TUM / KITTI / EuRoC / MCAP",
         description="Convert a trajectory (TUM / KITTI / EuRoC file or LOG:TOPIC) to another format.",
     )
-    one_line_errors(p)
     p.add_argument("traj", metavar="TRAJ", help="input trajectory: file or LOG:TOPIC")
     p.add_argument("--to", dest="to", required=True, choices=TARGETS, help="output format")
     p.add_argument("out", metavar="OUT", help="output path")

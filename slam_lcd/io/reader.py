@@ -249,6 +249,22 @@ def _header_stamp(msg, has_header: bool, is_tf: bool, log_time: int) -> int:
         return s if s > 0 else log_time
     return log_time
 
+def _deserialised(reader, records, deser, use_header: bool):
+    """LogMessages from ``(meta, log_time, bytes)`` records, ``meta = (topic, msgtype, has_header, is_tf)``.
+
+    Shared by both backends: a message that cannot be decoded is a one-line CorruptLogError.
+    """
+    from rosbags.serde import SerdeError
+
+    for (topic, msgtype, has_header, is_tf), t, data in records:
+        try:
+            msg = deser(data, msgtype)
+        except (SerdeError, KeyError, ValueError) as e:
+            raise _deser_error(reader, topic, e) from None
+        stamp = _header_stamp(msg, has_header, is_tf, t) if use_header else t
+        yield LogMessage(topic, msgtype, stamp, t, msg)
+
+
 def _deser_error(reader, topic, e):
     return CorruptLogError(f"message on topic {topic!r} cannot be decoded ({e})", reader.path)
 
@@ -313,19 +329,10 @@ class _RosbagsBackend:
             raise CorruptLogError(f"log cannot be read to the end ({_one_line(e)})", self.reader.path) from None
 
     def messages(self, names, use_header):
-        from rosbags.serde import SerdeError
-
         meta = self.meta
-        deser = self.deser
+        records = ((meta[id(c)], t, data) for c, t, data in self._stream(names))
         try:
-            for c, t, data in self._stream(names):
-                topic, msgtype, has_header, is_tf = meta[id(c)]
-                try:
-                    msg = deser(data, msgtype)
-                except (SerdeError, KeyError, ValueError) as e:
-                    raise _deser_error(self.reader, topic, e) from None
-                stamp = _header_stamp(msg, has_header, is_tf, t) if use_header else t
-                yield LogMessage(topic, msgtype, stamp, t, msg)
+            yield from _deserialised(self.reader, records, self.deser, use_header)
         except (*self.errors, struct.error, KeyError) as e:
             raise CorruptLogError(f"log cannot be read to the end ({_one_line(e)})", self.reader.path) from None
 
@@ -549,17 +556,9 @@ class _McapStreamBackend:
             yield RawMessage(m[0], m[1], t, data)
 
     def messages(self, names, use_header):
-        from rosbags.serde import SerdeError
-
-        meta, deser = self.meta, self.deser
-        for cid, t, data in self._records(names):
-            topic, msgtype, has_header, is_tf = meta[cid]
-            try:
-                msg = deser(data, msgtype)
-            except (SerdeError, KeyError, ValueError) as e:
-                raise _deser_error(self.reader, topic, e) from None
-            stamp = _header_stamp(msg, has_header, is_tf, t) if use_header else t
-            yield LogMessage(topic, msgtype, stamp, t, msg)
+        meta = self.meta
+        records = ((meta[cid], t, data) for cid, t, data in self._records(names))
+        yield from _deserialised(self.reader, records, self.deser, use_header)
 
     def close(self):
         self.fh.close()
