@@ -13,6 +13,7 @@ Stages and who does them:
 """
 from __future__ import annotations
 
+import bisect
 import time
 from collections import defaultdict
 from contextlib import contextmanager
@@ -103,6 +104,7 @@ class Pipeline:
         # when the log carries depth, a frame waits for its depth image (or for the next frame):
         # message order at equal stamps differs between log formats, the result must not
         self.expect_depth = False
+        self._early_depth: dict[int, np.ndarray] = {}  # depth that arrived before its image
         self._segment_from: int | None = None  # stamp of an odometry break not yet handed to a keyframe
         self._finalized = False
 
@@ -136,15 +138,22 @@ class Pipeline:
     def add_image(self, stamp_ns: int, image: np.ndarray, *, depth: np.ndarray | None = None,
                   right_image: np.ndarray | None = None) -> list[LoopClosure]:
         """One camera frame (grayscale or RGB); processed once odometry reaches its stamp."""
+        if depth is None:
+            depth = self._early_depth.pop(int(stamp_ns), None)
         self._pending.append(_Frame(int(stamp_ns), image, depth, right_image))
         return self._release(final=False)
 
-    def attach_depth(self, stamp_ns: int, depth: np.ndarray) -> list[LoopClosure]:
-        """Attach a depth image to a frame still waiting (logs may write depth after the image)."""
+    def add_depth(self, stamp_ns: int, depth: np.ndarray) -> list[LoopClosure]:
+        """A depth image for the frame of the same stamp, whether that frame came before or comes after."""
+        stamp_ns = int(stamp_ns)
         for f in self._pending:
             if f.stamp == stamp_ns:
                 f.depth = depth
-        return self._release(final=False)
+                return self._release(final=False)
+        self._early_depth[stamp_ns] = depth
+        while len(self._early_depth) > 8:  # depth whose image never came: keep only the newest
+            self._early_depth.pop(min(self._early_depth))
+        return []
 
     def add_keyframe(self, kf: Keyframe) -> list[LoopClosure]:
         """Plugin entry for a user's own front end: a ready keyframe (pose = odometry)."""
@@ -183,9 +192,17 @@ class Pipeline:
             return self.extractor.extract(image)
 
     def _odom_at(self, stamp: int):
-        st = np.asarray(self._odom_stamps, dtype=np.int64)
-        T = interpolate_poses(st, np.asarray(self._odom_poses), np.array([stamp]))[0]
-        j = int(np.clip(np.searchsorted(st, stamp), 0, len(st) - 1))
+        """Odometry pose interpolated at ``stamp`` from its two neighbours (clamped at the ends),
+        and the covariance of the first sample at or after it."""
+        st = self._odom_stamps
+        j = bisect.bisect_left(st, stamp)
+        if j >= len(st):  # after the last sample: clamp to it
+            j = len(st) - 1
+            i = j
+        else:
+            i = max(j - 1, 0)  # st[i] < stamp <= st[j]
+        T = interpolate_poses(np.array(st[i:j + 1], np.int64), np.array(self._odom_poses[i:j + 1]),
+                              np.array([stamp], np.int64))[0]
         return T, self._odom_covs[j]
 
     def _release(self, final: bool) -> list[LoopClosure]:

@@ -191,7 +191,6 @@ def run_log(
         n_img = reader.topics[topics.image].count
         camera_set = False
         bar = tqdm(total=n_img, desc="frames", unit="img", disable=not progress, dynamic_ncols=True)
-        depth_wait: dict[int, np.ndarray] = {}
         try:
             for m in reader.messages(wanted):
                 if m.topic == topics.odom:
@@ -207,18 +206,14 @@ def run_log(
                         d = decode_image(m.msg).astype(np.float32)
                         if m.msg.encoding in ("16UC1", "mono16"):
                             d = d * 1e-3  # millimetres (ROS convention for 16-bit depth)
-                    depth_wait[m.stamp] = d
-                    pipe.attach_depth(m.stamp, d)
+                    pipe.add_depth(m.stamp, d)
                 elif m.topic == topics.image:
                     with pipe.timer("decode"):
                         img = decode_compressed_image(m.msg) if m.msgtype.endswith("CompressedImage") else decode_image(m.msg)
                         gray = image_to_gray(img)
-                    pipe.add_image(m.stamp, gray, depth=depth_wait.pop(m.stamp, None))
+                    pipe.add_image(m.stamp, gray)
                     result.n_frames += 1
                     bar.update(1)
-                    if len(depth_wait) > 64:
-                        for k in sorted(depth_wait)[:-8]:
-                            depth_wait.pop(k)
                 elif m.topic == topics.gt:
                     T, _ = decode_pose(m.msg)
                     gt_st.append(m.stamp)
@@ -229,12 +224,15 @@ def run_log(
         finally:
             bar.close()
         result.log_duration_s = reader.duration_ns * 1e-9
+        # input topics copied into corrected.mcap: all of them, or all but images (large)
+        copy_topics = [t for t, i in reader.topics.items() if cfg.run.copy_images or i.msgtype not in IMAGE_TYPES]
 
     pipe.finalize()
     if gt_traj is None and gt_st:
         gt_traj = Trajectory(np.array(gt_st, np.int64), np.array(gt_T))
     result.wall_s = time.perf_counter() - t_start
-    write_outputs(pipe, out_dir, result, gt_traj, log_path if (write_mcap and cfg.run.write_mcap) else None, topics)
+    write_outputs(pipe, out_dir, result, gt_traj, log_path if (write_mcap and cfg.run.write_mcap) else None,
+                  copy_topics)
     return result
 
 
@@ -276,7 +274,7 @@ def _gt_relative(gt: Trajectory, s_q: int, s_m: int):
 
 
 def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
-                  mcap_source: Path | None, topics: Topics | None) -> None:
+                  mcap_source: Path | None, copy_topics: list[str] | None = None) -> None:
     from .eval import ate as compute_ate
     from .io.trajectory_files import write_tum
 
@@ -341,10 +339,9 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
     if mcap_source is not None:
         from .io.writers import write_trajectory_log
 
-        copy = _topics_to_copy(mcap_source, cfg)
         write_trajectory_log(out_dir / "corrected.mcap", corrected, "mcap", topic="/slam_lcd/corrected",
                              frame_id="map", child_frame_id="base_link_corrected",
-                             copy_from=mcap_source, copy_topics=copy)
+                             copy_from=mcap_source, copy_topics=copy_topics)
         outputs.append("corrected.mcap")
 
     # ---- plots
@@ -357,15 +354,6 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
     outputs += ["report.json", "report.md"]
     result.outputs = outputs
     _write_report(out_dir, result, ate_before, ate_after)
-
-
-def _topics_to_copy(src: Path, cfg) -> list[str]:
-    from .io import open_log
-
-    with open_log(src) as r:
-        if cfg.run.copy_images:
-            return list(r.topics)
-        return [t for t, i in r.topics.items() if i.msgtype not in IMAGE_TYPES]
 
 
 def _fmt(x):
