@@ -19,6 +19,7 @@ import torch
 
 from ..errors import ConfigError, InputError
 from ..types import Features
+from .allocator import retain_freed_memory
 from .config import FeaturesConfig
 from .superpoint import SuperPoint
 from .weights import load_state_dict_checked, resolve_weights, sha256_of
@@ -122,6 +123,8 @@ class SuperPointExtractor(Extractor):
                 h.update(v.detach().cpu().numpy().tobytes())
             self._weights_id = h.hexdigest()
         self.model = model.eval().to(self.device)
+        if self.device.type == "cpu" and conf.cpu_allocator == "retain":
+            retain_freed_memory()
 
     @staticmethod
     def model_conf(conf: FeaturesConfig) -> dict:
