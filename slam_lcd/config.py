@@ -48,6 +48,10 @@ class RunConfig:
     # frame, not only of keyframes (about 5x the SuperPoint cost at 10 Hz); odometry
     # thresholds alone are the default
     keyframe_on_overlap: bool = False
+    # keyframes whose features are extracted in a background thread while earlier keyframes
+    # go through loop detection and the back end (SuperPoint releases the GIL); 0 = one at a
+    # time. Loops of a keyframe are then reported up to this many keyframes later.
+    extract_ahead: int = 1
 
 
 @dataclass

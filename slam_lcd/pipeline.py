@@ -15,7 +15,8 @@ from __future__ import annotations
 
 import bisect
 import time
-from collections import defaultdict
+from collections import defaultdict, deque
+from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Callable
@@ -107,6 +108,11 @@ class Pipeline:
         self._early_depth: dict[int, np.ndarray] = {}  # depth that arrived before its image
         self._segment_from: int | None = None  # stamp of an odometry break not yet handed to a keyframe
         self._finalized = False
+        # keyframes handed in, and those still waiting for features / loop detection (in order)
+        self._n_submitted = 0
+        self._ahead = max(0, int(self.config.run.extract_ahead))
+        self._inflight: deque[tuple[Keyframe, Future | None]] = deque()
+        self._executor: ThreadPoolExecutor | None = None
 
     # ------------------------------------------------------------------ inputs
     def set_camera(self, camera: CameraModel, T_body_camera: np.ndarray | None = None) -> None:
@@ -156,12 +162,46 @@ class Pipeline:
         return []
 
     def add_keyframe(self, kf: Keyframe) -> list[LoopClosure]:
-        """Plugin entry for a user's own front end: a ready keyframe (pose = odometry)."""
-        kf.id = len(self.keyframes)
+        """Plugin entry for a user's own front end: a ready keyframe (pose = odometry).
+
+        With ``run.extract_ahead = N > 0`` the keyframe's features are extracted in a
+        background thread and its loop detection runs once N newer keyframes have been
+        handed in (or at :meth:`flush`/:meth:`finalize`): the loops returned by a call may
+        belong to earlier keyframes. ``on_loop`` fires for each accepted loop either way.
+        """
+        kf.id = self._n_submitted
+        self._n_submitted += 1
         if kf.camera is None:
             kf.camera = self.camera
+        future = None
         if kf.features is None and kf.image is not None:
-            kf.features = self._extract(kf.stamp, kf.image)
+            if self._ahead > 0:
+                future = self._worker().submit(self._extract, kf.stamp, kf.image)
+            else:
+                kf.features = self._extract(kf.stamp, kf.image)
+        self._inflight.append((kf, future))
+        return self._drain(keep=self._ahead)
+
+    def _worker(self) -> ThreadPoolExecutor:
+        if self._executor is None:
+            self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="slam-lcd-features")
+        return self._executor
+
+    def _drain(self, keep: int) -> list[LoopClosure]:
+        """Detect loops on the oldest waiting keyframes until at most ``keep`` wait."""
+        accepted: list[LoopClosure] = []
+        while len(self._inflight) > keep:
+            kf, future = self._inflight[0]
+            if future is not None:
+                with self.timer("features_wait"):
+                    kf.features = future.result()
+                self._inflight[0] = (kf, None)
+            accepted += self._detect(kf)
+            self._inflight.popleft()
+        return accepted
+
+    def _detect(self, kf: Keyframe) -> list[LoopClosure]:
+        """Pose graph, loop detection and loop factors for one keyframe with its features."""
         with self.timer("backend"):
             self.graph.add_keyframe(kf.id, kf.stamp, kf.T_world_body, kf.covariance_since_last)
         with self.timer("loop_detection"):
@@ -183,6 +223,12 @@ class Pipeline:
         kf.depth = None
         self.keyframes.append(kf)
         return accepted
+
+    def close(self) -> None:
+        """Stop the background extraction thread (waiting keyframes are not processed)."""
+        if self._executor is not None:
+            self._executor.shutdown(wait=True, cancel_futures=True)
+            self._executor = None
 
     # ------------------------------------------------------------------ internals
     def _extract(self, stamp: int, image: np.ndarray):
@@ -240,7 +286,7 @@ class Pipeline:
             return []
         out: list[LoopClosure] = []
         # usually one new keyframe; two on an odometry break (the frame before it is promoted)
-        for i in range(len(self.keyframes), len(self.selector.keyframes)):
+        for i in range(self._n_submitted, len(self.selector.keyframes)):
             kf = self.selector.keyframes[i]
             # the selector's list is only for its own bookkeeping: drop heavy fields there
             self.selector.keyframes[i] = Keyframe(
@@ -251,12 +297,14 @@ class Pipeline:
 
     # ------------------------------------------------------------------ results
     def flush(self) -> list[LoopClosure]:
-        """Process frames still waiting for odometry (uses the last odometry pose)."""
-        return self._release(final=True)
+        """Process frames still waiting for odometry (uses the last odometry pose) and every waiting keyframe."""
+        out = self._release(final=True)
+        return out + self._drain(keep=0)
 
     def finalize(self):
         """Flush waiting frames and run the back end's final batch re-check (idempotent)."""
         self.flush()
+        self.close()
         if not self._finalized:
             with self.timer("backend"):
                 self.graph.finalize()
