@@ -14,6 +14,7 @@ Stages and who does them:
 from __future__ import annotations
 
 import bisect
+import os
 import time
 from collections import defaultdict, deque
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -30,6 +31,18 @@ from .frontend import KeyframeSelector
 from .geometry import interpolate_poses
 from .lcd import LoopDetector
 from .types import CameraModel, Keyframe, LoopClosure, Trajectory
+
+
+def resident_kb() -> int:
+    """Resident set size of this process in kB (0 where /proc is not available)."""
+    try:
+        with open("/proc/self/statm", "rb") as f:
+            return int(f.read().split()[1]) * (_PAGE_SIZE // 1024)
+    except (OSError, ValueError, IndexError):
+        return 0
+
+
+_PAGE_SIZE = os.sysconf("SC_PAGE_SIZE") if hasattr(os, "sysconf") else 4096
 
 
 @dataclass
@@ -113,6 +126,8 @@ class Pipeline:
         self._ahead = max(0, int(self.config.run.extract_ahead))
         self._inflight: deque[tuple[Keyframe, Future | None]] = deque()
         self._executor: ThreadPoolExecutor | None = None
+        # per keyframe: (loop detection s, back end s, resident memory kB after it), for benchmarks
+        self.keyframe_seconds: list[tuple[float, float, int]] = []
 
     # ------------------------------------------------------------------ inputs
     def set_camera(self, camera: CameraModel, T_body_camera: np.ndarray | None = None) -> None:
@@ -202,10 +217,13 @@ class Pipeline:
 
     def _detect(self, kf: Keyframe) -> list[LoopClosure]:
         """Pose graph, loop detection and loop factors for one keyframe with its features."""
+        t0 = time.perf_counter()
         with self.timer("backend"):
             self.graph.add_keyframe(kf.id, kf.stamp, kf.T_world_body, kf.covariance_since_last)
+        t1 = time.perf_counter()
         with self.timer("loop_detection"):
             closures = self.detector.add(kf)
+        t2 = time.perf_counter()
         accepted = []
         for c in closures:
             if not np.all(np.isfinite(c.T_match_query)):
@@ -217,11 +235,14 @@ class Pipeline:
                 accepted.append(c)
                 if self.on_loop is not None:
                     self.on_loop(c, rec)
-        # keep memory bounded: the detector stores what it needs of past keyframes
+        # keep memory bounded: the detector stores what it needs of past keyframes (in its own,
+        # compact form); the pipeline's list keeps poses, stamps and covariances only
         kf.image = None
         kf.right_image = None
         kf.depth = None
+        kf.features = None
         self.keyframes.append(kf)
+        self.keyframe_seconds.append((t2 - t1, (t1 - t0) + (time.perf_counter() - t2), resident_kb()))
         return accepted
 
     def close(self) -> None:
@@ -285,6 +306,9 @@ class Pipeline:
         if not is_kf:
             return []
         out: list[LoopClosure] = []
+        # the selector compares frames with its newest keyframe only: older ones need no features
+        if self._n_submitted:
+            self.selector.keyframes[self._n_submitted - 1].features = None
         # usually one new keyframe; two on an odometry break (the frame before it is promoted)
         for i in range(self._n_submitted, len(self.selector.keyframes)):
             kf = self.selector.keyframes[i]

@@ -62,6 +62,8 @@ class RunResult:
     log_duration_s: float = 0.0
     stages: dict = field(default_factory=dict)
     outputs: list[str] = field(default_factory=list)
+    # per keyframe: (loop detection s, back end s, resident kB), in keyframe order (benchmarks)
+    keyframe_seconds: list = field(default_factory=list, repr=False)
 
     def summary_lines(self) -> list[str]:
         lines = [
@@ -267,10 +269,13 @@ def _read_gt_file(path) -> Trajectory:
 
 
 # --------------------------------------------------------------------------- outputs
-def _gt_relative(gt: Trajectory, s_q: int, s_m: int):
-    """Ground-truth T_match_query (body frames) at the two keyframe stamps (GT interpolated)."""
-    P = interpolate_poses(gt.stamps, gt.poses, np.array([s_q, s_m]))
-    return inv(P[1]) @ P[0]
+def _gt_at_keyframes(gt: Trajectory, kf_stamp: dict[int, int]) -> dict[int, np.ndarray]:
+    """Ground-truth pose (interpolated) of every keyframe id, in one pass over the ground truth."""
+    ids = list(kf_stamp)
+    if not ids:
+        return {}
+    P = interpolate_poses(gt.stamps, gt.poses, np.array([kf_stamp[i] for i in ids], np.int64))
+    return dict(zip(ids, P))
 
 
 def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
@@ -293,6 +298,7 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
     backend = {(r.query_id, r.match_id): r for r in pipe.loop_records}
     kf_stamp = {k.id: k.stamp for k in pipe.keyframes}
     rows = []
+    gt_pose = _gt_at_keyframes(gt, kf_stamp) if gt is not None else {}
     for rec in pipe.candidate_records:
         q, mt = int(rec.query_id), int(rec.match_id)
         b = backend.get((q, mt))
@@ -302,8 +308,8 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
         row["backend_verdict"] = b.verdict if b is not None else ""
         row["backend_reason"] = b.reason if b is not None else ""
         row.update({"gt_distance_m": "", "err_trans_m": "", "err_rot_deg": ""})
-        if gt is not None and q in kf_stamp and mt in kf_stamp:
-            T_gt = _gt_relative(gt, kf_stamp[q], kf_stamp[mt])
+        if q in gt_pose and mt in gt_pose:
+            T_gt = inv(gt_pose[mt]) @ gt_pose[q]  # ground-truth T_match_query (body frames)
             row["gt_distance_m"] = _fmt(float(np.linalg.norm(T_gt[:3, 3])))
             if rec.pose is not None and rec.pose.ok:
                 E = inv(T_gt) @ np.asarray(rec.pose.T_match_query)
@@ -319,6 +325,7 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
     result.loops_accepted = sum(1 for r in pipe.loop_records if r.verdict == "accepted")
     result.loops_rejected_backend = sum(1 for r in pipe.loop_records if r.verdict != "accepted")
     result.stages = pipe.timer.as_dict()
+    result.keyframe_seconds = list(pipe.keyframe_seconds)
 
     # ---- evaluation against ground truth
     ate_before = ate_after = None
