@@ -34,6 +34,9 @@ class FeaturesConfig:
     # (no page faults on SuperPoint's large activations, ~30% of CPU time otherwise);
     # 'system' leaves malloc as the environment set it
     cpu_allocator: Literal["retain", "system"] = "retain"
+    # CPU inference in channels-last (NHWC) memory layout: oneDNN's faster convolution path
+    # (about 30% less CPU time per 640x480 forward here; outputs differ by ~1e-5)
+    cpu_channels_last: bool = True
     # ORB baseline: number of features, pyramid scale factor and levels, FAST threshold
     orb_n_features: int = 1000
     orb_scale_factor: float = 1.2
