@@ -10,10 +10,19 @@ Stages and who does them:
   (:mod:`slam_lcd.features`) → Bag of SuperPoints candidates + graph verification + metric
   pose (:mod:`slam_lcd.lcd`, :mod:`slam_lcd.vocab`) → GTSAM iSAM2 pose graph with robust loop
   handling (:mod:`slam_lcd.backend`) → full-rate correction.
+
+Interrupts: every step leaves the pipeline consistent whatever instant a Ctrl-C (or an
+error inside a stage) stops it. A keyframe is in the pose graph exactly when it is in
+:attr:`Pipeline.keyframes`; loop detection runs after that, and a loop is in the graph's
+records exactly when iSAM2 holds it (see :mod:`slam_lcd.backend.pose_graph`). Frames not
+yet processed stay queued. An interrupt inside the loop detector itself may leave its
+database half-updated: its candidates for that keyframe are dropped and later keyframes
+go to the back end without loop detection (one warning says so).
 """
 from __future__ import annotations
 
 import bisect
+import logging
 import time
 from collections import defaultdict
 from contextlib import contextmanager
@@ -30,6 +39,7 @@ from .geometry import interpolate_poses
 from .lcd import LoopDetector
 from .types import CameraModel, Keyframe, LoopClosure, Trajectory
 
+log = logging.getLogger(__name__)
 
 @dataclass
 class _Frame:
@@ -107,6 +117,7 @@ class Pipeline:
         self._early_depth: dict[int, np.ndarray] = {}  # depth that arrived before its image
         self._segment_from: int | None = None  # stamp of an odometry break not yet handed to a keyframe
         self._finalized = False
+        self._detector_stale = False  # an interrupt inside the loop detector: no more detection
 
     # ------------------------------------------------------------------ inputs
     def set_camera(self, camera: CameraModel, T_body_camera: np.ndarray | None = None) -> None:
@@ -156,33 +167,64 @@ class Pipeline:
         return []
 
     def add_keyframe(self, kf: Keyframe) -> list[LoopClosure]:
-        """Plugin entry for a user's own front end: a ready keyframe (pose = odometry)."""
-        kf.id = len(self.keyframes)
+        """Plugin entry for a user's own front end: a ready keyframe (pose = odometry).
+
+        Order (see the module docstring): features (nothing changes yet), then the pose
+        graph and :attr:`keyframes` together, then loop detection and the loops.
+        """
         if kf.camera is None:
             kf.camera = self.camera
         if kf.features is None and kf.image is not None:
             kf.features = self._extract(kf.stamp, kf.image)
-        with self.timer("backend"):
-            self.graph.add_keyframe(kf.id, kf.stamp, kf.T_world_body, kf.covariance_since_last)
-        with self.timer("loop_detection"):
-            closures = self.detector.add(kf)
-        accepted = []
-        for c in closures:
-            if not np.all(np.isfinite(c.T_match_query)):
-                continue  # verified by appearance but no metric pose: nothing to add to the graph
+        kf.id = len(self.keyframes)
+        try:
             with self.timer("backend"):
-                rec = self.graph.add_loop(c)
-            self.closures.append(c)
-            if getattr(rec, "verdict", "") == "accepted":
-                accepted.append(c)
-                if self.on_loop is not None:
-                    self.on_loop(c, rec)
-        # keep memory bounded: the detector stores what it needs of past keyframes
-        kf.image = None
-        kf.right_image = None
-        kf.depth = None
-        self.keyframes.append(kf)
+                self.graph.add_keyframe(kf.id, kf.stamp, kf.T_world_body, kf.covariance_since_last)
+        finally:
+            if len(self.graph) > len(self.keyframes):  # the graph took it: so does the list
+                self.keyframes.append(kf)
+        accepted = []
+        try:
+            for c in self._detect(kf):
+                if not np.all(np.isfinite(c.T_match_query)):
+                    continue  # verified by appearance but no metric pose: nothing to add to the graph
+                n_loops = self.graph.n_loops
+                try:
+                    with self.timer("backend"):
+                        rec = self.graph.add_loop(c)
+                finally:
+                    if self.graph.n_loops > n_loops:
+                        self.closures.append(c)
+                if getattr(rec, "verdict", "") == "accepted":
+                    accepted.append(c)
+                    if self.on_loop is not None:
+                        self.on_loop(c, rec)
+        finally:
+            # keep memory bounded: the detector stores what it needs of past keyframes
+            kf.image = None
+            kf.right_image = None
+            kf.depth = None
         return accepted
+
+    def _detect(self, kf: Keyframe) -> list[LoopClosure]:
+        """Loop detection for a keyframe already in the graph; an interrupt inside it drops its candidates."""
+        if self._detector_stale:
+            return []
+        det = self.detector
+        n_records, n_closures = len(det.records), len(det.closures)
+        done = False
+        try:
+            with self.timer("loop_detection"):
+                closures = det.add(kf)
+            done = True
+            return closures
+        finally:
+            if not done:
+                del det.records[n_records:]
+                del det.closures[n_closures:]
+                self._detector_stale = True
+                log.warning("loop detection stopped at keyframe %d (interrupted inside the loop detector); "
+                            "later keyframes get no loop detection", kf.id)
 
     # ------------------------------------------------------------------ internals
     def _extract(self, stamp: int, image: np.ndarray):
@@ -212,17 +254,23 @@ class Pipeline:
                 self._pending.clear()
             return out
         last = self._odom_stamps[-1]
-        keep = []
+        keep, ready = [], []
         newest = self._pending[-1] if self._pending else None
         for f in self._pending:
             complete = f.depth is not None or not self.expect_depth or f is not newest
             if (f.stamp <= last and complete) or final:
                 if f.stamp < self._odom_stamps[0]:
                     continue  # before the first odometry sample: no pose to attach
-                out += self._process(f)
+                ready.append(f)
             else:
                 keep.append(f)
         self._pending = keep
+        for i, f in enumerate(ready):
+            try:
+                out += self._process(f)
+            except BaseException:
+                self._pending = ready[i + 1:] + self._pending  # interrupted: the rest stays queued
+                raise
         return out
 
     def _process(self, f: _Frame) -> list[LoopClosure]:
@@ -240,13 +288,14 @@ class Pipeline:
             return []
         out: list[LoopClosure] = []
         # usually one new keyframe; two on an odometry break (the frame before it is promoted)
+        # (a keyframe an interrupt kept from the back end is handed over with the next one)
         for i in range(len(self.keyframes), len(self.selector.keyframes)):
             kf = self.selector.keyframes[i]
-            # the selector's list is only for its own bookkeeping: drop heavy fields there
-            self.selector.keyframes[i] = Keyframe(
-                id=kf.id, stamp=kf.stamp, T_world_body=kf.T_world_body, features=kf.features,
-                covariance_since_last=kf.covariance_since_last)
+            light = Keyframe(id=kf.id, stamp=kf.stamp, T_world_body=kf.T_world_body, features=kf.features,
+                             covariance_since_last=kf.covariance_since_last)
             out += self.add_keyframe(kf)
+            # the selector's list is only for its own bookkeeping: drop heavy fields there
+            self.selector.keyframes[i] = light
         return out
 
     # ------------------------------------------------------------------ results
@@ -254,9 +303,13 @@ class Pipeline:
         """Process frames still waiting for odometry (uses the last odometry pose)."""
         return self._release(final=True)
 
-    def finalize(self):
-        """Flush waiting frames and run the back end's final batch re-check (idempotent)."""
-        self.flush()
+    def finalize(self, *, flush: bool = True):
+        """Flush waiting frames and run the back end's final batch re-check (idempotent).
+
+        ``flush=False`` (after a Ctrl-C) leaves waiting frames unprocessed.
+        """
+        if flush:
+            self.flush()
         if not self._finalized:
             with self.timer("backend"):
                 self.graph.finalize()
