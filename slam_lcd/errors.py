@@ -61,6 +61,10 @@ class TopicTypeError(InputError):
     """A topic whose message type does not fit what it was chosen for (e.g. --image-topic /odom)."""
 
 
+class DamagedImageError(MessageEncodingError):
+    """An image whose bytes are damaged (e.g. a truncated JPEG): the decoder said so."""
+
+
 class TrajectoryFormatError(InputError):
     """A malformed trajectory file line; ``line`` is 1-based."""
 
@@ -102,7 +106,7 @@ class PipelineError(SlamLcdError):
     """A run that cannot proceed (e.g. log without the image topic it needs)."""
 
 
-_CONTEXT_KINDS = (InvalidPoseError, UnsortedStampsError, MessageEncodingError, TopicTypeError, ConfigError,
+_CONTEXT_KINDS = (DamagedImageError, InvalidPoseError, UnsortedStampsError, MessageEncodingError, TopicTypeError, ConfigError,
                   CorruptLogError, WeightsError, VocabularyError, FileMissingError, InputError, PipelineError)
 
 

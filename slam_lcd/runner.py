@@ -31,7 +31,7 @@ import numpy as np
 
 from .atomic import write_text
 from .config import Config, save_config
-from .errors import (FileMissingError, InputError, MessageEncodingError, PipelineError, SlamLcdError, TopicTypeError,
+from .errors import (DamagedImageError, FileMissingError, InputError, MessageEncodingError, PipelineError, SlamLcdError, TopicTypeError,
                      in_context, stamp_text)
 from .frontend.camera import camera_mounting
 from .interrupts import defer_sigint
@@ -207,8 +207,11 @@ def _check_first_messages(reader, topics: Topics) -> dict:
         m = next(iter(reader.messages([topic])), None)
         if m is None:
             raise PipelineError(f"topic {topic} ({flag}) has no messages", reader.path)
-        with _at_message(m, reader.path):
-            decode(m)
+        try:
+            with _at_message(m, reader.path):
+                decode(m)
+        except DamagedImageError:
+            pass  # one damaged frame is skipped while streaming (and counted in a warning)
         first[topic] = m
     return first
 
@@ -333,6 +336,7 @@ def run_log(
                 pipe.add_odometry(int(traj.stamps[k]), traj.poses[k], cov, segment_start=bool(breaks[k]) and k > 0)
         n_img = reader.topics[topics.image].count
         camera_set = False
+        damaged: list[DamagedImageError] = []
         bar = tqdm(total=n_img, desc="frames", unit="img", disable=not progress, dynamic_ncols=True)
         try:
             for m in reader.messages(wanted):
@@ -350,13 +354,21 @@ def run_log(
                     pipe.set_camera(cam, T_bc)
                     camera_set = True
                 elif m.topic == topics.depth:
-                    with pipe.timer("decode"), _at_message(m, log_path):
-                        d = _decode_depth(m)
+                    try:
+                        with pipe.timer("decode"), _at_message(m, log_path):
+                            d = _decode_depth(m)
+                    except DamagedImageError as e:
+                        damaged.append(e)
+                        continue
                     with _at_message(m, log_path, decoding=False):
                         pipe.add_depth(m.stamp, d)
                 elif m.topic == topics.image:
-                    with pipe.timer("decode"), _at_message(m, log_path):
-                        gray = _decode_gray(m)
+                    try:
+                        with pipe.timer("decode"), _at_message(m, log_path):
+                            gray = _decode_gray(m)
+                    except DamagedImageError as e:  # a damaged frame is skipped, not fatal
+                        damaged.append(e)
+                        continue
                     with _at_message(m, log_path, decoding=False):
                         pipe.add_image(m.stamp, gray)
                     result.n_frames += 1
@@ -371,6 +383,9 @@ def run_log(
             log.warning("interrupted: writing the partial result")
         finally:
             bar.close()
+        if damaged:
+            log.warning("%s: %d damaged image message(s) skipped; the first: %s", log_path, len(damaged),
+                        damaged[0].problem)
         result.log_duration_s = reader.duration_ns * 1e-9
 
     try:
