@@ -26,7 +26,7 @@ def read_image(path: str | Path, flags: int | None = None) -> np.ndarray:
         img = cv2.imread(str(path), flags)
     if img is None:
         said = f" ({one_line(cap.text)})" if cap.text else ""
-        raise InputError(f"cannot read this image: not an image file, or damaged{said}", path)
+        raise InputError(f"cannot read this image (not an image file, or damaged){said}", path)
     if cap.damage:
         raise DamagedImageError(f"image is damaged or truncated (decoder: {cap.damage})", path)
     return img

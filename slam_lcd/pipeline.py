@@ -118,6 +118,7 @@ class Pipeline:
         self._segment_from: int | None = None  # stamp of an odometry break not yet handed to a keyframe
         self._finalized = False
         self._detector_stale = False  # an interrupt inside the loop detector: no more detection
+        self._stale_warned = False
 
     # ------------------------------------------------------------------ inputs
     def set_camera(self, camera: CameraModel, T_body_camera: np.ndarray | None = None) -> None:
@@ -209,6 +210,10 @@ class Pipeline:
     def _detect(self, kf: Keyframe) -> list[LoopClosure]:
         """Loop detection for a keyframe already in the graph; an interrupt inside it drops its candidates."""
         if self._detector_stale:
+            if not self._stale_warned:  # said once, when a keyframe actually goes without detection
+                self._stale_warned = True
+                log.warning("no loop detection from keyframe %d on: an earlier interrupt inside the loop "
+                            "detector left its database incomplete", kf.id)
             return []
         det = self.detector
         n_records, n_closures = len(det.records), len(det.closures)
@@ -223,8 +228,6 @@ class Pipeline:
                 del det.records[n_records:]
                 del det.closures[n_closures:]
                 self._detector_stale = True
-                log.warning("loop detection stopped at keyframe %d (interrupted inside the loop detector); "
-                            "later keyframes get no loop detection", kf.id)
 
     # ------------------------------------------------------------------ internals
     def _extract(self, stamp: int, image: np.ndarray):

@@ -242,12 +242,11 @@ def run_inputs(log_path, gt_file, cfg, extra=None) -> dict:
     """What the run reads, by the flag that named it (outputs must not land on any of them)."""
     inputs = {"the log": log_path, "--gt": gt_file}
     inputs.update(extra or {})
-    if cfg.features.kind == "superpoint" or cfg.frontend.vo_features == "superpoint":
-        if cfg.features.weights:
-            inputs["--weights (features.weights)"] = cfg.features.weights
-        env = os.environ.get("SLAM_LCD_SUPERPOINT_WEIGHTS")
-        if env:
-            inputs["$SLAM_LCD_SUPERPOINT_WEIGHTS"] = env
+    if cfg.features.weights:
+        inputs["--weights"] = cfg.features.weights
+    env = os.environ.get("SLAM_LCD_SUPERPOINT_WEIGHTS")
+    if env:
+        inputs["$SLAM_LCD_SUPERPOINT_WEIGHTS"] = env
     return inputs
 
 
@@ -390,9 +389,9 @@ def run_log(
 
     try:
         pipe.finalize(flush=not result.interrupted)
-    except KeyboardInterrupt:  # a second Ctrl-C: skip the back end's final re-check
+    except KeyboardInterrupt:  # Ctrl-C (maybe a second one): skip the back end's final re-check
+        log.warning("interrupted%s: the back end's final re-check is skipped", " again" if result.interrupted else "")
         result.interrupted = True
-        log.warning("interrupted again: the back end's final re-check is skipped")
     if not result.interrupted and not pipe.keyframes:
         raise PipelineError(_no_keyframe_reason(pipe, topics, result.n_frames), log_path)
     if gt_traj is None and gt_st:

@@ -69,7 +69,7 @@ def load_loop_matrix(path: str | Path, names: Sequence[str]) -> np.ndarray:
         try:
             img = read_image(path, cv2.IMREAD_GRAYSCALE)
         except InputError as e:
-            raise UnsupportedFormatError(f"cannot read the ground-truth image: {e.problem}", path) from None
+            raise UnsupportedFormatError(f"ground-truth image: {e.problem}", path) from None
         gt = img > 127
     elif suffix == ".npy":
         try:
