@@ -392,6 +392,41 @@ def test_atomic_writers_leave_no_temporary_files_when_interrupted(demo, tmp_path
     assert sorted(p.name for p in tmp_path.iterdir()) == []
 
 
+def test_real_ctrl_c_waits_for_a_critical_step(tmp_path, monkeypatch):
+    """Item 3 with a real SIGINT: publishing an output set (and other critical steps) finishes
+    first, then the interrupt is raised; the folder then holds the complete new set."""
+    import os
+    import signal
+
+    from slam_lcd.interrupts import defer_sigint
+    from slam_lcd.output_set import OutputSet
+
+    with pytest.raises(KeyboardInterrupt):
+        with defer_sigint():
+            os.kill(os.getpid(), signal.SIGINT)
+            done = True  # reached: the signal waits for the block to end
+    assert done
+    target = tmp_path / "set"
+    target.mkdir()
+    for name in ("a.txt", "b.txt"):
+        (target / name).write_text("old\n")
+    outputs = OutputSet(target, ["a.txt", "b.txt"])
+    for name in ("a.txt", "b.txt"):
+        (outputs.staging / name).write_text("new\n")
+    real_replace = os.replace
+
+    def replace_then_ctrl_c(src, dst):
+        real_replace(src, dst)
+        os.kill(os.getpid(), signal.SIGINT)  # Ctrl-C right after the first file moved
+
+    monkeypatch.setattr(os, "replace", replace_then_ctrl_c)
+    with pytest.raises(KeyboardInterrupt):
+        outputs.publish()
+    monkeypatch.undo()
+    assert sorted(p.name for p in target.iterdir()) == ["a.txt", "b.txt"]
+    assert all((target / n).read_text() == "new\n" for n in ("a.txt", "b.txt"))
+
+
 # ---------------------------------------------------------------------------- 4: camera mounting
 
 
