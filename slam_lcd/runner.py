@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from .atomic import write_text
-from .config import Config, save_config
+from .config import Config, save_config, validate_config
 from .errors import (DamagedImageError, FileMissingError, InputError, MessageEncodingError, PipelineError, SlamLcdError, TopicTypeError,
                      in_context, stamp_text)
 from .frontend.camera import camera_mounting
@@ -280,7 +280,7 @@ def run_log(
     from .io.decode import decode_camera_info
     from .io.tf import TfBuffer
 
-    cfg = config or Config()
+    cfg = validate_config(config or Config())
     log_path = Path(log_path)
     out_dir = Path(out_dir)
     if not log_path.exists():
@@ -387,10 +387,13 @@ def run_log(
                         damaged[0].problem)
         result.log_duration_s = reader.duration_ns * 1e-9
 
+    notes: list[str] = []
+    read_to_end = not result.interrupted
     try:
         pipe.finalize(flush=not result.interrupted)
     except KeyboardInterrupt:  # Ctrl-C (maybe a second one): skip the back end's final re-check
         log.warning("interrupted%s: the back end's final re-check is skipped", " again" if result.interrupted else "")
+        notes.append("The back end's final re-check (GNC) was interrupted and skipped.")
         result.interrupted = True
     if not result.interrupted and not pipe.keyframes:
         raise PipelineError(_no_keyframe_reason(pipe, topics, result.n_frames), log_path)
@@ -398,7 +401,7 @@ def run_log(
         order = np.argsort(np.array(gt_st, np.int64), kind="stable")
         gt_traj = Trajectory(np.array(gt_st, np.int64)[order], np.array(gt_T)[order])
     result.wall_s = time.perf_counter() - t_start
-    _write_set(outputs, pipe, result, gt_traj, log_path if mcap_wanted else None, copy_topics)
+    _write_set(outputs, pipe, result, gt_traj, log_path if mcap_wanted else None, copy_topics, notes, read_to_end)
     return result
 
 
@@ -411,30 +414,40 @@ def _no_keyframe_reason(pipe, topics: Topics, n_frames: int) -> str:
             f"of {source} ({span}); nothing to correct")
 
 
-def _partial_text(result: RunResult, notes=(), while_writing: bool = False) -> str:
-    lines = [f"This run was interrupted (Ctrl-C) after {result.n_frames} frames: the files here hold the result",
-             "up to that point and agree with each other, but the log was not processed to its end."]
-    if while_writing:
-        lines.append("It was interrupted again while the outputs were written: only the files present were written.")
+def _partial_text(result: RunResult, notes=(), *, read_to_end: bool, while_writing: bool = False) -> str:
+    """What PARTIAL.txt says: why the set is incomplete, and what is missing from it."""
+    lines = []
+    if not read_to_end:
+        lines += [f"This run was interrupted (Ctrl-C) after {result.n_frames} frames: the files here hold the",
+                  "result up to that point and agree with each other, but the log was not processed to its end."]
     lines += list(notes)
+    if while_writing:
+        lines.append(f"This run was interrupted{' again' if lines else ''} while the outputs were written: "
+                     "only the files present here were written.")
     return "\n".join(lines)
 
 
-def _write_set(outputs: OutputSet, pipe, result: RunResult, gt, mcap_source, copy_topics) -> None:
+def _write_set(outputs: OutputSet, pipe, result: RunResult, gt, mcap_source, copy_topics, notes=None,
+               read_to_end: bool = True) -> None:
     """Write every output into the staging folder, then publish the set (partial when interrupted)."""
-    notes: list[str] = []
+    notes = list(notes or [])
+    partial = result.interrupted
     try:
-        if result.interrupted:
-            outputs.mark_partial(_partial_text(result))
+        if partial:  # said first: a second Ctrl-C may stop the writing at any file
+            outputs.mark_partial(_partial_text(result, notes, read_to_end=read_to_end))
         write_outputs(pipe, outputs.staging, result, gt, mcap_source, copy_topics,
-                      skipped=notes if result.interrupted else None)
-        if notes:
-            outputs.mark_partial(_partial_text(result, notes))
+                      skipped=notes if partial else None)
+        if partial:
+            outputs.mark_partial(_partial_text(result, notes, read_to_end=read_to_end))
     except KeyboardInterrupt:
-        with defer_sigint():
-            result.interrupted = True
-            outputs.mark_partial(_partial_text(result, notes, while_writing=True))
-            result.outputs = outputs.publish()
+        try:
+            with defer_sigint():
+                result.interrupted = True
+                outputs.mark_partial(_partial_text(result, notes, read_to_end=read_to_end, while_writing=True))
+                result.outputs = outputs.publish()
+        except OSError as e:
+            outputs.discard()
+            raise _write_error(e, outputs) from None
         log.warning("interrupted while writing the outputs: %s holds a partial set (see %s)",
                     outputs.target, PARTIAL_MARKER)
         return

@@ -293,7 +293,7 @@ def test_second_interrupt_while_writing_still_leaves_a_partial_set(demo, earlier
     assert len(message_lines(err)) == 2 and all("interrupted" in ln for ln in message_lines(err))
     _assert_consistent_set(earlier)
     text = (earlier / "PARTIAL.txt").read_text()
-    assert "interrupted again while the outputs were written" in text
+    assert "not processed to its end" in text and "interrupted again while the outputs were written" in text
     # what the interrupted writing did not reach is gone, not left from the earlier run
     assert not (earlier / "corrected.tum").exists() and not (earlier / "report.json").exists()
     assert (earlier / "notes.txt").exists()
