@@ -41,6 +41,7 @@ from .types import CameraModel, Keyframe, LoopClosure, Trajectory
 
 log = logging.getLogger(__name__)
 
+
 @dataclass
 class _Frame:
     stamp: int
