@@ -1,8 +1,9 @@
 """Run configuration: typed dataclasses, YAML presets, ``--set section.key=value`` overrides.
 
 Each stage owns its section (``slam_lcd/<stage>/config.py``); this module composes them.
-Unknown keys are errors, values are type-checked, and :func:`save_config` writes the
-resolved configuration next to a run's outputs.
+Unknown keys are errors, values are type-checked and range-checked
+(:mod:`slam_lcd.config_ranges`), and :func:`save_config` writes the resolved
+configuration next to a run's outputs.
 """
 from __future__ import annotations
 
@@ -156,6 +157,32 @@ def apply_override(cfg: Config, assignment: str) -> Config:
     return _from_dict(Config, data)
 
 
+def validate_config(cfg: Config, path: str | Path | None = None) -> Config:
+    """Range-check every numeric key (:mod:`slam_lcd.config_ranges`); one-line ConfigError naming the key."""
+    from .config_ranges import ORDERED, RANGES, describe, in_range
+
+    data = config_to_dict(cfg)
+    for key, spec in RANGES.items():
+        section, name = key.split(".", 1)
+        value = data.get(section, {}).get(name)
+        if value is None or isinstance(value, bool):
+            continue
+        if not in_range(value, spec):
+            raise ConfigError(f"{key} = {value!r} is out of range: it must be {describe(spec)}", path)
+    for small, large in ORDERED:
+        (s1, k1), (s2, k2) = small.split(".", 1), large.split(".", 1)
+        if data[s1][k1] >= data[s2][k2]:
+            raise ConfigError(f"{small} = {data[s1][k1]!r} must be below {large} = {data[s2][k2]!r}", path)
+    if cfg.frontend.T_body_camera is not None:
+        from .frontend.camera import pose_from_list
+
+        try:
+            pose_from_list(cfg.frontend.T_body_camera)
+        except ConfigError as e:
+            raise ConfigError(e.problem, path) from None
+    return cfg
+
+
 def load_config(source: str | Path | None = None, overrides: list[str] | tuple[str, ...] = ()) -> Config:
     """Load a preset name (``default``, ``fast`` …) or a YAML path, then apply overrides."""
     data: dict = {}
@@ -178,11 +205,12 @@ def load_config(source: str | Path | None = None, overrides: list[str] | tuple[s
             cfg = _from_dict(Config, data)
         except ConfigError as e:
             raise ConfigError(e.problem, path) from None
+        validate_config(cfg, path)
     else:
         cfg = Config()
     for ov in overrides:
         cfg = apply_override(cfg, ov)
-    return cfg
+    return validate_config(cfg)
 
 
 def dump_config(cfg: Config) -> str:

@@ -6,6 +6,7 @@ Inputs are TUM / KITTI / EuRoC files or ``LOG:TOPIC``.
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 from pathlib import Path
@@ -57,6 +58,17 @@ def _check_args(args) -> None:
         raise InputError("--plot and --json name the same file", args.plot)
 
 
+@contextlib.contextmanager
+def _naming_both(args):
+    """Association and alignment errors concern both trajectories: name both files."""
+    from ..eval.errors import AlignmentError, AssociationError
+
+    try:
+        yield
+    except (AssociationError, AlignmentError) as e:
+        raise type(e)(f"reference {args.ref} and estimate {args.est}: {e.problem}") from None
+
+
 def _short(spec: str) -> str:
     return Path(spec).name if Path(spec).exists() else str(spec)
 
@@ -69,7 +81,8 @@ def run(args) -> int:
     ref = load_trajectory_source(args.ref, args.ref_format, args.ref_times)
     est = load_trajectory_source(args.est, args.est_format, args.est_times)
     mode = align_mode_from_flags(args.align, args.correct_scale)
-    res = ate(ref, est, mode, t_max_diff=args.t_max_diff, t_offset=args.t_offset, n_to_align=args.n_to_align)
+    with _naming_both(args):
+        res = ate(ref, est, mode, t_max_diff=args.t_max_diff, t_offset=args.t_offset, n_to_align=args.n_to_align)
     tr, rot = res.translation, res.rotation
     print(f"reference: {args.ref} ({len(ref)} poses)")
     print(f"estimate:  {args.est} ({len(est)} poses)")
@@ -92,8 +105,9 @@ def run(args) -> int:
     )
     report = {"reference": str(args.ref), "estimate": str(args.est), "ate": res.to_dict()}
     if args.rpe is not None:
-        r = rpe(ref, est, args.rpe, args.rpe_unit, mode, t_max_diff=args.t_max_diff, t_offset=args.t_offset,
-                n_to_align=args.n_to_align)
+        with _naming_both(args):
+            r = rpe(ref, est, args.rpe, args.rpe_unit, mode, t_max_diff=args.t_max_diff, t_offset=args.t_offset,
+                    n_to_align=args.n_to_align)
         print(
             f"RPE ({args.rpe:g} {args.rpe_unit}, {len(r.errors)} pairs): translation rmse {r.translation.rmse:.6f} m, "
             f"rotation rmse {r.rotation.rmse:.4f} deg"

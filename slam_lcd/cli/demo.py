@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .run import add_config_args, config_from_args
+from .run import add_config_args, config_from_args, config_inputs
 
 
 def register(sub) -> None:
@@ -31,7 +31,8 @@ def run(args) -> int:
     log_path = ensure_demo_log(frames=args.frames, seed=args.seed, rebuild=args.rebuild,
                                progress=not args.no_progress)
     print(f"demo log: {log_path}")
-    res = run_log(log_path, Path(args.out), cfg, extractor=extractor, progress=not args.no_progress)
+    res = run_log(log_path, Path(args.out), cfg, extractor=extractor, progress=not args.no_progress,
+                  input_paths=config_inputs(args))
     print("slam-lcd demo summary")
     for line in res.summary_lines():
         print(f"  {line}")

@@ -10,6 +10,7 @@ import argparse
 import importlib
 import logging
 import sys
+import warnings
 
 from .. import __version__
 from ..errors import SlamLcdError
@@ -48,12 +49,18 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        parser = build_parser()  # imports every subcommand module: a Ctrl-C here is one line too
+        args = parser.parse_args(argv)
+    except KeyboardInterrupt:
+        print("slam-lcd: interrupted", file=sys.stderr)
+        return 130
     logging.basicConfig(
         level=logging.INFO if args.verbose else logging.WARNING,
         format="%(levelname)s: %(message)s",
     )
+    if not args.debug:  # library warnings (torch, numpy, matplotlib) are not ours to show
+        warnings.filterwarnings("ignore")
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
@@ -63,6 +70,12 @@ def main(argv: list[str] | None = None) -> int:
         if args.debug:
             raise
         print(f"slam-lcd {args.command}: error: {e}", file=sys.stderr)
+        return 2
+    except OSError as e:  # a file system error no subcommand turned into its own message
+        if args.debug:
+            raise
+        where = f"{e.filename}: " if getattr(e, "filename", None) else ""
+        print(f"slam-lcd {args.command}: error: {where}{e.strerror or e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"slam-lcd {args.command}: interrupted", file=sys.stderr)

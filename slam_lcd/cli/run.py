@@ -14,6 +14,16 @@ def add_config_args(p) -> None:
     p.add_argument("--device", default=None, choices=["auto", "cpu", "cuda"], help="torch device for SuperPoint")
 
 
+def config_inputs(args) -> dict:
+    """Input files named by the config flags (outputs must never land on them)."""
+    from pathlib import Path as _P
+
+    inputs = {}
+    if getattr(args, "config", None) and _P(args.config).exists():
+        inputs["--config"] = args.config
+    return inputs
+
+
 def config_from_args(args):
     overrides = list(args.overrides)
     if getattr(args, "weights", None):
@@ -48,8 +58,9 @@ def run(args) -> int:
     cfg = config_from_args(args)
     res = run_log(args.log, Path(args.out), cfg, image_topic=args.image_topic, odom_topic=args.odom_topic,
                   depth_topic=args.depth_topic, gt_topic=args.gt_topic, gt_file=args.gt,
-                  progress=not args.no_progress, write_mcap=not args.no_mcap)
+                  progress=not args.no_progress, write_mcap=not args.no_mcap, input_paths=config_inputs(args))
     for line in res.summary_lines():
         print(line)
-    print(f"outputs in {res.out_dir}/ ({', '.join(res.outputs)})")
+    print(f"outputs in {res.out_dir}/ ({', '.join(res.outputs)})"
+          + (" -- a partial set, see PARTIAL.txt" if res.interrupted else ""))
     return 130 if res.interrupted else 0

@@ -43,9 +43,17 @@ def _natural_key(path: Path):
     return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", path.name)]
 
 
-def iter_source_images(source: Path, topic: str | None, every: int = 1, max_images: int | None = None):
-    """Grey uint8 images of an image folder (natural order) or of one image topic of a log."""
+def iter_source_images(source: Path, topic: str | None, every: int = 1, max_images: int | None = None,
+                       skipped: list | None = None):
+    """Grey uint8 images of an image folder (natural order) or of one image topic of a log.
+
+    Damaged or unreadable images are skipped when ``skipped`` (a list) is given: their
+    errors are appended to it (the caller warns once); otherwise they raise.
+    """
     import cv2
+
+    from ..errors import DamagedImageError, SlamLcdError, in_context, stamp_text
+    from ..image_files import read_image
 
     every = max(1, every)
     count = 0
@@ -54,9 +62,13 @@ def iter_source_images(source: Path, topic: str | None, every: int = 1, max_imag
         if not files:
             raise InputError("no images (.png/.jpg/...) in this folder", source)
         for f in files[::every]:
-            img = cv2.imread(str(f), cv2.IMREAD_GRAYSCALE)
-            if img is None:
-                raise InputError("cannot decode image", f)
+            try:
+                img = read_image(f, cv2.IMREAD_GRAYSCALE)
+            except InputError as e:
+                if skipped is None:
+                    raise
+                skipped.append(e)
+                continue
             yield img
             count += 1
             if max_images is not None and count >= max_images:
@@ -70,35 +82,60 @@ def iter_source_images(source: Path, topic: str | None, every: int = 1, max_imag
     from ..io.decode import decode_compressed_image, decode_image, image_to_gray
 
     with open_log(source) as reader:
-        for n, m in enumerate(reader.messages([topic])):
+        (name,) = reader.resolve_topics([topic])
+        msgtype = reader.topics[name].msgtype
+        if msgtype not in ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage"):
+            raise InputError(f"--topic {name} carries {msgtype}, not a camera image", source)
+        for n, m in enumerate(reader.messages([name])):
             if n % every:
                 continue
-            img = decode_compressed_image(m.msg) if "Compressed" in m.msgtype else decode_image(m.msg)
-            yield image_to_gray(img)
+            try:
+                img = decode_compressed_image(m.msg) if "Compressed" in m.msgtype else decode_image(m.msg)
+                gray = image_to_gray(img)
+            except SlamLcdError as e:
+                err = in_context(e, f"topic {m.topic}, stamp {stamp_text(m.stamp)}", source)
+                if skipped is None or not isinstance(e, DamagedImageError):
+                    raise err from None
+                skipped.append(err)
+                continue
+            yield gray
             count += 1
             if max_images is not None and count >= max_images:
                 return
 
 
 def run_train(args) -> int:
-    from ..atomic import guard_not_input
-    from ..config import load_config
+    from ..atomic import check_no_clash, check_writable_target
+    from ..config import load_config, validate_config
     from ..features import load_extractor
     from ..vocab import train_hkmeans, train_vocabulary
+    from .util import write_guard
 
+    if args.every < 1:
+        raise InputError(f"--every must be >= 1, got {args.every}")
+    if args.max_images is not None and args.max_images < 1:
+        raise InputError(f"--max-images must be >= 1, got {args.max_images}")
+    source, out = Path(args.source), Path(args.out)
+    check_writable_target(out)
+    check_no_clash([out], {"SOURCE": source, "--config": args.config if args.config and Path(args.config).exists() else None,
+                           "--weights": args.weights})
     cfg = load_config(args.config, args.set)
     if args.features:
         cfg.features.kind = args.features
     if args.weights:
         cfg.features.weights = args.weights
+    validate_config(cfg)
     tree = args.tree or cfg.vocab.tree
-    source, out = Path(args.source), Path(args.out)
-    guard_not_input(out, source)
     extractor = load_extractor(cfg.features)
     t0 = time.perf_counter()
     sets = []
-    for img in iter_source_images(source, args.topic, args.every, args.max_images):
+    skipped: list = []
+    for img in iter_source_images(source, args.topic, args.every, args.max_images, skipped=skipped):
         sets.append(extractor.extract(img).descriptors)
+    if skipped:
+        log.warning("%d damaged or unreadable image(s) skipped; the first: %s", len(skipped), skipped[0])
+    if not sets:
+        raise InputError("no readable image to train on", source)
     n_desc = sum(len(d) for d in sets)
     log.info("extracted %d descriptors from %d images in %.1f s", n_desc, len(sets), time.perf_counter() - t0)
     t1 = time.perf_counter()
@@ -106,7 +143,8 @@ def run_train(args) -> int:
         vocab = train_vocabulary(sets, cfg.vocab, features=cfg.features.kind)
     else:
         vocab = train_hkmeans(sets, cfg.vocab.hk_branching, cfg.vocab.hk_depth, cfg.vocab.seed, features=cfg.features.kind)
-    vocab.save(out)
+    with write_guard(out):
+        vocab.save(out)
     print(f"{out}: {len(vocab)} words, depth {vocab.depth}, tree {tree}, {cfg.features.kind} features "
           f"from {len(sets)} images ({n_desc} descriptors), trained in {time.perf_counter() - t1:.1f} s")
     return 0
