@@ -28,7 +28,7 @@ def _run(feats, **conf):
 
 
 def test_disk_store_gives_the_same_records_and_holds_no_descriptors(sp_features):
-    mem, rows_mem = _run(sp_features)
+    mem, rows_mem = _run(sp_features, descriptor_storage="memory")
     disk, rows_disk = _run(sp_features, descriptor_storage="disk")
     assert rows_disk == rows_mem and any(r["accepted"] for r in rows_mem)
     n_values = sum(len(f) * f.descriptors.shape[1] for f in sp_features)
@@ -39,8 +39,8 @@ def test_disk_store_gives_the_same_records_and_holds_no_descriptors(sp_features)
 
 
 def test_float16_descriptors_keep_the_detections(sp_features):
-    half, rows_half = _run(sp_features)
-    full, rows_full = _run(sp_features, descriptor_dtype="float32")
+    half, rows_half = _run(sp_features, descriptor_storage="memory")
+    full, rows_full = _run(sp_features, descriptor_storage="memory", descriptor_dtype="float32")
     assert full.memory_bytes()["descriptors_resident"] == 2 * half.memory_bytes()["descriptors_resident"]
     modes = ("ransac", "graph", "graph+ransac")
     decisions = lambda det: [(r.query_id, r.match_id, r.accepted, *(r.passes(m) for m in modes)) for r in det.records]
@@ -60,6 +60,8 @@ def test_store_round_trip_and_bad_settings(tmp_path):
             assert got.dtype == a.dtype and np.array_equal(got, a)
         store.close()
     assert list(tmp_path.iterdir()) == []  # the temp file is anonymous: nothing left behind
+    with pytest.raises(InputError, match="descriptor store"):
+        DescriptorStore("disk", directory=str(tmp_path / "missing")).put(0, arrays[0])
     with pytest.raises(InputError, match="descriptor_storage"):
         LoopDetector(LcdConfig(descriptor_storage="cloud"))
     with pytest.raises(InputError, match="descriptor_dtype"):

@@ -1,10 +1,11 @@
 #!/usr/bin/env python3
 """Time graph verification: the all-pairs reference vs the grid-bucketed version, on real match sets.
 
-Match sets come from the demo world (rendered here, SuperPoint or ORB features): one-to-one
-matches of revisit pairs (true loops) and of pairs of different places matched without ratio
-or distance bound (mostly wrong matches: what pruning has to take apart), each cut to exactly
-100, 300 or 1000 matches with the detector's own budget rule. For every set both versions run
+Match sets come from the demo world (rendered here at 1280x960, SuperPoint or ORB features):
+one-to-one matches of revisit pairs (true loops, 900-1300 matches) and of pairs of places half
+a lap apart matched without ratio or distance bound (wrong matches, what pruning has to take
+apart; only ~250 are mutual), each cut to exactly 100, 300 or 1000 matches with the
+detector's own budget rule. For every set both versions run
 in the same process; the script prints per size the median time of each, their ratio, and
 checks that the verdicts are identical (the reference is tests/lcd_graph_reference.py).
 
@@ -31,14 +32,21 @@ from slam_lcd.lcd import LcdConfig, verify_graph  # noqa: E402
 from slam_lcd.lcd.budget import select_matches  # noqa: E402
 
 
-def demo_features(kind: str, weights: str | None, n_pairs: int):
+def demo_features(kind: str, weights: str | None, n_pairs: int, width: int, height: int):
     """Features of revisit pairs (query, match) and of the same queries' far-away keyframes."""
     world = sim.build_world(0)
     traj = sim.make_trajectory("laps", laps=1.3, rate_hz=1.0)
-    cam = sim.demo_camera(640, 480)
+    cam = sim.demo_camera(width, height)
     T_bc = sim.T_body_camera()
     pairs = sim.gt_loop_pairs(traj, T_body_camera=T_bc)
-    pick = pairs[np.linspace(0, len(pairs) - 1, n_pairs).astype(int)]
+    # the revisits seen from the closest viewpoints (most overlap: the largest true match sets)
+    cams = traj.poses @ T_bc
+    gap = np.linalg.norm(cams[pairs[:, 0], :3, 3] - cams[pairs[:, 1], :3, 3], axis=1)
+    pick, used = [], set()
+    for q, m in pairs[np.argsort(gap, kind="stable")]:
+        if len(pick) < n_pairs and not {int(q), int(m)} & used:
+            pick.append((int(q), int(m)))
+            used |= {int(q), int(m)}
     conf = FeaturesConfig(kind=kind, feature_cache=False, max_keypoints=3000, orb_n_features=4000)
     ex = load_extractor(conf, weights=weights, device="cpu")
     cache: dict[int, object] = {}
@@ -50,7 +58,7 @@ def demo_features(kind: str, weights: str | None, n_pairs: int):
         return cache[k]
 
     n = len(traj)
-    true_pairs = [(feats(int(q)), feats(int(m))) for q, m in pick]
+    true_pairs = [(feats(q), feats(m)) for q, m in pick]
     false_pairs = [(feats(int(q)), feats(int((q + n // 2) % n))) for q, _ in pick]  # half a lap away
     return true_pairs, false_pairs
 
@@ -59,15 +67,17 @@ def match_sets(true_pairs, false_pairs, sizes, kind: str):
     conf = LcdConfig()
     max_d = conf.match_max_distance_orb if kind == "orb" else conf.match_max_distance_sp
     sets = {s: [] for s in sizes}
+    counts = {"true": [], "false": []}
     for label, pairs, ratio, bound in (("true", true_pairs, conf.match_ratio, max_d), ("false", false_pairs, None, None)):
         for fq, fm in pairs:
             m, d = mutual_nn_match_bf(fq.descriptors, fm.descriptors, ratio=ratio, max_distance=bound,
                                       return_distances=True)
+            counts[label].append(len(m))
             for s in sizes:
                 if len(m) >= s:
                     keep = select_matches(m, d, fq.keypoints, s, fq.image_size, conf.verify_spread_cells)
                     sets[s].append((label, fq.keypoints, fm.keypoints, m[keep]))
-    return sets
+    return sets, counts
 
 
 def timed(fn, repeat: int):
@@ -86,13 +96,17 @@ def main(argv=None) -> int:
     ap.add_argument("--sizes", type=int, nargs="+", default=[100, 300, 1000])
     ap.add_argument("--pairs", type=int, default=4, help="revisit pairs rendered (and as many far pairs)")
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--resolution", default="1280x960", help="rendered image size (1000 true matches need 1280x960)")
     args = ap.parse_args(argv)
 
     t0 = time.perf_counter()
-    true_pairs, false_pairs = demo_features(args.features, args.weights, args.pairs)
-    sets = match_sets(true_pairs, false_pairs, args.sizes, args.features)
-    print(f"[bench_graph] {args.features} features of {2 * args.pairs} demo pairs in {time.perf_counter() - t0:.1f} s; "
-          f"median of {args.repeat} runs per set, both versions in this process")
+    width, height = (int(v) for v in args.resolution.lower().split("x"))
+    true_pairs, false_pairs = demo_features(args.features, args.weights, args.pairs, width, height)
+    sets, counts = match_sets(true_pairs, false_pairs, args.sizes, args.features)
+    print(f"[bench_graph] {args.features} features of {2 * args.pairs} demo pairs ({args.resolution}) in "
+          f"{time.perf_counter() - t0:.1f} s; one-to-one matches of the revisits {counts['true']}, of places half a "
+          f"lap apart {counts['false']}; T/F: sets cut from those; median of {args.repeat} runs per set, both "
+          f"versions in this process")
     exact = LcdConfig(graph_early_exit=False)
     fast = LcdConfig()
     print(f"{'matches':>7} {'sets':>9} {'reference':>10} {'grid':>9} {'ratio':>6} {'grid+exit':>9} {'ratio':>6} "

@@ -90,8 +90,9 @@ def _nearest_two(d1: np.ndarray, d2: np.ndarray, k: int):
     nn21 = sq.argmin(0)
     best = np.sqrt(sq[rows, nn12]).astype(np.float64)
     second = None
-    if k == 2:
-        second = np.sqrt(np.partition(sq, 1, axis=1)[:, 1]).astype(np.float64)
+    if k == 2:  # second smallest of each row: the smallest once the best is masked (cheaper than a partition)
+        sq[rows, nn12] = np.inf
+        second = np.sqrt(sq.min(1)).astype(np.float64)
     return nn12.astype(np.int64), best, second, nn21.astype(np.int64)
 
 

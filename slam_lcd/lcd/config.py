@@ -25,7 +25,7 @@ class LcdConfig:
 
     # --- what is kept of past keyframes ---
     descriptor_dtype: Literal["float16", "float32"] = "float16"  # SuperPoint descriptors kept (and matched) in this precision
-    descriptor_storage: Literal["memory", "disk"] = "memory"  # 'disk': past descriptors in an anonymous temp file
+    descriptor_storage: Literal["memory", "disk"] = "disk"  # past descriptors in an anonymous temp file ($TMPDIR; ~12 kB/keyframe resident) or in RAM
 
     # --- graph verification (paper III-E) ---
     graph_min_matches: int = 20  # fewer one-to-one matches than this: reject before building a graph

@@ -219,10 +219,12 @@ class LoopDetector:
         position = len(self._entries)
         # the query is matched with the same compact descriptors it is stored with (symmetric pairs)
         desc = compact_descriptors(feats.descriptors, c.descriptor_dtype)
-        kept = Features(keypoints=feats.keypoints, scores=np.zeros(0, np.float32), descriptors=desc[:0],
-                        image_size=feats.image_size, kind=feats.kind)
-        light = Keyframe(id=kf.id, stamp=kf.stamp, T_world_body=kf.T_world_body, camera=camera,
-                         T_body_camera=np.asarray(kf.T_body_camera, float), features=kept,
+        # own small copies: views would keep the caller's larger arrays alive
+        kept = Features(keypoints=np.array(feats.keypoints), scores=np.zeros(0, np.float32),
+                        descriptors=np.zeros((0,) + desc.shape[1:], desc.dtype), image_size=feats.image_size,
+                        kind=feats.kind)
+        light = Keyframe(id=kf.id, stamp=kf.stamp, T_world_body=np.array(kf.T_world_body, float), camera=camera,
+                         T_body_camera=np.array(kf.T_body_camera, float), features=kept,
                          landmarks=landmarks)
         entry = _Entry(kf.id, int(kf.stamp), position, kept, camera, light.T_body_camera, points3d, source, light)
 

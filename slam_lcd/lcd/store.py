@@ -54,14 +54,23 @@ class DescriptorStore:
         if self.mode == "memory":
             self._arrays[key] = desc
             return
-        if self._file is None:
-            self._file = tempfile.TemporaryFile(prefix="slam-lcd-descriptors-", dir=self._directory)
         data = np.ascontiguousarray(desc).tobytes()
-        written = os.pwrite(self._file.fileno(), data, self._end)
+        try:
+            if self._file is None:
+                self._file = tempfile.TemporaryFile(prefix="slam-lcd-descriptors-", dir=self._directory)
+            written = os.pwrite(self._file.fileno(), data, self._end)
+        except OSError as e:
+            where = self._directory or tempfile.gettempdir()
+            raise InputError(f"cannot write the loop detector's descriptor store there ({e.strerror or e}); "
+                             f"set TMPDIR or lcd.descriptor_storage=memory", where) from None
         if written != len(data):
-            raise OSError(f"short write to the descriptor store ({written} of {len(data)} bytes)")
+            raise InputError(f"short write to the loop detector's descriptor store ({written} of {len(data)} bytes)",
+                             self._directory or tempfile.gettempdir())
         self._slots[key] = (self._end, desc.shape, desc.dtype)
         self._end += len(data)
+
+    def __del__(self):
+        self.close()
 
     def get(self, key: int) -> np.ndarray:
         if self.mode == "memory":
@@ -81,6 +90,6 @@ class DescriptorStore:
         return self._end
 
     def close(self) -> None:
-        if self._file is not None:
+        if getattr(self, "_file", None) is not None:  # also when __init__ raised
             self._file.close()
             self._file = None
