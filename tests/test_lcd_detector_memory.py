@@ -66,3 +66,14 @@ def test_store_round_trip_and_bad_settings(tmp_path):
         LoopDetector(LcdConfig(descriptor_storage="cloud"))
     with pytest.raises(InputError, match="descriptor_dtype"):
         LoopDetector(LcdConfig(descriptor_dtype="int4"))
+
+
+def test_match_budget_bounds_what_each_candidate_verifies(sp_features):
+    budget = 40
+    det, _ = _run(sp_features, verify_max_matches=budget)
+    verified = [r for r in det.records if r.graph is not None]
+    assert any(r.n_matches > budget for r in verified)
+    for r in verified:
+        assert r.n_verified == min(r.n_matches, budget) == r.graph.n_matches
+        assert r.ransac is None or r.ransac.n_matches == r.n_verified
+    assert any(r.accepted for r in det.records)  # a budgeted candidate can still pass
