@@ -1,7 +1,8 @@
 """``LoopDetector``: the loop-closure plugin (keyframes in, verified loops out).
 
 Chain per keyframe: features (extracted if missing) -> Bag-of-Words candidates (top-K,
-recent keyframes excluded) -> one-to-one descriptor matches -> verification
+recent keyframes excluded) -> one-to-one descriptor matches (at most
+``lcd.verify_max_matches`` go on: a fixed budget per candidate) -> verification
 (``conf.verify``: 'none', 'ransac', 'graph' or 'graph+ransac') -> metric relative pose ->
 optional temporal consistency. Every candidate, accepted or not, is appended to
 ``detector.records`` with the reason and the evidence, so a run can be audited and
