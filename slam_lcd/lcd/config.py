@@ -20,6 +20,12 @@ class LcdConfig:
     match_ratio: float | None = 0.9  # Lowe ratio on top of mutual nearest neighbours (None: off)
     match_max_distance_sp: float | None = 0.8  # max L2 distance between SuperPoint descriptors (None: off)
     match_max_distance_orb: float | None = 64.0  # max Hamming distance between ORB descriptors (None: off)
+    verify_max_matches: int = 400  # budget: at most this many one-to-one matches go to graph/RANSAC/pose (0: all)
+    verify_spread_cells: int = 4  # budget picks the best by distance round-robin over an NxN grid of the query image (0: globally best)
+
+    # --- what is kept of past keyframes ---
+    descriptor_dtype: Literal["float16", "float32"] = "float16"  # SuperPoint descriptors kept (and matched) in this precision
+    descriptor_storage: Literal["memory", "disk"] = "disk"  # past descriptors in an anonymous temp file ($TMPDIR; ~12 kB/keyframe resident) or in RAM
 
     # --- graph verification (paper III-E) ---
     graph_min_matches: int = 20  # fewer one-to-one matches than this: reject before building a graph
@@ -31,6 +37,7 @@ class LcdConfig:
     graph_remove_fraction: float = 0.2  # at most this fraction of the violating nodes is removed per iteration
     graph_max_iterations: int = 50  # cap on pruning rounds
     graph_min_separation_px: float = 2.0  # merge matched points closer than this (duplicates break triangulation)
+    graph_early_exit: bool = True  # stop pruning once the node ratio can no longer be reached (same decisions, less work)
 
     # --- geometric verification (essential matrix) ---
     ransac_threshold_px: float = 2.0  # Sampson/epipolar RANSAC threshold in pixels

@@ -1,7 +1,8 @@
 """``LoopDetector``: the loop-closure plugin (keyframes in, verified loops out).
 
 Chain per keyframe: features (extracted if missing) -> Bag-of-Words candidates (top-K,
-recent keyframes excluded) -> one-to-one descriptor matches -> verification
+recent keyframes excluded) -> one-to-one descriptor matches (at most
+``lcd.verify_max_matches`` go on: a fixed budget per candidate) -> verification
 (``conf.verify``: 'none', 'ransac', 'graph' or 'graph+ransac') -> metric relative pose ->
 optional temporal consistency. Every candidate, accepted or not, is appended to
 ``detector.records`` with the reason and the evidence, so a run can be audited and
@@ -20,7 +21,9 @@ from ..features.matching import mutual_nn_match_bf
 from ..types import CameraModel, Features, Keyframe, LoopClosure
 from .config import LcdConfig
 from .geometry import EpipolarVerdict, PoseVerdict, default_camera, estimate_loop_pose, keyframe_points3d, verify_epipolar
+from .budget import select_matches
 from .graph import GraphVerdict, verify_graph
+from .store import DESCRIPTOR_DTYPES, DescriptorStore, compact_descriptors
 from .temporal import TemporalConsistency
 
 log = logging.getLogger(__name__)
@@ -36,7 +39,8 @@ class CandidateRecord:
     match_id: int
     rank: int  # 0 = best BoW score
     bow_score: float
-    n_matches: int = 0
+    n_matches: int = 0  # one-to-one matches found
+    n_verified: int = 0  # of those, handed to verification (at most ``lcd.verify_max_matches``)
     graph: GraphVerdict | None = None
     ransac: EpipolarVerdict | None = None  # on all mutual matches
     ransac_on_graph: EpipolarVerdict | None = None  # on the graph's surviving nodes
@@ -76,6 +80,7 @@ class CandidateRecord:
             "rank": self.rank,
             "bow_score": round(float(self.bow_score), 6),
             "n_matches": self.n_matches,
+            "n_verified": self.n_verified,
             "accepted": self.accepted,
             "reason": self.reason,
             "graph_nodes": self.graph.n_nodes if self.graph else "",
@@ -94,7 +99,11 @@ class CandidateRecord:
 
 @dataclass
 class _Entry:
-    """What the detector keeps of a past keyframe (no images: features and 3-D points only)."""
+    """What the detector keeps of a past keyframe (no images; descriptors live in the store).
+
+    ``features`` holds the keypoints only (no scores, zero-length descriptors); 3-D points and
+    landmarks are float32 (what later verification needs, in the precision it needs).
+    """
 
     id: int
     stamp: int
@@ -105,6 +114,20 @@ class _Entry:
     points3d: np.ndarray | None
     points_source: str
     keyframe: Keyframe = field(repr=False, default=None)  # light copy without images
+
+    def nbytes(self) -> int:
+        """Bytes of the arrays this entry holds (descriptors excluded: see the store)."""
+        arrays = [self.features.keypoints, self.points3d, self.keyframe.landmarks if self.keyframe else None]
+        seen, total = set(), 0
+        for a in arrays:
+            if a is not None and id(a) not in seen:
+                seen.add(id(a))
+                total += a.nbytes
+        return total
+
+
+def _float32_or_none(a) -> np.ndarray | None:
+    return None if a is None else np.ascontiguousarray(a, dtype=np.float32)
 
 
 class LoopDetector:
@@ -123,6 +146,10 @@ class LoopDetector:
         self.conf = conf or LcdConfig()
         if self.conf.verify not in VERIFY_MODES:
             raise InputError(f"lcd.verify must be one of {list(VERIFY_MODES)}, got {self.conf.verify!r}")
+        if self.conf.descriptor_dtype not in DESCRIPTOR_DTYPES:
+            raise InputError(f"lcd.descriptor_dtype must be one of {list(DESCRIPTOR_DTYPES)}, "
+                             f"got {self.conf.descriptor_dtype!r}")
+        self._store = DescriptorStore(self.conf.descriptor_storage)
         self.db = BowDatabase(vocab, vocab_conf)
         self.extractor = extractor
         self.run_all_checks = run_all_checks
@@ -148,11 +175,24 @@ class LoopDetector:
         kf.features = self.extractor.extract(kf.image)
         return kf.features
 
-    def _match(self, fq: Features, fm: Features) -> np.ndarray:
+    def _match(self, dq: np.ndarray, dm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         c = self.conf
-        binary = fq.descriptors.dtype == np.uint8
+        binary = dq.dtype == np.uint8
         max_d = c.match_max_distance_orb if binary else c.match_max_distance_sp
-        return mutual_nn_match_bf(fq.descriptors, fm.descriptors, ratio=c.match_ratio, max_distance=max_d)
+        return mutual_nn_match_bf(dq, dm, ratio=c.match_ratio, max_distance=max_d, return_distances=True)
+
+    def memory_bytes(self) -> dict[str, int]:
+        """Bytes the detector holds for its past keyframes: descriptors (RAM / file) and the rest."""
+        return {
+            "keyframes": len(self._entries),
+            "descriptors_resident": self._store.resident_bytes(),
+            "descriptors_file": self._store.file_bytes(),
+            "entries": sum(e.nbytes() for e in self._entries.values()),
+        }
+
+    def close(self) -> None:
+        """Release the descriptor store's temporary file (``lcd.descriptor_storage = 'disk'``)."""
+        self._store.close()
 
     def _camera(self, kf: Keyframe, feats: Features) -> CameraModel:
         if kf.camera is not None:
@@ -175,11 +215,19 @@ class LoopDetector:
         points3d, source = (None, "none")
         if c.pose and kf.camera is not None:
             points3d, source = keyframe_points3d(kf, c)
+        points3d = _float32_or_none(points3d)
+        landmarks = points3d if source == "landmarks" else _float32_or_none(kf.landmarks)
         position = len(self._entries)
-        light = Keyframe(id=kf.id, stamp=kf.stamp, T_world_body=kf.T_world_body, camera=camera,
-                         T_body_camera=np.asarray(kf.T_body_camera, float), features=feats,
-                         landmarks=kf.landmarks)
-        entry = _Entry(kf.id, int(kf.stamp), position, feats, camera, light.T_body_camera, points3d, source, light)
+        # the query is matched with the same compact descriptors it is stored with (symmetric pairs)
+        desc = compact_descriptors(feats.descriptors, c.descriptor_dtype)
+        # own small copies: views would keep the caller's larger arrays alive
+        kept = Features(keypoints=np.array(feats.keypoints), scores=np.zeros(0, np.float32),
+                        descriptors=np.zeros((0,) + desc.shape[1:], desc.dtype), image_size=feats.image_size,
+                        kind=feats.kind)
+        light = Keyframe(id=kf.id, stamp=kf.stamp, T_world_body=np.array(kf.T_world_body, float), camera=camera,
+                         T_body_camera=np.array(kf.T_body_camera, float), features=kept,
+                         landmarks=landmarks)
+        entry = _Entry(kf.id, int(kf.stamp), position, kept, camera, light.T_body_camera, points3d, source, light)
 
         closures: list[LoopClosure] = []
         candidates = []
@@ -188,7 +236,7 @@ class LoopDetector:
                 feats.descriptors, top_k=c.top_k, exclude_recent_s=c.exclude_recent_s,
                 exclude_recent_n=c.exclude_recent_n, query_id=kf.id, stamp_ns=int(kf.stamp),
             )
-        records = [self._verify(entry, cand, rank) for rank, cand in enumerate(candidates)]
+        records = [self._verify(entry, desc, cand, rank) for rank, cand in enumerate(candidates)]
         self.records.extend(records)
 
         accepted = [r for r in records if r.accepted]
@@ -204,18 +252,24 @@ class LoopDetector:
             closures.append(self._closure(best))
         self.closures.extend(closures)
         self.db.add(kf.id, int(kf.stamp), feats.descriptors)
+        self._store.put(kf.id, desc)
         self._entries[kf.id] = entry
         return closures
 
-    def _verify(self, q: _Entry, cand, rank: int) -> CandidateRecord:
+    def _verify(self, q: _Entry, q_desc: np.ndarray, cand, rank: int) -> CandidateRecord:
         c = self.conf
         m = self._entries[cand.match_id]
         rec = CandidateRecord(q.id, m.id, rank, float(cand.bow_score), query_stamp=q.stamp, match_stamp=m.stamp)
         if cand.bow_score < c.min_bow_score:
             rec.reason = "low_bow_score"
             return rec
-        matches = self._match(q.features, m.features)
+        matches, distances = self._match(q_desc, self._store.get(m.id))
         rec.n_matches = len(matches)
+        if 0 < c.verify_max_matches < len(matches):
+            keep = select_matches(matches, distances, q.features.keypoints, c.verify_max_matches,
+                                  q.features.image_size, c.verify_spread_cells)
+            matches = matches[keep]
+        rec.n_verified = len(matches)
         mode = c.verify
         need_graph = self.run_all_checks or mode in ("graph", "graph+ransac")
         need_ransac = self.run_all_checks or mode == "ransac"

@@ -32,6 +32,7 @@ import numpy as np
 from scipy.spatial import Delaunay, QhullError
 
 from .config import LcdConfig
+from .segments import crossing_counts, crosses_any
 
 
 @dataclass
@@ -48,6 +49,7 @@ class GraphVerdict:
     crossing_free: float = 0.0
     edge_jaccard: float = 0.0
     iterations: int = 0
+    stopped_early: bool = False  # pruning stopped once the rejection was certain (``lcd.graph_early_exit``)
 
     def evidence(self) -> dict:
         return {
@@ -96,11 +98,14 @@ def planar_graph(points: np.ndarray, max_edge_factor: float) -> tuple[np.ndarray
 
 
 def _unique_edges(tri: np.ndarray) -> np.ndarray:
+    """Distinct undirected edges (a < b) of the triangles, sorted by (a, b)."""
     if len(tri) == 0:
         return np.zeros((0, 2), np.int64)
     e = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
     e.sort(axis=1)
-    return np.unique(e, axis=0)
+    n = int(e.max()) + 1
+    code = np.unique(e[:, 0] * n + e[:, 1])  # integer codes sort like the rows (a, b)
+    return np.stack([code // n, code % n], axis=1)
 
 
 def _cross2(u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -115,34 +120,15 @@ def _signed_area2(pts: np.ndarray, tri: np.ndarray) -> np.ndarray:
 def crossing_edges(points: np.ndarray, edges: np.ndarray) -> np.ndarray:
     """For each edge (drawn as a segment between ``points``), how many other edges it properly crosses.
 
-    Edges sharing an end point never count as crossing.
+    Edges sharing an end point never count as crossing. Grid broad phase
+    (:mod:`slam_lcd.lcd.segments`), the same counts as testing all pairs.
     """
-    m = len(edges)
-    if m < 2:
-        return np.zeros(m, np.int64)
-    p, q = points[edges[:, 0]], points[edges[:, 1]]
-    d = q - p  # (m, 2)
-    # orientation of the ends of edge j relative to edge i: o[i, j]
-    o_p = _cross2(d[:, None, :], p[None, :, :] - p[:, None, :])
-    o_q = _cross2(d[:, None, :], q[None, :, :] - p[:, None, :])
-    straddle = (o_p * o_q) < 0
-    cross = straddle & straddle.T
-    share = (
-        (edges[:, None, 0] == edges[None, :, 0])
-        | (edges[:, None, 0] == edges[None, :, 1])
-        | (edges[:, None, 1] == edges[None, :, 0])
-        | (edges[:, None, 1] == edges[None, :, 1])
-    )
-    cross &= ~share
-    return cross.sum(1)
+    return crossing_counts(points, edges)
 
 
-def _adjacency(n: int, edges: np.ndarray) -> np.ndarray:
-    A = np.zeros((n, n), bool)
-    if len(edges):
-        A[edges[:, 0], edges[:, 1]] = True
-        A[edges[:, 1], edges[:, 0]] = True
-    return A
+def _edge_codes(edges: np.ndarray, n: int) -> np.ndarray:
+    """Sorted integer code ``a * n + b`` of each undirected edge (a < b): a sparse adjacency."""
+    return np.sort(edges[:, 0] * n + edges[:, 1]) if len(edges) else np.zeros(0, np.int64)
 
 
 # ----------------------------------------------------------------------------- comparison
@@ -165,19 +151,19 @@ def _directional(src: np.ndarray, dst: np.ndarray, tri: np.ndarray, edges: np.nd
         s_src = np.sign(_signed_area2(src, tri))
         s_dst = np.sign(_signed_area2(dst, tri))
         flipped = (s_src != s_dst).astype(np.float64)
-        for k in range(3):
-            np.add.at(flips, tri[:, k], flipped)
-            np.add.at(tri_count, tri[:, k], 1.0)
+        corners = tri.T.ravel()  # counts of 0/1 values: exact whatever the summation order
+        flips = np.bincount(corners, np.tile(flipped, 3), minlength=n)
+        tri_count = np.bincount(corners, minlength=n).astype(np.float64)
         orient = 1.0 - float(flipped.mean())
     else:
         orient = 0.0
     crosses = np.zeros(n)
     edge_count = np.zeros(n)
     if len(edges):
-        c = (crossing_edges(dst, edges) > 0).astype(np.float64)
-        for k in range(2):
-            np.add.at(crosses, edges[:, k], c)
-            np.add.at(edge_count, edges[:, k], 1.0)
+        c = crosses_any(dst, edges).astype(np.float64)
+        ends = edges.T.ravel()
+        crosses = np.bincount(ends, np.tile(c, 2), minlength=n)
+        edge_count = np.bincount(ends, minlength=n).astype(np.float64)
         free = 1.0 - float(c.mean())
     else:
         free = 0.0
@@ -193,9 +179,12 @@ def compare_graphs(pq: np.ndarray, pm: np.ndarray, max_edge_factor: float) -> _C
     tri_m, e_m = planar_graph(pm, max_edge_factor)
     fq, cq, in_q, oq, xq = _directional(pq, pm, tri_q, e_q, n)
     fm, cm, in_m, om, xm = _directional(pm, pq, tri_m, e_m, n)
-    A_q, A_m = _adjacency(n, e_q), _adjacency(n, e_m)
-    inter = (A_q & A_m).sum(1)
-    union = (A_q | A_m).sum(1)
+    # per-node neighbour-set Jaccard from sorted edge codes (no n x n adjacency)
+    common = np.intersect1d(_edge_codes(e_q, n), _edge_codes(e_m, n), assume_unique=True)
+    inter = np.bincount(np.concatenate([common // n, common % n]), minlength=n)
+    deg_q = np.bincount(e_q.ravel(), minlength=n)
+    deg_m = np.bincount(e_m.ravel(), minlength=n)
+    union = deg_q + deg_m - inter
     jac = np.divide(inter, union, out=np.zeros(n), where=union > 0)
     edge_jac = float(inter.sum() / union.sum()) if union.sum() else 0.0
     badness = (0.5 * (fq + fm) + 0.5 * (cq + cm) + (1.0 - jac)) / 3.0
@@ -249,12 +238,17 @@ def verify_graph(
     pq_all = np.asarray(kpts_q, dtype=np.float64)[matches[:, 0]]
     pm_all = np.asarray(kpts_m, dtype=np.float64)[matches[:, 1]]
     alive = _dedupe(pq_all, pm_all, conf.graph_min_separation_px)
+    min_nodes = max(conf.graph_min_nodes, 3)
 
     it = 0
     comp = None
     while True:
-        if len(alive) < max(conf.graph_min_nodes, 3):
+        if len(alive) < min_nodes:
             break
+        # pruning only removes nodes: below the node ratio the candidate is rejected whatever follows
+        if conf.graph_early_exit and len(alive) / n_matches < conf.graph_min_node_ratio:
+            return GraphVerdict(False, 0.0, len(alive), "low_node_ratio", n_matches=n_matches, kept=alive,
+                                iterations=it, stopped_early=True)
         comp = compare_graphs(pq_all[alive], pm_all[alive], conf.graph_max_edge_factor)
         drop = comp.isolated.copy()
         violating = np.flatnonzero((comp.badness > conf.graph_node_threshold) & ~comp.isolated)
@@ -271,7 +265,7 @@ def verify_graph(
         comp = None
 
     n_nodes = len(alive)
-    if comp is None or n_nodes < max(conf.graph_min_nodes, 3):
+    if comp is None or n_nodes < min_nodes:
         return GraphVerdict(
             False, 0.0, n_nodes, "too_few_nodes", n_matches=n_matches, kept=alive, iterations=it
         )
