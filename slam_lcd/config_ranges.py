@@ -83,6 +83,8 @@ RANGES: dict[str, str] = {
     "vocab.online_word_radius": "(0, 2]",  # on unit vectors
     # lcd
     "lcd.top_k": "[1, inf)",
+    "lcd.verify_max_matches": "0 or [3, inf)",  # 0: no budget
+    "lcd.verify_spread_cells": "[0, 64]",  # 0: globally best
     "lcd.min_bow_score": "[0, inf)",
     "lcd.exclude_recent_n": "[0, inf)",
     "lcd.exclude_recent_s": "[0, inf)",
