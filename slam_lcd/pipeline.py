@@ -143,8 +143,9 @@ class Pipeline:
         self._ahead = max(0, int(self.config.run.extract_ahead))
         self._inflight: deque[tuple[Keyframe, Future | None]] = deque()
         self._executor: ThreadPoolExecutor | None = None
-        # per keyframe: (loop detection s, back end s, resident memory kB after it), for benchmarks
-        self.keyframe_seconds: list[tuple[float, float, int]] = []
+        # per keyframe: seconds of loop detection (and of each of its parts), of the back end, and
+        # the resident memory after it (kB), for benchmarks and reports
+        self.keyframe_seconds: list[dict[str, float]] = []
 
     # ------------------------------------------------------------------ inputs
     def set_camera(self, camera: CameraModel, T_body_camera: np.ndarray | None = None) -> None:
@@ -274,11 +275,13 @@ class Pipeline:
             kf.right_image = None
             kf.depth = None
             kf.features = None
-        self.keyframe_seconds.append((t2 - t1, (t1 - t0) + (time.perf_counter() - t2), resident_kb()))
+        self.keyframe_seconds.append({"loop_detection": t2 - t1, "backend": (t1 - t0) + (time.perf_counter() - t2),
+                                      "rss_kb": resident_kb(), **self.detector.last_part_seconds})
         return accepted
 
     def _detect_loops(self, kf: Keyframe) -> list[LoopClosure]:
         """Loop detection for a keyframe already in the graph; an interrupt inside it drops its candidates."""
+        self.detector.last_part_seconds = {}
         if self._detector_stale:
             if not self._stale_warned:  # said once, when a keyframe actually goes without detection
                 self._stale_warned = True

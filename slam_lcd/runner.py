@@ -79,7 +79,7 @@ class RunResult:
     log_duration_s: float = 0.0
     stages: dict = field(default_factory=dict)
     outputs: list[str] = field(default_factory=list)
-    # per keyframe: (loop detection s, back end s, resident kB), in keyframe order (benchmarks)
+    # per keyframe: loop detection (and its parts) and back end seconds, resident kB (benchmarks)
     keyframe_seconds: list = field(default_factory=list, repr=False)
 
     def summary_lines(self) -> list[str]:

@@ -11,6 +11,7 @@ evaluated (``slam-lcd eval-lcd``).
 from __future__ import annotations
 
 import logging
+import time
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -29,6 +30,29 @@ from .temporal import TemporalConsistency
 log = logging.getLogger(__name__)
 
 VERIFY_MODES = ("none", "ransac", "graph", "graph+ransac")
+
+
+class PartClock:
+    """Seconds per part of one ``LoopDetector.add`` (BoW, matching, graph, RANSAC, pose, ...)."""
+
+    def __init__(self):
+        self.seconds: dict[str, float] = {}
+        self._t = time.perf_counter()
+
+    def lap(self, part: str) -> None:
+        """Charge the time since the previous lap to ``part``."""
+        now = time.perf_counter()
+        self.seconds[part] = self.seconds.get(part, 0.0) + (now - self._t)
+        self._t = now
+
+
+def _drop_arrays(rec: "CandidateRecord") -> None:
+    """A record kept for the run's report needs its figures, not its per-match arrays."""
+    if rec.graph is not None:
+        rec.graph.kept = rec.graph.kept[:0]
+    for v in (rec.ransac, rec.ransac_on_graph):
+        if v is not None:
+            v.mask = v.mask[:0]
 
 
 @dataclass
@@ -154,6 +178,7 @@ class LoopDetector:
         self.extractor = extractor
         self.run_all_checks = run_all_checks
         self.records: list[CandidateRecord] = []
+        self.last_part_seconds: dict[str, float] = {}  # seconds per part of the last add()
         self.closures: list[LoopClosure] = []
         self._entries: dict[int, _Entry] = {}
         self._temporal = TemporalConsistency(self.conf.temporal_k, self.conf.temporal_window)
@@ -205,7 +230,9 @@ class LoopDetector:
         """Query the database with ``kf``, verify its candidates, then insert it; returns accepted loops."""
         if kf.id in self._entries:
             raise InputError(f"keyframe id {kf.id} was already added to the loop detector")
+        clock = PartClock()
         feats = self._features(kf)
+        clock.lap("features")
         if self._kind is None:
             self._kind = feats.kind
         elif feats.kind != self._kind:
@@ -228,6 +255,7 @@ class LoopDetector:
                          T_body_camera=np.array(kf.T_body_camera, float), features=kept,
                          landmarks=landmarks)
         entry = _Entry(kf.id, int(kf.stamp), position, kept, camera, light.T_body_camera, points3d, source, light)
+        clock.lap("points3d")
 
         closures: list[LoopClosure] = []
         candidates = []
@@ -236,7 +264,8 @@ class LoopDetector:
                 feats.descriptors, top_k=c.top_k, exclude_recent_s=c.exclude_recent_s,
                 exclude_recent_n=c.exclude_recent_n, query_id=kf.id, stamp_ns=int(kf.stamp),
             )
-        records = [self._verify(entry, desc, cand, rank) for rank, cand in enumerate(candidates)]
+        clock.lap("bow_query")
+        records = [self._verify(entry, desc, cand, rank, clock) for rank, cand in enumerate(candidates)]
         self.records.extend(records)
 
         accepted = [r for r in records if r.accepted]
@@ -251,37 +280,49 @@ class LoopDetector:
         elif best is not None:
             closures.append(self._closure(best))
         self.closures.extend(closures)
+        for r in records:
+            _drop_arrays(r)
+        clock.lap("decision")
         self.db.add(kf.id, int(kf.stamp), feats.descriptors)
+        clock.lap("bow_add")
         self._store.put(kf.id, desc)
         self._entries[kf.id] = entry
+        clock.lap("store")
+        self.last_part_seconds = clock.seconds
         return closures
 
-    def _verify(self, q: _Entry, q_desc: np.ndarray, cand, rank: int) -> CandidateRecord:
+    def _verify(self, q: _Entry, q_desc: np.ndarray, cand, rank: int, clock: PartClock | None = None) -> CandidateRecord:
         c = self.conf
+        clock = clock or PartClock()
         m = self._entries[cand.match_id]
         rec = CandidateRecord(q.id, m.id, rank, float(cand.bow_score), query_stamp=q.stamp, match_stamp=m.stamp)
         if cand.bow_score < c.min_bow_score:
             rec.reason = "low_bow_score"
             return rec
-        matches, distances = self._match(q_desc, self._store.get(m.id))
+        m_desc = self._store.get(m.id)
+        clock.lap("store")
+        matches, distances = self._match(q_desc, m_desc)
         rec.n_matches = len(matches)
         if 0 < c.verify_max_matches < len(matches):
             keep = select_matches(matches, distances, q.features.keypoints, c.verify_max_matches,
                                   q.features.image_size, c.verify_spread_cells)
             matches = matches[keep]
         rec.n_verified = len(matches)
+        clock.lap("matching")
         mode = c.verify
         need_graph = self.run_all_checks or mode in ("graph", "graph+ransac")
         need_ransac = self.run_all_checks or mode == "ransac"
         kq, km = q.features.keypoints, m.features.keypoints
         if need_graph:
             rec.graph = verify_graph(kq, km, matches, c)
+            clock.lap("graph")
             if rec.graph.accepted or self.run_all_checks:
                 kept = matches[rec.graph.kept] if rec.graph.accepted else matches[:0]
                 if self.run_all_checks or mode == "graph+ransac":
                     rec.ransac_on_graph = verify_epipolar(kq, km, kept, q.camera, m.camera, c)
         if need_ransac:
             rec.ransac = verify_epipolar(kq, km, matches, q.camera, m.camera, c)
+        clock.lap("ransac")
         if not rec.passes(mode):
             rec.reason = {
                 "ransac": lambda: f"ransac:{rec.ransac.reason}",
@@ -301,6 +342,7 @@ class LoopDetector:
             rec.pose = estimate_loop_pose(q.keyframe, m.keyframe, used, c, points3d_m=m.points3d,
                                           source=m.points_source) if m.points3d is not None else \
                 estimate_loop_pose(q.keyframe, m.keyframe, used, c)
+            clock.lap("pose")
             if not rec.pose.ok and c.require_pose:
                 rec.reason = f"pose:{rec.pose.reason}"
                 return rec
