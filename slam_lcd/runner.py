@@ -25,6 +25,7 @@ from .atomic import guard_not_input, write_text
 from .config import Config, save_config
 from .errors import FileMissingError, PipelineError
 from .geometry import interpolate_poses, inv, rotation_angle_deg
+from .progress import progress_bar
 from .types import Trajectory
 
 log = logging.getLogger(__name__)
@@ -137,8 +138,6 @@ def run_log(
     write_mcap: bool = True,
 ) -> RunResult:
     """Correct the trajectory of ``log_path`` with loop closures; write outputs into ``out_dir``."""
-    from tqdm import tqdm
-
     from .io import open_log
     from .io.decode import decode_camera_info, decode_compressed_image, decode_image, decode_pose, image_to_gray
     from .io.tf import TfBuffer
@@ -190,7 +189,7 @@ def run_log(
                 pipe.add_odometry(int(traj.stamps[k]), traj.poses[k], cov, segment_start=bool(breaks[k]) and k > 0)
         n_img = reader.topics[topics.image].count
         camera_set = False
-        bar = tqdm(total=n_img, desc="frames", unit="img", disable=not progress, dynamic_ncols=True)
+        bar = progress_bar(total=n_img, desc="frames", unit="img", enabled=progress)
         try:
             for m in reader.messages(wanted):
                 if m.topic == topics.odom:

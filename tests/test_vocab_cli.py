@@ -70,4 +70,4 @@ def test_errors_are_one_line(tmp_path, capsys, corridor_dir):
     assert "not found" in capsys.readouterr().err
     assert main(["vocab", "train", str(tmp_path / "nothing"), "--out", str(tmp_path / "v.npz")]) == 2
     assert main(["vocab", "train", str(corridor_dir / "1.jpg"), "--out", str(tmp_path / "v.npz"), "--features", "orb"]) == 2
-    assert "--topic" in capsys.readouterr().err
+    assert "--image-topic" in capsys.readouterr().err
