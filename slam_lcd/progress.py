@@ -38,8 +38,8 @@ class StageLine:
     def __iter__(self):
         try:
             for item in self.iterable:
+                self.n += 1  # counted when handed out: a consumer that stops after the last item still counts it
                 yield item
-                self.n += 1
         finally:
             self.close()
 

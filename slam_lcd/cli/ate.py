@@ -42,9 +42,9 @@ def register(sub) -> None:
     p.add_argument("ref", metavar="REF", help="reference trajectory: file (format detected) or LOG:TOPIC")
     p.add_argument("est", metavar="EST", help="estimated trajectory: file (format detected) or LOG:TOPIC")
     algo = p.add_argument_group("algorithm options (evo's)")
-    algo.add_argument("-r", "--pose_relation", default="trans_part", choices=RPE_RELATIONS,
-                      help="pose relation the error is measured on (default: trans_part, metres); "
-                           "point_distance_error_ratio only with --rpe")
+    algo.add_argument("-r", "--pose_relation", default="trans_part", choices=RPE_RELATIONS, metavar="RELATION",
+                      help=f"pose relation the error is measured on: {', '.join(RPE_RELATIONS)} "
+                           "(default: trans_part, metres; point_distance_error_ratio only with --rpe)")
     align = algo.add_mutually_exclusive_group()
     align.add_argument("-a", "--align", action="store_true",
                        help="SE(3) Umeyama alignment, Sim(3) with -s (default: no alignment)")
@@ -136,8 +136,9 @@ def run(args) -> int:
     from ..eval.sources import load_trajectory_source
 
     _check_args(args)
-    ref = load_trajectory_source(args.ref, args.ref_format, args.ref_times)
-    est = load_trajectory_source(args.est, args.est_format, args.est_times)
+    # KITTI matrices as written (evo's reading), so the figures equal evo's to the last digits
+    ref = load_trajectory_source(args.ref, args.ref_format, args.ref_times, file_rotations=True)
+    est = load_trajectory_source(args.est, args.est_format, args.est_times, file_rotations=True)
     mode = align_mode_from_flags(args.align, args.correct_scale)
     common = dict(align_origin=args.align_origin, t_max_diff=args.t_max_diff, t_offset=args.t_offset,
                   n_to_align=None if args.n_to_align == -1 else args.n_to_align)

@@ -39,6 +39,7 @@ def register(sub) -> None:
                    help="with --to mcap: parent frame (default: the input's, else 'map')")
     p.add_argument("--child-frame-id", default=None,
                    help="with --to mcap: child frame (default: the input's, else 'base_link')")
+    p.late_positional = "out"  # OUT may follow the options (see cli.util.one_line_errors)
     p.set_defaults(func=run)
 
 

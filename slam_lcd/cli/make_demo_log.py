@@ -3,6 +3,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .util import parse_size
+
 
 def register(sub) -> None:
     p = sub.add_parser(
@@ -29,12 +31,13 @@ def register(sub) -> None:
     p.add_argument("--trajectory", choices=["laps", "figure8"], default="laps",
                    help="laps of block A or a figure eight (default: laps)")
     p.add_argument("--laps", type=float, default=2.0, help="laps to drive when --frames is not given (default 2)")
-    p.add_argument("--size", default="640x480", help="image size WxH (default 640x480)")
+    p.add_argument("--size", default="640x480", type=parse_size, help="image size WxH (default 640x480)")
     p.add_argument("--hfov", type=float, default=70.0, help="horizontal field of view in degrees (default 70: fx = 457 at 640 px)")
     p.add_argument("--rate", type=float, default=10.0, help="camera rate in Hz (default 10; odometry is 50 Hz)")
     p.add_argument("--loops-csv", default=None,
                    help="where to write the ground-truth loop pairs (default: <name>_loops.csv beside OUT; "
                         "loop_pairs.csv inside OUT with --format folder)")
+    p.late_positional = "out"  # OUT may follow the options (see cli.util.one_line_errors)
     p.set_defaults(func=run)
 
 
@@ -43,12 +46,7 @@ def run(args) -> int:
     from ..sim import make_demo_log
     from ..io.writers import format_for_path
 
-    try:
-        w, h = (int(v) for v in args.size.lower().split("x"))
-    except ValueError:
-        raise InputError(f"--size must look like 640x480, got {args.size!r}") from None
-    if w < 16 or h < 16:
-        raise InputError(f"--size {args.size} is too small (at least 16x16)")
+    w, h = args.size
     if args.out and args.out_opt and args.out != args.out_opt:
         raise InputError(f"two output paths given ({args.out} and --out {args.out_opt}); give one")
     args.out = args.out or args.out_opt

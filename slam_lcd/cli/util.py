@@ -18,6 +18,10 @@ def one_line_errors(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     def parse_known_args(self, args=None, namespace=None):
         # unknown options would otherwise reach the top-level parser, which prints its usage
         ns, extras = argparse.ArgumentParser.parse_known_args(self, args, namespace)
+        late = getattr(self, "late_positional", None)
+        if late and len(extras) == 1 and not extras[0].startswith("-") and getattr(ns, late, None) is None:
+            # an optional positional after options (`export A --to tum B`): argparse leaves it over
+            setattr(ns, late, extras.pop())
         if extras:
             self.error(f"unrecognized arguments: {' '.join(extras)}{_suggest_option(self, extras)}")
         return ns, extras
@@ -50,7 +54,7 @@ def _suggest_option(parser: argparse.ArgumentParser, extras: list[str]) -> str:
         if x.startswith("--"):
             close = difflib.get_close_matches(x.split("=", 1)[0], known, n=1, cutoff=0.6)
             if close:
-                hints.append(f"{x} -> {close[0]}")
+                hints.append(close[0] if len(extras) == 1 else f"{close[0]} (for {x})")
     return f"; did you mean {', '.join(hints)}?" if hints else ""
 
 
@@ -97,3 +101,14 @@ def write_guard(out):
             raise InputError(f"cannot write output: {e.strerror or e}", out) from None
 
     return guard()
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """argparse type of ``--size WxH`` (at least 16x16)."""
+    try:
+        w, h = (int(v) for v in str(text).lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--size must look like 640x480, got {text!r}") from None
+    if w < 16 or h < 16:
+        raise argparse.ArgumentTypeError(f"--size {text} is too small (at least 16x16)")
+    return w, h

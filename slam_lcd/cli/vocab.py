@@ -37,6 +37,9 @@ def register(sub) -> None:
     p.set_defaults(func=lambda args: (p.print_help(), 2)[1])
 
 
+FOLDER_TOPIC = "images"  # feature-cache topic of an image folder (the same as eval-lcd's)
+
+
 def source_image_count(source: Path, topic: str | None, every: int = 1, max_images: int | None = None) -> int | None:
     """How many images :func:`iter_source_images` yields (for the progress bar); None if unknown."""
     every = max(1, every)
@@ -58,17 +61,20 @@ def source_image_count(source: Path, topic: str | None, every: int = 1, max_imag
 
 
 def iter_source_images(source: Path, topic: str | None, every: int = 1, max_images: int | None = None):
-    """Grey uint8 images of an image folder (natural order, image files only) or of one image topic of a log."""
+    """``(topic, stamp, image)`` of an image folder (natural order, image files only, stamps as
+    eval-lcd gives them) or of one image topic of a log; the (source, topic, stamp) triple is
+    the feature-cache key, so a vocabulary trained after ``run`` or before ``eval-lcd`` on the
+    same source reuses their features."""
     every = max(1, every)
     count = 0
     if source.is_dir() and not (source / "metadata.yaml").exists():
-        from ..io.image_folder import list_image_files, read_gray
+        from ..lcd.sources import folder_frames
 
-        files = list_image_files(source)
-        if not files:
-            raise InputError("no images (.png/.jpg/...) in this folder", source)
-        for f in files[::every]:
-            yield read_gray(f)
+        _, _, frames = folder_frames(source)
+        for n, fr in enumerate(frames):
+            if n % every:
+                continue
+            yield FOLDER_TOPIC, fr.stamp, fr.image
             count += 1
             if max_images is not None and count >= max_images:
                 return
@@ -78,14 +84,14 @@ def iter_source_images(source: Path, topic: str | None, every: int = 1, max_imag
     if not topic:
         raise InputError("SOURCE is a log: give the image topic with --image-topic", source)
     from ..io import open_log
-    from ..io.decode import decode_compressed_image, decode_image, image_to_gray
+    from ..io.decode import decode_compressed_image, decode_image
 
     with open_log(source) as reader:
         for n, m in enumerate(reader.messages([topic])):
             if n % every:
                 continue
             img = decode_compressed_image(m.msg) if "Compressed" in m.msgtype else decode_image(m.msg)
-            yield image_to_gray(img)
+            yield topic, m.stamp, img
             count += 1
             if max_images is not None and count >= max_images:
                 return
@@ -103,11 +109,18 @@ def run_train(args) -> int:
     guard_not_input(out, source)
     extractor = load_extractor(cfg.features)
     t0 = time.perf_counter()
+    cache = None
+    if cfg.features.feature_cache:
+        from ..features import FeatureCache
+
+        cache = FeatureCache(extractor)
     sets = []
     total = source_image_count(source, args.image_topic, args.every, args.max_images)
     images = iter_source_images(source, args.image_topic, args.every, args.max_images)
-    for img in progress_bar(images, total=total, desc="features", unit="img", enabled=not args.no_progress):
-        sets.append(extractor.extract(img).descriptors)
+    for topic, stamp, img in progress_bar(images, total=total, desc="features", unit="img",
+                                          enabled=not args.no_progress):
+        feats = cache.extract(source, topic, stamp, img) if cache is not None else extractor.extract(img)
+        sets.append(feats.descriptors)
     n_desc = sum(len(d) for d in sets)
     log.info("extracted %d descriptors from %d images in %.1f s", n_desc, len(sets), time.perf_counter() - t0)
     t1 = time.perf_counter()
