@@ -1,8 +1,9 @@
 """Run configuration: typed dataclasses, YAML presets, ``--set section.key=value`` overrides.
 
 Each stage owns its section (``slam_lcd/<stage>/config.py``); this module composes them.
-Unknown keys are errors, values are type-checked, and :func:`save_config` writes the
-resolved configuration next to a run's outputs.
+Unknown keys are errors, values are type-checked and range-checked
+(:mod:`slam_lcd.config_ranges`), and :func:`save_config` writes the resolved
+configuration next to a run's outputs.
 """
 from __future__ import annotations
 
@@ -74,6 +75,10 @@ class RunConfig:
     # frame, not only of keyframes (about 5x the SuperPoint cost at 10 Hz); odometry
     # thresholds alone are the default
     keyframe_on_overlap: bool = False
+    # keyframes whose features are extracted in a background thread while earlier keyframes
+    # go through loop detection and the back end (SuperPoint releases the GIL); 0 = one at a
+    # time. Loops of a keyframe are then reported up to this many keyframes later.
+    extract_ahead: int = 1
 
 
 @dataclass
@@ -200,6 +205,32 @@ def _near_miss(data: dict, key: str) -> str:
     return f"; did you mean {' or '.join(close[:3])}?" if close else ""
 
 
+def validate_config(cfg: Config, path: str | Path | None = None) -> Config:
+    """Range-check every numeric key (:mod:`slam_lcd.config_ranges`); one-line ConfigError naming the key."""
+    from .config_ranges import ORDERED, RANGES, describe, in_range
+
+    data = config_to_dict(cfg)
+    for key, spec in RANGES.items():
+        section, name = key.split(".", 1)
+        value = data.get(section, {}).get(name)
+        if value is None or isinstance(value, bool):
+            continue
+        if not in_range(value, spec):
+            raise ConfigError(f"{key} = {value!r} is out of range: it must be {describe(spec)}", path)
+    for small, large in ORDERED:
+        (s1, k1), (s2, k2) = small.split(".", 1), large.split(".", 1)
+        if data[s1][k1] >= data[s2][k2]:
+            raise ConfigError(f"{small} = {data[s1][k1]!r} must be below {large} = {data[s2][k2]!r}", path)
+    if cfg.frontend.T_body_camera is not None:
+        from .frontend.camera import pose_from_list
+
+        try:
+            pose_from_list(cfg.frontend.T_body_camera)
+        except ConfigError as e:
+            raise ConfigError(e.problem, path) from None
+    return cfg
+
+
 def load_config(source: str | Path | None = None, overrides: list[str] | tuple[str, ...] = ()) -> Config:
     """Load a preset name (``default``, ``orb`` …) or a YAML path, then apply overrides."""
     data: dict = {}
@@ -227,11 +258,18 @@ def load_config(source: str | Path | None = None, overrides: list[str] | tuple[s
             cfg = _from_dict(Config, data)
         except ConfigError as e:
             raise ConfigError(prefix + e.problem, where) from None
+        if where is None:  # a preset: range errors name it
+            try:
+                validate_config(cfg)
+            except ConfigError as e:
+                raise ConfigError(prefix + e.problem) from None
+        else:
+            validate_config(cfg, where)
     else:
         cfg = Config()
     for ov in overrides:
         cfg = apply_override(cfg, ov)
-    return cfg
+    return validate_config(cfg)
 
 
 def dump_config(cfg: Config) -> str:

@@ -57,6 +57,14 @@ class MessageEncodingError(InputError):
     """A message whose encoding/type we cannot decode (e.g. image encoding 'yuv422')."""
 
 
+class TopicTypeError(InputError):
+    """A topic whose message type does not fit what it was chosen for (e.g. --image-topic /odom)."""
+
+
+class DamagedImageError(MessageEncodingError):
+    """An image whose bytes are damaged (e.g. a truncated JPEG): the decoder said so."""
+
+
 class TrajectoryFormatError(InputError):
     """A malformed trajectory file line; ``line`` is 1-based."""
 
@@ -96,3 +104,25 @@ class NotBuiltError(SlamLcdError):
 
 class PipelineError(SlamLcdError):
     """A run that cannot proceed (e.g. log without the image topic it needs)."""
+
+
+_CONTEXT_KINDS = (DamagedImageError, InvalidPoseError, UnsortedStampsError, MessageEncodingError, TopicTypeError, ConfigError,
+                  CorruptLogError, WeightsError, VocabularyError, FileMissingError, InputError, PipelineError)
+
+
+def in_context(err: SlamLcdError, where: str, path: str | Path | None = None) -> SlamLcdError:
+    """The same kind of error with ``where`` (e.g. ``topic /odom, stamp 12.5 s``) before its problem.
+
+    Decoders do not know which log, topic or message they were given; the caller does,
+    and adds it here so that the one line the user sees says where the problem is.
+    """
+    kind = next((k for k in _CONTEXT_KINDS if isinstance(err, k)), SlamLcdError)
+    return kind(f"{where}: {err.problem}", path if path is not None else err.path)
+
+
+def stamp_text(stamp_ns: int) -> str:
+    """``1700000000.100000000 s``: a stamp as exact decimal seconds."""
+    ns = int(stamp_ns)
+    sign = "-" if ns < 0 else ""
+    ns = abs(ns)
+    return f"{sign}{ns // 1_000_000_000}.{ns % 1_000_000_000:09d} s"

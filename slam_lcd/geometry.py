@@ -239,6 +239,14 @@ def interpolate_poses(stamps: np.ndarray, poses: np.ndarray, query: np.ndarray) 
     query = np.asarray(query, dtype=np.int64)
     if len(stamps) == 1:
         return np.repeat(poses[:1], len(query), axis=0)
+    if len(stamps) == 2 and len(query) == 1:  # the per-frame case of a stream: no scipy set-up
+        span = float(stamps[1] - stamps[0])
+        a = min(max(float(query[0] - stamps[0]) / span, 0.0), 1.0) if span > 0 else 0.0
+        P0, P1 = np.asarray(poses[0], np.float64), np.asarray(poses[1], np.float64)
+        out = np.eye(4)[None].copy()
+        out[0, :3, :3] = P0[:3, :3] @ so3_exp(a * so3_log(P0[:3, :3].T @ P1[:3, :3]))
+        out[0, :3, 3] = (1.0 - a) * P0[:3, 3] + a * P1[:3, 3]
+        return out
     t0 = stamps[0]
     x = (stamps - t0).astype(np.float64)
     q = np.clip((query - t0).astype(np.float64), x[0], x[-1])

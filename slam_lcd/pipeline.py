@@ -10,12 +10,27 @@ Stages and who does them:
   (:mod:`slam_lcd.features`) → Bag of SuperPoints candidates + graph verification + metric
   pose (:mod:`slam_lcd.lcd`, :mod:`slam_lcd.vocab`) → GTSAM iSAM2 pose graph with robust loop
   handling (:mod:`slam_lcd.backend`) → full-rate correction.
+
+Interrupts: every step leaves the pipeline consistent whatever instant a Ctrl-C (or an
+error inside a stage) stops it. A keyframe is in the pose graph exactly when it is in
+:attr:`Pipeline.keyframes`; loop detection runs after that, and a loop is in the graph's
+records exactly when iSAM2 holds it (see :mod:`slam_lcd.backend.pose_graph`). Frames not
+yet processed stay queued. An interrupt inside the loop detector itself may leave its
+database half-updated: its candidates for that keyframe are dropped and later keyframes
+go to the back end without loop detection (one warning says so).
+
+Background extraction (``run.extract_ahead``): a keyframe's features are computed in a
+worker thread while earlier keyframes go through loop detection; keyframes reach the graph
+in order, and one interrupted while waiting for its features stays queued.
 """
 from __future__ import annotations
 
 import bisect
+import logging
+import os
 import time
-from collections import defaultdict
+from collections import defaultdict, deque
+from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Callable
@@ -29,6 +44,20 @@ from .frontend import KeyframeSelector
 from .geometry import interpolate_poses
 from .lcd import LoopDetector
 from .types import CameraModel, Keyframe, LoopClosure, Trajectory
+
+log = logging.getLogger(__name__)
+
+
+def resident_kb() -> int:
+    """Resident set size of this process in kB (0 where /proc is not available)."""
+    try:
+        with open("/proc/self/statm", "rb") as f:
+            return int(f.read().split()[1]) * (_PAGE_SIZE // 1024)
+    except (OSError, ValueError, IndexError):
+        return 0
+
+
+_PAGE_SIZE = os.sysconf("SC_PAGE_SIZE") if hasattr(os, "sysconf") else 4096
 
 
 @dataclass
@@ -107,6 +136,15 @@ class Pipeline:
         self._early_depth: dict[int, np.ndarray] = {}  # depth that arrived before its image
         self._segment_from: int | None = None  # stamp of an odometry break not yet handed to a keyframe
         self._finalized = False
+        self._detector_stale = False  # an interrupt inside the loop detector: no more detection
+        self._stale_warned = False
+        # keyframes handed in, and those still waiting for features / loop detection (in order)
+        self._n_submitted = 0
+        self._ahead = max(0, int(self.config.run.extract_ahead))
+        self._inflight: deque[tuple[Keyframe, Future | None]] = deque()
+        self._executor: ThreadPoolExecutor | None = None
+        # per keyframe: (loop detection s, back end s, resident memory kB after it), for benchmarks
+        self.keyframe_seconds: list[tuple[float, float, int]] = []
 
     # ------------------------------------------------------------------ inputs
     def set_camera(self, camera: CameraModel, T_body_camera: np.ndarray | None = None) -> None:
@@ -156,33 +194,116 @@ class Pipeline:
         return []
 
     def add_keyframe(self, kf: Keyframe) -> list[LoopClosure]:
-        """Plugin entry for a user's own front end: a ready keyframe (pose = odometry)."""
-        kf.id = len(self.keyframes)
+        """Plugin entry for a user's own front end: a ready keyframe (pose = odometry).
+
+        With ``run.extract_ahead = N > 0`` the keyframe's features are extracted in a
+        background thread and its loop detection runs once N newer keyframes have been
+        handed in (or at :meth:`flush`/:meth:`finalize`): the loops returned by a call may
+        belong to earlier keyframes. ``on_loop`` fires for each accepted loop either way.
+        """
+        kf.id = self._n_submitted
         if kf.camera is None:
             kf.camera = self.camera
+        future = None
         if kf.features is None and kf.image is not None:
-            kf.features = self._extract(kf.stamp, kf.image)
-        with self.timer("backend"):
-            self.graph.add_keyframe(kf.id, kf.stamp, kf.T_world_body, kf.covariance_since_last)
-        with self.timer("loop_detection"):
-            closures = self.detector.add(kf)
-        accepted = []
-        for c in closures:
-            if not np.all(np.isfinite(c.T_match_query)):
-                continue  # verified by appearance but no metric pose: nothing to add to the graph
-            with self.timer("backend"):
-                rec = self.graph.add_loop(c)
-            self.closures.append(c)
-            if getattr(rec, "verdict", "") == "accepted":
-                accepted.append(c)
-                if self.on_loop is not None:
-                    self.on_loop(c, rec)
-        # keep memory bounded: the detector stores what it needs of past keyframes
-        kf.image = None
-        kf.right_image = None
-        kf.depth = None
-        self.keyframes.append(kf)
+            if self._ahead > 0:
+                future = self._worker().submit(self._extract, kf.stamp, kf.image)
+            else:
+                kf.features = self._extract(kf.stamp, kf.image)
+        self._inflight.append((kf, future))
+        self._n_submitted += 1  # queued: an interrupt before this line hands the keyframe over again
+        return self._drain(keep=self._ahead)
+
+    def _worker(self) -> ThreadPoolExecutor:
+        if self._executor is None:
+            self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="slam-lcd-features")
+        return self._executor
+
+    def _drain(self, keep: int) -> list[LoopClosure]:
+        """Detect loops on the oldest waiting keyframes until at most ``keep`` wait."""
+        accepted: list[LoopClosure] = []
+        while len(self._inflight) > keep:
+            kf, future = self._inflight[0]
+            if future is not None:
+                with self.timer("features_wait"):
+                    kf.features = future.result()
+                self._inflight[0] = (kf, None)
+            try:
+                accepted += self._add_to_graph(kf)
+            finally:
+                if self.keyframes and self.keyframes[-1] is kf:  # the graph took it
+                    self._inflight.popleft()
         return accepted
+
+    def _add_to_graph(self, kf: Keyframe) -> list[LoopClosure]:
+        """Pose graph, loop detection and loop factors for one keyframe with its features.
+
+        Order (see the module docstring): the pose graph and :attr:`keyframes` together, then
+        loop detection and the loops.
+        """
+        t0 = time.perf_counter()
+        try:
+            with self.timer("backend"):
+                self.graph.add_keyframe(kf.id, kf.stamp, kf.T_world_body, kf.covariance_since_last)
+        finally:
+            if len(self.graph) > len(self.keyframes):  # the graph took it: so does the list
+                self.keyframes.append(kf)
+        t1 = time.perf_counter()
+        accepted = []
+        try:
+            closures = self._detect_loops(kf)
+            t2 = time.perf_counter()
+            for c in closures:
+                if not np.all(np.isfinite(c.T_match_query)):
+                    continue  # verified by appearance but no metric pose: nothing to add to the graph
+                n_loops = self.graph.n_loops
+                try:
+                    with self.timer("backend"):
+                        rec = self.graph.add_loop(c)
+                finally:
+                    if self.graph.n_loops > n_loops:
+                        self.closures.append(c)
+                if getattr(rec, "verdict", "") == "accepted":
+                    accepted.append(c)
+                    if self.on_loop is not None:
+                        self.on_loop(c, rec)
+        finally:
+            # keep memory bounded: the detector stores what it needs of past keyframes (in its
+            # own, compact form); the pipeline's list keeps poses, stamps and covariances only
+            kf.image = None
+            kf.right_image = None
+            kf.depth = None
+            kf.features = None
+        self.keyframe_seconds.append((t2 - t1, (t1 - t0) + (time.perf_counter() - t2), resident_kb()))
+        return accepted
+
+    def _detect_loops(self, kf: Keyframe) -> list[LoopClosure]:
+        """Loop detection for a keyframe already in the graph; an interrupt inside it drops its candidates."""
+        if self._detector_stale:
+            if not self._stale_warned:  # said once, when a keyframe actually goes without detection
+                self._stale_warned = True
+                log.warning("no loop detection from keyframe %d on: an earlier interrupt inside the loop "
+                            "detector left its database incomplete", kf.id)
+            return []
+        det = self.detector
+        n_records, n_closures = len(det.records), len(det.closures)
+        done = False
+        try:
+            with self.timer("loop_detection"):
+                closures = det.add(kf)
+            done = True
+            return closures
+        finally:
+            if not done:
+                del det.records[n_records:]
+                del det.closures[n_closures:]
+                self._detector_stale = True
+
+    def close(self) -> None:
+        """Stop the background extraction thread (waiting keyframes are not processed)."""
+        if self._executor is not None:
+            self._executor.shutdown(wait=True, cancel_futures=True)
+            self._executor = None
 
     # ------------------------------------------------------------------ internals
     def _extract(self, stamp: int, image: np.ndarray):
@@ -212,17 +333,23 @@ class Pipeline:
                 self._pending.clear()
             return out
         last = self._odom_stamps[-1]
-        keep = []
+        keep, ready = [], []
         newest = self._pending[-1] if self._pending else None
         for f in self._pending:
             complete = f.depth is not None or not self.expect_depth or f is not newest
             if (f.stamp <= last and complete) or final:
                 if f.stamp < self._odom_stamps[0]:
                     continue  # before the first odometry sample: no pose to attach
-                out += self._process(f)
+                ready.append(f)
             else:
                 keep.append(f)
         self._pending = keep
+        for i, f in enumerate(ready):
+            try:
+                out += self._process(f)
+            except BaseException:
+                self._pending = ready[i + 1:] + self._pending  # interrupted: the rest stays queued
+                raise
         return out
 
     def _process(self, f: _Frame) -> list[LoopClosure]:
@@ -239,24 +366,34 @@ class Pipeline:
         if not is_kf:
             return []
         out: list[LoopClosure] = []
+        # the selector compares frames with its newest keyframe only: older ones need no features
+        if self._n_submitted:
+            self.selector.keyframes[self._n_submitted - 1].features = None
         # usually one new keyframe; two on an odometry break (the frame before it is promoted)
-        for i in range(len(self.keyframes), len(self.selector.keyframes)):
+        # (a keyframe an interrupt kept from the queue is handed over with the next one)
+        for i in range(self._n_submitted, len(self.selector.keyframes)):
             kf = self.selector.keyframes[i]
-            # the selector's list is only for its own bookkeeping: drop heavy fields there
-            self.selector.keyframes[i] = Keyframe(
-                id=kf.id, stamp=kf.stamp, T_world_body=kf.T_world_body, features=kf.features,
-                covariance_since_last=kf.covariance_since_last)
+            light = Keyframe(id=kf.id, stamp=kf.stamp, T_world_body=kf.T_world_body, features=kf.features,
+                             covariance_since_last=kf.covariance_since_last)
             out += self.add_keyframe(kf)
+            # the selector's list is only for its own bookkeeping: drop heavy fields there
+            self.selector.keyframes[i] = light
         return out
 
     # ------------------------------------------------------------------ results
     def flush(self) -> list[LoopClosure]:
-        """Process frames still waiting for odometry (uses the last odometry pose)."""
-        return self._release(final=True)
+        """Process frames still waiting for odometry (uses the last odometry pose) and every waiting keyframe."""
+        out = self._release(final=True)
+        return out + self._drain(keep=0)
 
-    def finalize(self):
-        """Flush waiting frames and run the back end's final batch re-check (idempotent)."""
-        self.flush()
+    def finalize(self, *, flush: bool = True):
+        """Flush waiting frames and keyframes, then run the back end's final batch re-check (idempotent).
+
+        ``flush=False`` (after a Ctrl-C) leaves waiting frames and keyframes unprocessed.
+        """
+        if flush:
+            self.flush()
+        self.close()
         if not self._finalized:
             with self.timer("backend"):
                 self.graph.finalize()

@@ -107,3 +107,24 @@ def test_ros_covariance_to_gtsam_reorders_and_rotates_into_the_body_frame():
     unknown = np.zeros(36)
     unknown[0] = -1
     assert ros_covariance_to_gtsam(unknown, T) is None
+
+
+def test_two_pose_interpolation_matches_scipy_slerp():
+    """The per-frame fast path (two samples, one query) equals scipy's Slerp + linear translation."""
+    from scipy.spatial.transform import Rotation, Slerp
+
+    from slam_lcd.geometry import interpolate_poses, se3_exp
+
+    rng = np.random.default_rng(0)
+    for scale in (0.01, 0.5, 2.0):
+        for _ in range(200):
+            P = np.array([se3_exp(rng.normal(size=6) * scale) for _ in range(2)])
+            st = np.array([100, 100 + int(rng.integers(1, 10**9))], np.int64)
+            q = np.array([int(rng.integers(50, st[1] + 50))], np.int64)
+            got = interpolate_poses(st, P, q)[0]
+            x = (st - st[0]).astype(float)
+            qq = np.clip(float(q[0] - st[0]), 0, x[1])
+            R = Slerp(x, Rotation.from_matrix(P[:, :3, :3]))([qq]).as_matrix()[0]
+            t = [np.interp(qq, x, P[:, k, 3]) for k in range(3)]
+            assert np.allclose(got[:3, :3], R, atol=1e-8) and np.allclose(got[:3, 3], t, atol=1e-9)
+            assert np.array_equal(got[3], [0, 0, 0, 1])

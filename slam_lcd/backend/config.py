@@ -67,3 +67,7 @@ class BackendConfig:
     gnc_max_iterations: int = 100
     # Weight below which GNC declares a loop an outlier.
     gnc_outlier_weight: float = 0.5
+    # finalize(): 'lm' solves the written graph (prior, odometry, accepted loops; Gaussian) by
+    # batch Levenberg-Marquardt from iSAM2's estimate, so every output sits at its optimum;
+    # 'none' keeps iSAM2's last estimate.
+    final_solver: Literal["lm", "none"] = "lm"

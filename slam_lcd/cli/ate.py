@@ -12,6 +12,7 @@ Inputs are TUM / KITTI / EuRoC files or ``LOG:TOPIC``. ``--json`` writes every f
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 from pathlib import Path
@@ -126,6 +127,17 @@ def _check_args(args) -> None:
         raise InputError("--save_plot, --save_results and --json must name different files")
 
 
+@contextlib.contextmanager
+def _naming_both(args):
+    """Association and alignment errors concern both trajectories: name both files."""
+    from ..eval.errors import AlignmentError, AssociationError
+
+    try:
+        yield
+    except (AssociationError, AlignmentError) as e:
+        raise type(e)(f"reference {args.ref} and estimate {args.est}: {e.problem}") from None
+
+
 def _short(spec: str) -> str:
     return Path(spec).stem if Path(spec).exists() else str(spec)
 
@@ -142,11 +154,12 @@ def run(args) -> int:
     mode = align_mode_from_flags(args.align, args.correct_scale)
     common = dict(align_origin=args.align_origin, t_max_diff=args.t_max_diff, t_offset=args.t_offset,
                   n_to_align=None if args.n_to_align == -1 else args.n_to_align)
-    if args.rpe:
-        res = rpe(ref, est, args.pose_relation, args.delta, args.delta_unit, mode, all_pairs=args.all_pairs,
-                  pairs_from_reference=args.pairs_from_reference, rel_delta_tol=args.delta_tol, **common)
-    else:
-        res = ape(ref, est, args.pose_relation, mode, **common)
+    with _naming_both(args):
+        if args.rpe:
+            res = rpe(ref, est, args.pose_relation, args.delta, args.delta_unit, mode, all_pairs=args.all_pairs,
+                      pairs_from_reference=args.pairs_from_reference, rel_delta_tol=args.delta_tol, **common)
+        else:
+            res = ape(ref, est, args.pose_relation, mode, **common)
     print(f"reference: {args.ref} ({len(ref)} poses)")
     print(f"estimate:  {args.est} ({len(est)} poses)")
     print(f"matched:   {res.n_matched} pose pairs (t_max_diff {args.t_max_diff} s, t_offset {args.t_offset} s)")

@@ -14,7 +14,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from .run import add_config_args, config_from_args
+from .run import add_config_args, config_from_args, config_inputs
 from .util import parse_size
 
 
@@ -92,7 +92,8 @@ def run(args) -> int:
     log_path = ensure_demo_log(frames=args.frames, seed=args.seed, rebuild=args.rebuild,
                                progress=not args.no_progress, width=width, height=height)
     print(f"demo log: {log_path}", flush=True)
-    res = run_log(log_path, Path(args.out), cfg, extractor=extractor, progress=not args.no_progress)
+    res = run_log(log_path, Path(args.out), cfg, extractor=extractor, progress=not args.no_progress,
+                  input_paths=config_inputs(args))
     print("slam-lcd demo summary")
     print(f"  features: {cfg.features.kind}" + (f" ({notice})" if notice else ""))
     for line in res.summary_lines():

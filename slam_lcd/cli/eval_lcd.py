@@ -21,6 +21,7 @@ from .run import add_alias, add_config_args, config_from_args
 log = logging.getLogger(__name__)
 
 MODES = ("none", "ransac", "graph", "graph+ransac")
+EVAL_OUTPUTS = ("candidates.csv", "pr.csv", "pr.png", "summary.json", "config.yaml")
 
 
 def register(sub) -> None:
@@ -59,11 +60,10 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ..atomic import guard_not_input, write_text
-    from ..config import save_config
+    from ..config import validate_config
     from ..lcd import LoopDetector
-    from ..lcd.evaluation import (format_table, load_loop_matrix, plot_pr, precision_recall,
-                                  write_candidates_csv, write_pr_csv)
+    from ..lcd.evaluation import format_table, load_loop_matrix, precision_recall
+    from ..output_set import OutputSet
     from ..lcd.sources import folder_frames, frame_to_keyframe, log_frames
     from ..progress import progress_bar
 
@@ -79,10 +79,14 @@ def run(args) -> int:
     # evaluation scores images, not a SLAM run: no metric pose, no temporal filter
     lcd = dataclasses.replace(lcd, verify=modes[-1], pose=False, temporal_k=0)
     cfg.lcd = lcd
+    validate_config(cfg)
 
     src = Path(args.source)
     out = Path(args.out)
-    guard_not_input(out, src, args.gt)
+    # every output is checked against every input before any work; the set is published whole
+    outputs = OutputSet(out, EVAL_OUTPUTS)
+    outputs.check({"SOURCE": src, "--gt": args.gt, "--vocab": args.vocab, "--weights": args.weights,
+                   "--config": args.config if args.config and Path(args.config).exists() else None})
     if src.is_dir() and not (src / "metadata.yaml").exists():
         names, stamps, frames = folder_frames(src, exclude=[args.gt])
     else:
@@ -128,7 +132,24 @@ def run(args) -> int:
     kind = cfg.features.kind
     table = format_table(results, kind)
     print(table)
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        _write_set(outputs, cfg, det, gt, names, results, src, args, kind, elapsed)
+    except OSError as e:
+        outputs.discard()
+        raise InputError(f"cannot write the outputs ({e.strerror or e}); nothing was written there", out) from None
+    except BaseException:
+        outputs.discard()
+        raise
+    print(f"wrote {out}/candidates.csv, pr.csv, pr.png, summary.json ({len(det.records)} candidates, {elapsed:.1f} s)")
+    return 0
+
+
+def _write_set(outputs, cfg, det, gt, names, results, src, args, kind, elapsed) -> None:
+    from ..atomic import write_text
+    from ..config import save_config
+    from ..lcd.evaluation import plot_pr, write_candidates_csv, write_pr_csv
+
+    out = outputs.staging
     write_candidates_csv(out / "candidates.csv", det.records, gt, names)
     write_pr_csv(out / "pr.csv", results)
     plot_pr(out / "pr.png", results, f"{src.name} ({kind})")
@@ -139,8 +160,7 @@ def run(args) -> int:
     }
     write_text(out / "summary.json", json.dumps(summary, indent=2))
     save_config(cfg, out / "config.yaml")
-    print(f"wrote {out}/candidates.csv, pr.csv, pr.png, summary.json ({len(det.records)} candidates, {elapsed:.1f} s)")
-    return 0
+    outputs.publish()
 
 
 def _gt_from_trajectory(path, stamps, args) -> np.ndarray:

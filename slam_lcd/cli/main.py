@@ -14,6 +14,7 @@ import argparse
 import importlib
 import logging
 import sys
+import warnings
 
 from .. import __version__
 from ..errors import SlamLcdError
@@ -68,15 +69,20 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
     try:
+        parser = build_parser()  # imports every subcommand module: a Ctrl-C here is one line too
         args = parser.parse_args(argv)
+    except KeyboardInterrupt:
+        print("slam-lcd: interrupted", file=sys.stderr)
+        return 130
     except SystemExit as e:  # usage errors (one line, already printed), --help, --version
         return int(e.code or 0) if not isinstance(e.code, str) else 2
     logging.basicConfig(
         level=logging.INFO if args.verbose else logging.WARNING,
         format="%(levelname)s: %(message)s",
     )
+    if not args.debug:  # library warnings (torch, numpy, matplotlib) are not ours to show
+        warnings.filterwarnings("ignore")
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
@@ -87,14 +93,20 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"slam-lcd {args.command}: error: {e}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print(f"slam-lcd {args.command}: interrupted", file=sys.stderr)
-        return 130
     except BrokenPipeError:  # `slam-lcd info x | head`: the reader left; not an error of ours
         import os
 
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+    except OSError as e:  # a file system error no subcommand turned into its own message
+        if args.debug:
+            raise
+        where = f"{e.filename}: " if getattr(e, "filename", None) else ""
+        print(f"slam-lcd {args.command}: error: {where}{e.strerror or e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"slam-lcd {args.command}: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":  # pragma: no cover

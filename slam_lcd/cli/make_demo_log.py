@@ -42,8 +42,10 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
+    from ..atomic import check_writable_target
     from ..errors import InputError
     from ..sim import make_demo_log
+    from .util import write_guard
     from ..io.writers import format_for_path
 
     w, h = args.size
@@ -53,9 +55,14 @@ def run(args) -> int:
     if not args.out:
         raise InputError("no output path: give OUT (or -o/--out OUT)")
     fmt = args.fmt or format_for_path(Path(args.out))
-    info = make_demo_log(args.out, fmt=fmt, frames=args.frames, seed=args.seed, stereo=args.stereo,
-                         depth=args.depth, compressed=args.compressed, color=args.color, kind=args.trajectory,
-                         laps=args.laps, width=w, height=h, hfov_deg=args.hfov, camera_rate=args.rate, loops_csv=args.loops_csv,
-                         progress=not args.no_progress)
+    # before rendering: an unwritable target (read-only, /proc, a file in the way) fails now
+    check_writable_target(args.out, folder=fmt in ("rosbag2", "folder"))
+    if args.loops_csv is not None:
+        check_writable_target(args.loops_csv)
+    with write_guard(args.out):
+        info = make_demo_log(args.out, fmt=fmt, frames=args.frames, seed=args.seed, stereo=args.stereo,
+                             depth=args.depth, compressed=args.compressed, color=args.color, kind=args.trajectory,
+                             laps=args.laps, width=w, height=h, hfov_deg=args.hfov, camera_rate=args.rate,
+                             loops_csv=args.loops_csv, progress=not args.no_progress)
     print(info.summary())
     return 0

@@ -30,6 +30,16 @@ def add_config_args(p, *, device: bool = True) -> None:
                         "$SLAM_LCD_CACHE_DIR or ~/.cache/slam-lcd)")
 
 
+def config_inputs(args) -> dict:
+    """Input files named by the config flags (outputs must never land on them)."""
+    from pathlib import Path as _P
+
+    inputs = {}
+    if getattr(args, "config", None) and _P(args.config).exists():
+        inputs["--config"] = args.config
+    return inputs
+
+
 def config_from_args(args, extra: list[str] | tuple[str, ...] = ()):
     """The run configuration: preset/file, then ``--set``, then the shortcut flags (they win)."""
     overrides = list(getattr(args, "overrides", []) or [])
@@ -85,8 +95,9 @@ def run(args) -> int:
     cfg = config_from_args(args)
     res = run_log(args.log, Path(args.out), cfg, image_topic=args.image_topic, odom_topic=args.odom_topic,
                   depth_topic=args.depth_topic, gt_topic=args.gt_topic, gt_file=args.gt,
-                  progress=not args.no_progress, write_mcap=not args.no_mcap)
+                  progress=not args.no_progress, write_mcap=not args.no_mcap, input_paths=config_inputs(args))
     for line in res.summary_lines():
         print(line)
-    print(f"outputs in {res.out_dir}/ ({', '.join(res.outputs)})")
+    print(f"outputs in {res.out_dir}/ ({', '.join(res.outputs)})"
+          + (" -- a partial set, see PARTIAL.txt" if res.interrupted else ""))
     return 130 if res.interrupted else 0

@@ -77,14 +77,21 @@ def check_output_path(out: str | None, *inputs) -> None:
     """Refuse outputs that are folders or inputs, before any work is done."""
     from pathlib import Path
 
-    from ..atomic import guard_not_input
+    from ..atomic import check_writable_target, guard_not_input
     from ..errors import InputError
 
     if out is None:
         return
     if Path(out).is_dir():
         raise InputError("output path is a folder; give a file name", out)
-    guard_not_input(out, *inputs)
+    from ..eval.sources import split_log_topic
+
+    paths = []
+    for inp in inputs:  # LOG:TOPIC names the log as the input
+        lt = split_log_topic(str(inp)) if inp is not None else None
+        paths.append(lt[0] if lt else inp)
+    guard_not_input(out, *paths)
+    check_writable_target(out)
 
 
 def write_guard(out):
@@ -98,7 +105,7 @@ def write_guard(out):
         try:
             yield
         except OSError as e:
-            raise InputError(f"cannot write output: {e.strerror or e}", out) from None
+            raise InputError(f"cannot write output ({e.strerror or e}); nothing was written there", out) from None
 
     return guard()
 

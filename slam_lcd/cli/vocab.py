@@ -60,21 +60,34 @@ def source_image_count(source: Path, topic: str | None, every: int = 1, max_imag
     return n if max_images is None else min(n, max_images)
 
 
-def iter_source_images(source: Path, topic: str | None, every: int = 1, max_images: int | None = None):
-    """``(topic, stamp, image)`` of an image folder (natural order, image files only, stamps as
-    eval-lcd gives them) or of one image topic of a log; the (source, topic, stamp) triple is
-    the feature-cache key, so a vocabulary trained after ``run`` or before ``eval-lcd`` on the
-    same source reuses their features."""
+def iter_source_images(source: Path, topic: str | None, every: int = 1, max_images: int | None = None,
+                       skipped: list | None = None):
+    """``(topic, stamp, image)`` of an image folder (natural order, image files only, stamps and
+    pixels as eval-lcd reads them) or grey images of one image topic of a log (as ``run``
+    reads them). The (source, topic, stamp) triple is the feature-cache key, so a vocabulary
+    trained after ``run`` or before ``eval-lcd`` on the same source reuses their features.
+
+    Damaged or unreadable images are skipped when ``skipped`` (a list) is given: their
+    errors are appended to it (the caller warns once); otherwise they raise.
+    """
+    from ..errors import DamagedImageError, SlamLcdError, in_context, stamp_text
+
     every = max(1, every)
     count = 0
     if source.is_dir() and not (source / "metadata.yaml").exists():
+        from ..io.image_folder import read_frame
         from ..lcd.sources import folder_frames
 
-        _, _, frames = folder_frames(source)
-        for n, fr in enumerate(frames):
-            if n % every:
+        names, stamps, _ = folder_frames(source)  # the listing and stamps eval-lcd uses (images read below)
+        for n in range(0, len(names), every):
+            try:
+                img = read_frame(source / names[n])
+            except InputError as e:
+                if skipped is None:
+                    raise
+                skipped.append(e)
                 continue
-            yield FOLDER_TOPIC, fr.stamp, fr.image
+            yield FOLDER_TOPIC, stamps[n], img
             count += 1
             if max_images is not None and count >= max_images:
                 return
@@ -84,29 +97,49 @@ def iter_source_images(source: Path, topic: str | None, every: int = 1, max_imag
     if not topic:
         raise InputError("SOURCE is a log: give the image topic with --image-topic", source)
     from ..io import open_log
-    from ..io.decode import decode_compressed_image, decode_image
+    from ..io.decode import decode_compressed_image, decode_image, image_to_gray
 
     with open_log(source) as reader:
-        for n, m in enumerate(reader.messages([topic])):
+        (name,) = reader.resolve_topics([topic])
+        msgtype = reader.topics[name].msgtype
+        if msgtype not in ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage"):
+            raise InputError(f"--image-topic {name} carries {msgtype}, not a camera image", source)
+        for n, m in enumerate(reader.messages([name])):
             if n % every:
                 continue
-            img = decode_compressed_image(m.msg) if "Compressed" in m.msgtype else decode_image(m.msg)
-            yield topic, m.stamp, img
+            try:
+                img = decode_compressed_image(m.msg) if "Compressed" in m.msgtype else decode_image(m.msg)
+                gray = image_to_gray(img)
+            except SlamLcdError as e:
+                err = in_context(e, f"topic {m.topic}, stamp {stamp_text(m.stamp)}", source)
+                if skipped is None or not isinstance(e, DamagedImageError):
+                    raise err from None
+                skipped.append(err)
+                continue
+            yield name, m.stamp, gray
             count += 1
             if max_images is not None and count >= max_images:
                 return
 
 
 def run_train(args) -> int:
-    from ..atomic import guard_not_input
+    from ..atomic import check_no_clash, check_writable_target
+    from ..config import validate_config
     from ..features import load_extractor
     from ..progress import progress_bar, stage
     from ..vocab import train_hkmeans, train_vocabulary
+    from .util import write_guard
 
-    cfg = config_from_args(args)
-    tree = args.tree or cfg.vocab.tree
+    if args.every < 1:
+        raise InputError(f"--every must be >= 1, got {args.every}")
+    if args.max_images is not None and args.max_images < 1:
+        raise InputError(f"--max-images must be >= 1, got {args.max_images}")
     source, out = Path(args.source), Path(args.out)
-    guard_not_input(out, source)
+    check_writable_target(out)
+    check_no_clash([out], {"SOURCE": source, "--config": args.config if args.config and Path(args.config).exists() else None,
+                           "--weights": args.weights})
+    cfg = validate_config(config_from_args(args))
+    tree = args.tree or cfg.vocab.tree
     extractor = load_extractor(cfg.features)
     t0 = time.perf_counter()
     cache = None
@@ -115,12 +148,17 @@ def run_train(args) -> int:
 
         cache = FeatureCache(extractor)
     sets = []
+    skipped: list = []
     total = source_image_count(source, args.image_topic, args.every, args.max_images)
-    images = iter_source_images(source, args.image_topic, args.every, args.max_images)
+    images = iter_source_images(source, args.image_topic, args.every, args.max_images, skipped=skipped)
     for topic, stamp, img in progress_bar(images, total=total, desc="features", unit="img",
                                           enabled=not args.no_progress):
         feats = cache.extract(source, topic, stamp, img) if cache is not None else extractor.extract(img)
         sets.append(feats.descriptors)
+    if skipped:
+        log.warning("%d damaged or unreadable image(s) skipped; the first: %s", len(skipped), skipped[0])
+    if not sets:
+        raise InputError("no readable image to train on", source)
     n_desc = sum(len(d) for d in sets)
     log.info("extracted %d descriptors from %d images in %.1f s", n_desc, len(sets), time.perf_counter() - t0)
     t1 = time.perf_counter()
@@ -130,7 +168,8 @@ def run_train(args) -> int:
         else:
             vocab = train_hkmeans(sets, cfg.vocab.hk_branching, cfg.vocab.hk_depth, cfg.vocab.seed,
                                   features=cfg.features.kind)
-    vocab.save(out)
+    with write_guard(out):
+        vocab.save(out)
     print(f"{out}: {len(vocab)} words, depth {vocab.depth}, tree {tree}, {cfg.features.kind} features "
           f"from {len(sets)} images ({n_desc} descriptors), trained in {time.perf_counter() - t1:.1f} s")
     return 0

@@ -19,6 +19,7 @@ import torch
 
 from ..errors import ConfigError, InputError
 from ..types import Features
+from .allocator import retain_freed_memory
 from .config import FeaturesConfig
 from .superpoint import SuperPoint
 from .weights import load_state_dict_checked, resolve_weights, sha256_of
@@ -122,6 +123,11 @@ class SuperPointExtractor(Extractor):
                 h.update(v.detach().cpu().numpy().tobytes())
             self._weights_id = h.hexdigest()
         self.model = model.eval().to(self.device)
+        self._channels_last = self.device.type == "cpu" and conf.cpu_channels_last
+        if self._channels_last:
+            self.model = self.model.to(memory_format=torch.channels_last)
+        if self.device.type == "cpu" and conf.cpu_allocator == "retain":
+            retain_freed_memory()
 
     @staticmethod
     def model_conf(conf: FeaturesConfig) -> dict:
@@ -138,11 +144,16 @@ class SuperPointExtractor(Extractor):
         }
 
     def identity(self) -> dict:
-        return {"kind": self.kind, "weights_sha256": self._weights_id, **self.model.conf}
+        ident = {"kind": self.kind, "weights_sha256": self._weights_id, **self.model.conf}
+        if self._channels_last:  # a different summation order: results differ in the last digits
+            ident["layout"] = "channels_last"
+        return ident
 
     def _run(self, grays: Sequence[np.ndarray]) -> list[Features]:
         h, w = grays[0].shape
         batch = torch.from_numpy(np.stack(grays)[:, None])
+        if self._channels_last:
+            batch = batch.contiguous(memory_format=torch.channels_last)
         with torch.inference_mode():
             out = self.model({"image": batch.to(self.device, non_blocking=True)})
             counts = [len(k) for k in out["keypoints"]]

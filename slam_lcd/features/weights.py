@@ -153,8 +153,15 @@ def load_state_dict_checked(model: "torch.nn.Module", path: str | Path) -> None:
     try:
         obj = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as e:  # corrupt zip/pickle, truncated file, not a torch file
+        from ..quiet import one_line
+
+        if "weights only load failed" in str(e).lower():  # torch's long, ANSI-coloured advice: ours instead
+            raise WeightsError("holds pickled Python objects besides tensors, which slam-lcd refuses to load "
+                               "(weights_only=True); save a plain state dict: torch.save(model.state_dict(), path)",
+                               path) from None
         first = str(e).strip().splitlines()[0] if str(e).strip() else ""
-        raise WeightsError(f"not a readable PyTorch weights file ({type(e).__name__}: {first[:160]})", path) from None
+        raise WeightsError(f"not a readable PyTorch weights file ({type(e).__name__}: {one_line(first, 160)})",
+                           path) from None
     sd = _unwrap(obj)
     if not isinstance(sd, dict) or not all(isinstance(v, torch.Tensor) for v in sd.values()):
         raise WeightsError(f"does not hold a state dict of tensors (found {type(sd).__name__})", path)

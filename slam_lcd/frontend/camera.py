@@ -134,19 +134,24 @@ def pose_from_list(values, where: str = "frontend.T_body_camera") -> np.ndarray:
     raise ConfigError(f"{where}: expected 16 numbers (4x4 row-major) or 7 (x y z qx qy qz qw), got {v.size}")
 
 
-def camera_mounting(conf, tf_buffer=None, camera_frame: str | None = None, stamp_ns: int = 0) -> np.ndarray:
+def camera_mounting(conf, tf_buffer=None, camera_frame: str | None = None, stamp_ns: int = 0,
+                    body_frame: str | None = None) -> np.ndarray:
     """``T_body_camera``: from the config when set, else from ``/tf_static``, else identity.
 
-    ``tf_buffer`` is a :class:`slam_lcd.io.tf.TfBuffer` (anything with
-    ``lookup(parent, child, stamp_ns)``); ``camera_frame`` defaults to ``conf.camera_frame``.
+    The one camera-mounting rule of slam-lcd (the visual-odometry pass and the main pass
+    both use it). ``tf_buffer`` is a :class:`slam_lcd.io.tf.TfBuffer` (anything with
+    ``lookup(parent, child, stamp_ns)``); the body frame is ``body_frame`` (the odometry's
+    child frame, when there is an odometry topic), else ``conf.body_frame``; the camera
+    frame is ``conf.camera_frame``, else ``camera_frame`` (the CameraInfo header's).
     """
     if conf.T_body_camera is not None:
         return pose_from_list(conf.T_body_camera)
+    body = body_frame or conf.body_frame
     frame = conf.camera_frame or camera_frame
     if tf_buffer is not None and frame:
         try:
-            return np.asarray(tf_buffer.lookup(conf.body_frame, frame, stamp_ns), dtype=np.float64)
+            return np.asarray(tf_buffer.lookup(body, frame, stamp_ns), dtype=np.float64)
         except (SlamLcdError, LookupError, ValueError) as e:  # no such frame: identity is the documented fallback
             log.warning("no transform %s -> %s in /tf_static (%s); using identity camera mounting",
-                        conf.body_frame, frame, e)
+                        body, frame, e)
     return np.eye(4)

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import PipelineError
+from ..errors import PipelineError, SlamLcdError, in_context, stamp_text
 from ..types import CameraModel
 from .camera import camera_from_camera_info, camera_mounting
 from .config import FrontendConfig
@@ -72,9 +72,15 @@ def visual_odometry_from_log(path, conf: FrontendConfig | None = None, *, image_
         camera = None
         cam_frame = None
         for m in reader.messages([info_topic]):
-            camera = camera_from_camera_info(m.msg)
+            try:
+                camera = camera_from_camera_info(m.msg)
+            except SlamLcdError as e:
+                raise in_context(e, f"topic {m.topic}, stamp {stamp_text(m.stamp)}", reader.path) from None
             cam_frame = m.msg.header.frame_id
             break
+        if camera is None:
+            raise PipelineError(f"camera info topic {info_topic} has no messages; visual odometry needs the intrinsics",
+                                reader.path)
         if mode == "stereo":
             rinfo = right_camera_info_topic or _info_topic(right_topic)
             if rinfo in topics:
@@ -95,11 +101,14 @@ def visual_odometry_from_log(path, conf: FrontendConfig | None = None, *, image_
         pending_aux: dict[int, np.ndarray] = {}
         n = 0
         for m in reader.messages([image_topic, aux_topic]):
-            if m.topic == image_topic:
-                pending_img[m.stamp] = image_to_gray(_decode(m))
-            else:
-                a = _decode(m)
-                pending_aux[m.stamp] = a if mode == "rgbd" else image_to_gray(a)
+            try:
+                if m.topic == image_topic:
+                    pending_img[m.stamp] = image_to_gray(_decode(m))
+                else:
+                    a = _decode(m)
+                    pending_aux[m.stamp] = a if mode == "rgbd" else image_to_gray(a)
+            except SlamLcdError as e:  # name the log, topic and stamp of the bad message
+                raise in_context(e, f"topic {m.topic}, stamp {stamp_text(m.stamp)}", reader.path) from None
             # pair the oldest image with an aux image within tolerance, in time order
             while pending_img and pending_aux:
                 si = min(pending_img)

@@ -13,7 +13,8 @@ import struct
 import cv2
 import numpy as np
 
-from ..errors import InvalidPoseError, MessageEncodingError
+from ..errors import DamagedImageError, InvalidPoseError, MessageEncodingError
+from ..quiet import native_stderr, one_line, quiet_opencv
 from ..types import CameraModel
 from .transforms import pose_from_tq, ros_cov_to_gtsam
 
@@ -81,6 +82,8 @@ def decode_compressed_image(msg) -> np.ndarray:
     """
     fmt = str(msg.format).lower()
     data = np.asarray(msg.data, dtype=np.uint8)
+    if data.size == 0:
+        raise MessageEncodingError(f"compressed image ({msg.format!r}) has no data (0 bytes)")
     depth_hdr = None
     if "compresseddepth" in fmt:
         if len(data) < 12:
@@ -89,9 +92,21 @@ def decode_compressed_image(msg) -> np.ndarray:
         data = data[12:]
     elif not any(k in fmt for k in ("jpeg", "jpg", "png")):
         raise MessageEncodingError(f"compressed image format {msg.format!r} is not supported (jpeg or png)")
-    img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+    if data.size == 0:
+        raise MessageEncodingError(f"compressedDepth image ({msg.format!r}) has a header but no image data")
+    quiet_opencv()
+    try:
+        with native_stderr() as cap:  # libjpeg/libpng warnings become our message, not terminal noise
+            img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+    except cv2.error as e:
+        raise MessageEncodingError(f"compressed image ({msg.format!r}, {len(data)} bytes) cannot be decoded "
+                                   f"(OpenCV: {one_line(e, 120)})") from None
     if img is None:
-        raise MessageEncodingError(f"compressed image ({msg.format!r}, {len(data)} bytes) cannot be decoded")
+        said = f" ({one_line(cap.text, 120)})" if cap.text else ""
+        raise MessageEncodingError(f"compressed image ({msg.format!r}, {len(data)} bytes) cannot be decoded{said}")
+    if cap.damage:
+        raise DamagedImageError(f"compressed image ({msg.format!r}, {len(data)} bytes) is damaged "
+                                f"(decoder: {cap.damage})")
     if depth_hdr is not None:
         if "32fc1" in fmt:
             _, qa, qb = depth_hdr

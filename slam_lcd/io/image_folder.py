@@ -56,11 +56,15 @@ def list_image_files(folder: str | Path, exclude: Iterable[str | Path | None] = 
     return files
 
 
-def read_gray(path: str | Path):
-    """One frame as a grey uint8 image; an undecodable file is an InputError naming it."""
+def read_frame(path: str | Path):
+    """One frame as eval-lcd's folder reader gives it (:func:`slam_lcd.lcd.sources.folder_frames`):
+    the file's own channels, colour as RGB. Unreadable → InputError, damaged → DamagedImageError
+    (:func:`slam_lcd.image_files.read_image`), each naming the file."""
     import cv2
 
-    img = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-    if img is None:
-        raise InputError("cannot decode image", path)
+    from ..image_files import read_image
+
+    img = read_image(path, cv2.IMREAD_UNCHANGED)
+    if img.ndim == 3:
+        img = cv2.cvtColor(img[:, :, :3], cv2.COLOR_BGR2RGB)
     return img

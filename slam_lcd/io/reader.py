@@ -15,6 +15,7 @@ from typing import Iterable, Iterator, NamedTuple
 
 from ..errors import (
     CorruptLogError,
+    SlamLcdError,
     FileMissingError,
     TopicNotFoundError,
     TruncatedLogError,
@@ -321,20 +322,32 @@ class _RosbagsBackend:
 
     def raw(self, names):
         meta = self.meta
+        last = [None]
         try:
             for c, t, data in self._stream(names):
                 m = meta[id(c)]
+                last[0] = t
                 yield RawMessage(m[0], m[1], t, data)
-        except (*self.errors, struct.error, KeyError) as e:
-            raise CorruptLogError(f"log cannot be read to the end ({_one_line(e)})", self.reader.path) from None
+        except SlamLcdError:
+            raise
+        except Exception as e:  # rosbags, zstd/lz4 and struct raise many kinds on damaged bytes
+            raise _unreadable(self.reader, e, last[0]) from None
 
     def messages(self, names, use_header):
         meta = self.meta
-        records = ((meta[id(c)], t, data) for c, t, data in self._stream(names))
+        last = [None]
+
+        def records():
+            for c, t, data in self._stream(names):
+                last[0] = t
+                yield meta[id(c)], t, data
+
         try:
-            yield from _deserialised(self.reader, records, self.deser, use_header)
-        except (*self.errors, struct.error, KeyError) as e:
-            raise CorruptLogError(f"log cannot be read to the end ({_one_line(e)})", self.reader.path) from None
+            yield from _deserialised(self.reader, records(), self.deser, use_header)
+        except SlamLcdError:
+            raise
+        except Exception as e:  # rosbags, zstd/lz4 and struct raise many kinds on damaged bytes
+            raise _unreadable(self.reader, e, last[0]) from None
 
     def close(self):
         try:
@@ -400,6 +413,18 @@ def _ros1_messages(bag, connections, cache_bytes: int, path):
 
 def _one_line(e) -> str:
     return " ".join(str(e).split()) or type(e).__name__
+
+
+def _unreadable(reader, e: Exception, last_log_time: int | None) -> CorruptLogError:
+    """A one-line error for bytes that cannot be read (damaged chunk, bad compression, short file)."""
+    from ..errors import stamp_text
+
+    where = (f"after log time {stamp_text(last_log_time)}" if last_log_time is not None
+             else "before its first readable message")
+    kind = type(e).__name__
+    text = _one_line(e)
+    detail = text if kind in text or kind in ("ReaderError",) else f"{kind}: {text}"
+    return CorruptLogError(f"damaged data in the log {where}; it cannot be read further ({detail})", reader.path)
 
 # ---- MCAP files ---------------------------------------------------------------------------
 
@@ -543,11 +568,13 @@ class _McapStreamBackend:
                     yield rec.channel_id, rec.log_time, rec.data
         else:
             topics = list(names)
+            last = None
             try:
                 for _sc, ch, msg in self.mreader.iter_messages(topics=topics, log_time_order=True):
+                    last = msg.log_time
                     yield ch.id, msg.log_time, msg.data
-            except Exception as e:
-                raise CorruptLogError(f"MCAP file cannot be read to the end ({_one_line(e)})", self.reader.path) from None
+            except Exception as e:  # the mcap library raises many kinds of errors on damaged bytes
+                raise _unreadable(self.reader, e, last) from None
 
     def raw(self, names):
         meta = self.meta

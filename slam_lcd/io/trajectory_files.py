@@ -19,10 +19,13 @@ Formats
 
 Poses: quaternions are normalised (a norm below 1e-6 is an error), KITTI rotations are
 projected onto the nearest rotation (a matrix further than 1e-2 from one is an error).
-Stamps must not go backwards (equal consecutive stamps occur in real files and are kept).
+Stamps must not go backwards (equal consecutive stamps occur in real files and are kept,
+with one warning line). A quaternion further than 1e-3 from unit length is normalised with
+one warning line per file (a norm of 2 is a broken writer, not rounding).
 """
 from __future__ import annotations
 
+import logging
 from decimal import Decimal, InvalidOperation
 from pathlib import Path
 from typing import Iterator
@@ -40,6 +43,8 @@ from ..errors import (
 from ..geometry import nearest_rotation, quat_to_rot, rot_to_quat
 from ..geometry import rot_to_quat as rotation_to_quat  # noqa: F401  (public name kept for callers)
 from ..types import Trajectory
+
+log = logging.getLogger(__name__)
 
 __all__ = [
     "FORMATS",
@@ -60,6 +65,8 @@ __all__ = [
 FORMATS = ("tum", "kitti", "euroc")
 _EXTENSIONS = {".tum": "tum", ".kitti": "kitti", ".csv": "euroc"}
 _QUAT_MIN_NORM = 1e-6
+# quaternions written with 4 decimals are off unit length by ~1e-4; more than this is a broken file
+_QUAT_UNIT_TOLERANCE = 1e-3
 _ROTATION_MAX_DEVIATION = 1e-2
 EUROC_HEADER = "#timestamp [ns],p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m],q_RS_w [],q_RS_x [],q_RS_y [],q_RS_z []"
 
@@ -149,6 +156,11 @@ def _poses_from_quats(t: np.ndarray, q_xyzw: np.ndarray, lines: list[int], path:
     if small.any():
         i = int(np.flatnonzero(small)[0])
         raise InvalidPoseError(f"line {lines[i]}: quaternion norm {norm[i]:.3g} is too close to zero", path)
+    off = np.abs(norm - 1.0) > _QUAT_UNIT_TOLERANCE
+    if off.any():  # normalised, as evo does, but said: a norm of 2 usually means a broken writer
+        i = int(np.flatnonzero(off)[0])
+        log.warning("%s: %d quaternion(s) are not of unit length (first at line %d: norm %.6g); normalised",
+                    path, int(off.sum()), lines[i], norm[i])
     T = np.tile(np.eye(4), (len(t), 1, 1))
     T[:, :3, :3] = quat_to_rot(q_xyzw)
     T[:, :3, 3] = t
@@ -171,7 +183,13 @@ def _finish(stamps, poses: np.ndarray, lines: list[int], path: Path) -> Trajecto
     if len(poses) == 0:
         raise TrajectoryFormatError("no poses in file", path)
     _check_sorted(stamps, lines, path)
-    return Trajectory(stamps=np.asarray(stamps, dtype=np.int64), poses=poses)
+    arr = np.asarray(stamps, dtype=np.int64)
+    rep = np.flatnonzero(np.diff(arr) == 0)
+    if rep.size:  # kept (real files have them), but said: association then picks one of the two
+        i = int(rep[0]) + 1
+        log.warning("%s: %d repeated timestamp(s) (first at line %d: %s s again); both poses are kept",
+                    path, int(rep.size), lines[i], ns_to_seconds_text(int(arr[i])))
+    return Trajectory(stamps=arr, poses=poses)
 
 
 def _collect(path: Path, ncols: int, what: str, comma: bool = False, at_least: bool = False):

@@ -107,6 +107,15 @@ def _ros2_definition(msgtype: str, typestore) -> tuple[object, str]:
     raise UnsupportedFormatError(f"message type {msgtype} is unknown; cannot describe it in the output")
 
 
+def describable(msgtype: str, typestore=None) -> bool:
+    """Can a topic of ``msgtype`` be written (its definition known to ROS2 Humble or ``typestore``)?"""
+    try:
+        _ros2_definition(msgtype, typestore)
+        return True
+    except Exception:  # unknown type, or a definition rosbags cannot turn back into text
+        return False
+
+
 def _to_cdr(data, msgtype: str, ros1: bool, typestore):
     if not ros1:
         return data

@@ -52,9 +52,12 @@ def load_loop_matrix(path: str | Path, names: Sequence[str]) -> np.ndarray:
     if suffix in IMAGE_SUFFIXES:
         import cv2
 
-        img = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-        if img is None:
-            raise UnsupportedFormatError("cannot read the ground-truth image", path)
+        from ..image_files import read_image
+
+        try:
+            img = read_image(path, cv2.IMREAD_GRAYSCALE)
+        except InputError as e:
+            raise UnsupportedFormatError(f"ground-truth image: {e.problem}", path) from None
         gt = img > 127
     elif suffix == ".npy":
         try:

@@ -12,7 +12,7 @@ from typing import Iterator
 
 import numpy as np
 
-from ..errors import InputError, PipelineError
+from ..errors import InputError, PipelineError, SlamLcdError, in_context, stamp_text
 from ..types import CameraModel, Keyframe
 from .evaluation import list_images
 
@@ -41,10 +41,10 @@ def folder_frames(folder: str | Path, exclude=()) -> tuple[list[str], list[int],
     stamps = [int(round(float(p.stem) * 1e9)) if use_stems else k * 1_000_000_000 for k, p in enumerate(files)]
 
     def gen():
+        from ..image_files import read_image
+
         for k, p in enumerate(files):
-            img = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
-            if img is None:
-                raise InputError("cannot read image", p)
+            img = read_image(p, cv2.IMREAD_UNCHANGED)  # damaged or unreadable: a one-line error naming it
             if img.ndim == 3:
                 img = cv2.cvtColor(img[:, :, :3], cv2.COLOR_BGR2RGB)
             yield Frame(p.name, stamps[k], img)
@@ -62,13 +62,16 @@ def log_frames(path: str | Path, topic: str, camera_info_topic: str | None = Non
     with open_log(path) as reader:
         topics = [topic] + ([camera_info_topic] if camera_info_topic else [])
         for m in reader.messages(topics):
-            if m.topic == camera_info_topic:
-                camera = decode_camera_info(m.msg)
-                continue
-            if m.msgtype.endswith("CompressedImage"):
-                img = decode_compressed_image(m.msg)
-            else:
-                img = decode_image(m.msg)
+            try:
+                if m.topic == camera_info_topic:
+                    camera = decode_camera_info(m.msg)
+                    continue
+                if m.msgtype.endswith("CompressedImage"):
+                    img = decode_compressed_image(m.msg)
+                else:
+                    img = decode_image(m.msg)
+            except SlamLcdError as e:  # name the log, topic and stamp of the bad message
+                raise in_context(e, f"topic {m.topic}, stamp {stamp_text(m.stamp)}", reader.path) from None
             frames.append(Frame(f"{m.stamp}", int(m.stamp), img, camera))
     if not frames:
         raise PipelineError(f"topic {topic!r} holds no images", path)

@@ -212,11 +212,15 @@ def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int =
         from ..progress import progress_bar
 
         frames_iter = progress_bar(frames_iter, total=len(sc.cam_stamps), unit="frame", desc="rendering")
-    if fmt == "folder":
-        counts = _write_folder(out, sc, frames_iter, color=color, depth=depth, stereo=stereo)
-    else:
-        counts = _write_log(out, fmt, sc, frames_iter, depth=depth, stereo=stereo, compressed=compressed,
-                            color=color, io_conf=io_conf)
+    try:
+        if fmt == "folder":
+            counts = _write_folder(out, sc, frames_iter, color=color, depth=depth, stereo=stereo)
+        else:
+            counts = _write_log(out, fmt, sc, frames_iter, depth=depth, stereo=stereo, compressed=compressed,
+                                color=color, io_conf=io_conf)
+    finally:
+        if progress:
+            frames_iter.close()  # an error message must not be glued to a half-drawn bar
     pairs = gt_loop_pairs(sc.gt_cam, T_body_camera=sc.T_bc)
     lp = Path(loops_csv) if loops_csv is not None else (out / "loop_pairs.csv" if fmt == "folder" else loops_path_for(out))
     write_loop_pairs(lp, sc.gt_cam, pairs, T_body_camera=sc.T_bc)

@@ -1,0 +1,113 @@
+"""A folder of outputs that appears as one set: complete, or marked partial, never mixed.
+
+Why: a run writes a dozen files that only make sense together (the config beside the
+trajectories it produced, the report that counts the loops in ``loops.csv``). Written one
+by one into the user's folder, a failure half-way would leave a new config beside an
+earlier run's results. Here every file is written into a hidden staging folder first;
+:meth:`OutputSet.publish` then moves the set into place:
+
+- a folder that does not exist yet is created by renaming the staging folder: one
+  atomic step;
+- into an existing folder, ``PARTIAL.txt`` is put in place first, the earlier run's
+  files of the same names are replaced (and ones this run did not produce removed),
+  and ``PARTIAL.txt`` is removed last, unless the new set is itself partial. Files of
+  other names (the user's own) are left alone.
+
+So at the final names there is, at every instant, a complete set or a set that says it is
+partial. A run that fails before :meth:`publish` removes its staging folder and leaves an
+earlier run's folder exactly as it was. Publishing holds Ctrl-C back until it is done.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Iterable, Mapping
+
+from .atomic import check_no_clash, check_writable_target
+from .errors import InputError
+from .interrupts import defer_sigint
+
+PARTIAL_MARKER = "PARTIAL.txt"
+STAGING_PREFIX = ".slam-lcd-staging."
+
+
+class OutputSet:
+    """Outputs named ``names`` inside folder ``target`` (see the module docstring)."""
+
+    def __init__(self, target: str | Path, names: Iterable[str]):
+        self.target = Path(target)
+        self.names = tuple(dict.fromkeys([*names, PARTIAL_MARKER]))
+        self._staging: Path | None = None
+
+    # ------------------------------------------------------------------ before any work
+    def check(self, inputs: Mapping[str, str | Path | None]) -> None:
+        """Refuse clashes with inputs and unwritable targets, writing nothing."""
+        check_writable_target(self.target, folder=True)
+        check_no_clash([self.target, *(self.target / n for n in self.names)], inputs)
+
+    # ------------------------------------------------------------------ writing
+    @property
+    def staging(self) -> Path:
+        """The hidden folder the outputs are written into (created on first use)."""
+        if self._staging is None:
+            where = self.target if self.target.is_dir() else self.target.parent
+            try:
+                where.mkdir(parents=True, exist_ok=True)
+                with defer_sigint():
+                    self._staging = Path(tempfile.mkdtemp(prefix=STAGING_PREFIX, dir=where))
+            except OSError as e:
+                raise InputError(f"cannot write the outputs ({e.strerror or e})", self.target) from None
+        return self._staging
+
+    def mark_partial(self, text: str) -> None:
+        """Say in the set itself that it is incomplete (written before anything else can fail)."""
+        path = self.staging / PARTIAL_MARKER
+        with open(path, "w", encoding="utf-8") as fh:
+            fh.write(text.rstrip("\n") + "\n")
+
+    @property
+    def is_partial(self) -> bool:
+        return self._staging is not None and (self._staging / PARTIAL_MARKER).exists()
+
+    def discard(self) -> None:
+        if self._staging is not None:
+            with defer_sigint():
+                shutil.rmtree(self._staging, ignore_errors=True)
+            self._staging = None
+
+    # ------------------------------------------------------------------ publishing
+    def publish(self) -> list[str]:
+        """Move the staged files to ``target``; returns the names published."""
+        staging = self.staging
+        produced = sorted(p.name for p in staging.iterdir())
+        unknown = [n for n in produced if n not in self.names]
+        if unknown:  # a programming error: every output must be declared
+            raise RuntimeError(f"outputs {unknown} are not declared in the output set")
+        partial = PARTIAL_MARKER in produced
+        t = self.target
+        with defer_sigint():
+            if not t.exists():  # a new folder: the staging folder becomes it in one rename
+                os.replace(staging, t)
+            else:
+                if partial:
+                    os.replace(staging / PARTIAL_MARKER, t / PARTIAL_MARKER)
+                else:
+                    with open(t / PARTIAL_MARKER, "w", encoding="utf-8") as fh:
+                        fh.write("slam-lcd is replacing this folder's outputs with a new run's; "
+                                 "the set is incomplete while this file exists\n")
+                for name in self.names:
+                    if name == PARTIAL_MARKER or name in produced:
+                        continue
+                    old = t / name
+                    if old.is_file() or old.is_symlink():
+                        old.unlink()  # an earlier run's output that this run did not produce
+                for name in produced:
+                    if name != PARTIAL_MARKER:
+                        os.replace(staging / name, t / name)
+                if not partial:
+                    os.unlink(t / PARTIAL_MARKER)
+                shutil.rmtree(staging, ignore_errors=True)
+            self._staging = None
+        return produced

@@ -1,0 +1,75 @@
+"""Background feature extraction (run.extract_ahead) changes when loops are reported, never which."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from slam_lcd.config import load_config
+from slam_lcd.io.trajectory_files import read_tum
+
+
+@pytest.fixture(scope="module")
+def short_log(tmp_path_factory):
+    from slam_lcd.sim import make_demo_log
+
+    path = tmp_path_factory.mktemp("overlap") / "demo.mcap"
+    make_demo_log(path, "mcap", frames=470, seed=1, depth=True, width=320, height=240)
+    return path
+
+
+@pytest.fixture(scope="module")
+def runs(short_log, tmp_path_factory):
+    from slam_lcd.runner import run_log
+
+    out = {}
+    for ahead in (0, 2):
+        cfg = load_config("default", ["features.kind=orb", "features.feature_cache=false", f"run.extract_ahead={ahead}",
+                                      "run.plots=false", "run.write_mcap=false"])
+        d = tmp_path_factory.mktemp(f"ahead{ahead}")
+        out[ahead] = (run_log(short_log, d, cfg, progress=False), d)
+    return out
+
+
+def test_same_keyframes_loops_and_trajectory_whatever_the_lookahead(runs):
+    ref_res, ref_dir = runs[0]
+    ref = read_tum(ref_dir / "corrected.tum")
+    ref_loops = (ref_dir / "loops.csv").read_text()
+    assert ref_res.loops_accepted >= 1
+    for ahead, (res, d) in runs.items():
+        assert res.n_keyframes == ref_res.n_keyframes, ahead
+        assert (d / "loops.csv").read_text() == ref_loops, ahead
+        t = read_tum(d / "corrected.tum")
+        assert np.array_equal(t.stamps, ref.stamps) and np.allclose(t.poses, ref.poses, atol=1e-12), ahead
+
+
+def test_plugin_reports_every_loop_once_with_lookahead():
+    """add_keyframe may return a keyframe's loops on a later call; flush() returns the rest."""
+    sim = pytest.importorskip("slam_lcd.sim")
+    from slam_lcd.features import load_extractor
+    from slam_lcd.pipeline import Pipeline
+    from slam_lcd.types import Keyframe
+
+    world = sim.build_world(0)
+    traj = sim.make_trajectory("laps", laps=1.3, rate_hz=1.0)
+    cam = sim.demo_camera(320, 240)
+    T_bc = sim.T_body_camera()
+    frames = [sim.render(world, cam, traj.poses[k] @ T_bc) for k in range(len(traj))]
+    counts = {}
+    for ahead in (0, 2):
+        cfg = load_config("default", ["features.kind=orb", f"run.extract_ahead={ahead}"])
+        seen = []
+        pipe = Pipeline(cfg, camera=cam, T_body_camera=T_bc, extractor=load_extractor(cfg.features),
+                        on_loop=lambda c, r: seen.append(c))
+        returned = []
+        for k, (img, depth) in enumerate(frames):
+            cov = np.diag([1e-4] * 3 + [1e-3] * 3) if k else None
+            returned += pipe.add_keyframe(Keyframe(0, int(traj.stamps[k]), traj.poses[k], image=img, depth=depth,
+                                                   covariance_since_last=cov))
+            assert len(pipe.keyframes) == max(0, k + 1 - ahead)  # at most `ahead` keyframes wait
+        returned += pipe.flush()
+        pipe.finalize()
+        assert [(c.query_id, c.match_id) for c in returned] == [(c.query_id, c.match_id) for c in seen]
+        assert [k.id for k in pipe.keyframes] == list(range(len(frames)))
+        assert len(pipe.graph) == len(frames)
+        counts[ahead] = [(c.query_id, c.match_id) for c in seen]
+    assert counts[0] == counts[2] and counts[0]
