@@ -8,9 +8,11 @@ configuration next to a run's outputs.
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import types
 import typing
 from dataclasses import dataclass, field
+from importlib import resources
 from pathlib import Path
 from typing import Any, Literal
 
@@ -26,7 +28,31 @@ from .io.config import IOConfig
 from .lcd.config import LcdConfig
 from .vocab.config import VocabConfig
 
-PRESET_DIR = Path(__file__).resolve().parent.parent / "data" / "configs"
+# presets are package data (slam_lcd/data/configs/*.yaml): found through importlib.resources,
+# so they are there in a wheel install as in a source checkout
+PRESET_PACKAGE = "slam_lcd.data"
+PRESET_FOLDER = "configs"
+
+
+def _preset_root():
+    return resources.files(PRESET_PACKAGE) / PRESET_FOLDER
+
+
+def preset_names() -> list[str]:
+    """Names of the shipped presets (``default``, …), sorted."""
+    root = _preset_root()
+    return sorted(e.name[: -len(".yaml")] for e in root.iterdir() if e.name.endswith(".yaml"))
+
+
+def preset_text(name: str) -> str:
+    """The YAML text of the shipped preset ``name``; an unknown name is a ConfigError with near misses."""
+    entry = _preset_root() / f"{name}.yaml"
+    if not entry.is_file():
+        names = preset_names()
+        close = difflib.get_close_matches(name, names, n=3)
+        hint = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
+        raise ConfigError(f"no preset named {name!r}{hint} (presets: {names})")
+    return entry.read_text(encoding="utf-8")
 
 
 @dataclass
@@ -126,7 +152,9 @@ def _from_dict(cls, data: dict, where: str = ""):
     names = {f.name for f in dataclasses.fields(cls)}
     unknown = set(data) - names
     if unknown:
-        raise ConfigError(f"unknown key(s) {sorted(unknown)} in section {where or 'top'}; known: {sorted(names)}")
+        hints = [f"{u!r} -> {near[0]!r}" for u in sorted(unknown) if (near := difflib.get_close_matches(u, names, n=1))]
+        hint = f"; did you mean {', '.join(hints)}?" if hints else ""
+        raise ConfigError(f"unknown key(s) {sorted(unknown)} in section {where or 'top'}{hint} (known: {sorted(names)})")
     kwargs = {k: _coerce(v, hints[k], f"{where}.{k}".lstrip(".")) for k, v in data.items()}
     return cls(**kwargs)
 
@@ -149,12 +177,32 @@ def apply_override(cfg: Config, assignment: str) -> Config:
     parts = key.strip().split(".")
     for p in parts[:-1]:
         if not isinstance(node, dict) or p not in node:
-            raise ConfigError(f"override {assignment!r}: unknown section {p!r}")
+            raise ConfigError(f"override {assignment!r}: unknown section {p!r}{_near_miss(data, key.strip())}")
         node = node[p]
     if not isinstance(node, dict) or parts[-1] not in node:
-        raise ConfigError(f"override {assignment!r}: unknown key {key!r}")
+        raise ConfigError(f"override {assignment!r}: unknown key {key!r}{_near_miss(data, key.strip())}")
     node[parts[-1]] = value
     return _from_dict(Config, data)
+
+
+def config_keys(data: dict | None = None) -> list[str]:
+    """Every ``section.key`` of the configuration (what ``--set`` accepts)."""
+    data = config_to_dict(Config()) if data is None else data
+    keys: list[str] = []
+    for section, values in data.items():
+        keys += [f"{section}.{k}" for k in values] if isinstance(values, dict) else [section]
+    return keys
+
+
+def _near_miss(data: dict, key: str) -> str:
+    """'; did you mean …?' for an unknown ``section.key``: close full keys, or the same key in another section."""
+    keys = config_keys(data)
+    close = difflib.get_close_matches(key, keys, n=3, cutoff=0.7)
+    leaf = key.rsplit(".", 1)[-1]
+    close += [k for k in keys if k.rsplit(".", 1)[-1] == leaf and k not in close]
+    if not close:
+        close = [k for k in keys if difflib.get_close_matches(leaf, [k.rsplit(".", 1)[-1]], n=1, cutoff=0.8)][:3]
+    return f"; did you mean {' or '.join(close[:3])}?" if close else ""
 
 
 def validate_config(cfg: Config, path: str | Path | None = None) -> Config:
@@ -184,28 +232,39 @@ def validate_config(cfg: Config, path: str | Path | None = None) -> Config:
 
 
 def load_config(source: str | Path | None = None, overrides: list[str] | tuple[str, ...] = ()) -> Config:
-    """Load a preset name (``default``, ``fast`` …) or a YAML path, then apply overrides."""
+    """Load a preset name (``default``, ``orb`` …) or a YAML path, then apply overrides."""
     data: dict = {}
     if source is not None:
         path = Path(source)
+        where: Path | None = path
         if not path.suffix and not path.exists():
-            path = PRESET_DIR / f"{source}.yaml"
-            if not path.exists():
-                presets = sorted(p.stem for p in PRESET_DIR.glob("*.yaml"))
-                raise ConfigError(f"no preset named {source!r}; presets: {presets}")
-        if not path.is_file():
-            raise FileMissingError("configuration file not found", path)
+            where = None
+            text = preset_text(str(source))
+        else:
+            if not path.is_file():
+                raise FileMissingError("configuration file not found", path)
+            try:
+                text = path.read_text(encoding="utf-8")
+            except UnicodeDecodeError as e:
+                raise ConfigError(f"not valid YAML ({e.__class__.__name__})", path) from None
+        prefix = "" if where is not None else f"preset {source!r}: "
         try:
-            data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
-        except (yaml.YAMLError, UnicodeDecodeError) as e:
-            raise ConfigError(f"not valid YAML ({e.__class__.__name__})", path) from None
+            data = yaml.safe_load(text) or {}
+        except yaml.YAMLError as e:
+            raise ConfigError(f"{prefix}not valid YAML ({e.__class__.__name__})", where) from None
         if not isinstance(data, dict):
-            raise ConfigError("top level of a config file must be a mapping", path)
+            raise ConfigError(f"{prefix}top level of a config file must be a mapping", where)
         try:
             cfg = _from_dict(Config, data)
         except ConfigError as e:
-            raise ConfigError(e.problem, path) from None
-        validate_config(cfg, path)
+            raise ConfigError(prefix + e.problem, where) from None
+        if where is None:  # a preset: range errors name it
+            try:
+                validate_config(cfg)
+            except ConfigError as e:
+                raise ConfigError(prefix + e.problem) from None
+        else:
+            validate_config(cfg, where)
     else:
         cfg = Config()
     for ov in overrides:

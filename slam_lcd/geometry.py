@@ -256,3 +256,39 @@ def interpolate_poses(stamps: np.ndarray, poses: np.ndarray, query: np.ndarray) 
     for k in range(3):
         out[:, k, 3] = np.interp(q, x, poses[:, k, 3])
     return out
+
+
+# ----------------------------------------------------------------------------- covariances
+# permutation from ROS [x y z rx ry rz] to GTSAM [rx ry rz tx ty tz]
+ROS_TO_GTSAM_ORDER = np.array([3, 4, 5, 0, 1, 2])
+
+
+def ros_covariance_to_gtsam(cov, T_world_body, frame: str = "parent") -> np.ndarray | None:
+    """A ROS 6x6 pose covariance → the 6x6 covariance slam-lcd (GTSAM ``Pose3``) expects.
+
+    ROS (``geometry_msgs/PoseWithCovariance``, ``nav_msgs/Odometry.pose``) orders it
+    ``[x y z rx ry rz]`` (translation first) about the *parent* frame's axes; GTSAM orders the
+    tangent ``[rx ry rz tx ty tz]`` (rotation first) about the *body* axes (right perturbation
+    ``T Exp(xi)``). Passing a ROS covariance unconverted swaps the rotation and translation
+    blocks: silently wrong, hence this helper. ``cov``: 36 values or 6x6; ``T_world_body``:
+    the pose the covariance belongs to (4x4, or its 3x3 rotation); ``frame='body'`` when the
+    covariance is already about the body axes (only the order changes). Returns None for ROS's
+    "unknown" conventions (all zeros, or ``cov[0] == -1``).
+    """
+    from .errors import InvalidPoseError
+
+    c = np.asarray(cov, dtype=np.float64).reshape(6, 6)
+    if not c.any() or c[0, 0] == -1:
+        return None
+    if not np.all(np.isfinite(c)):
+        raise InvalidPoseError("covariance has NaN/inf values")
+    if frame not in ("parent", "body"):
+        raise ValueError(f"frame must be 'parent' or 'body', got {frame!r}")
+    c = c[np.ix_(ROS_TO_GTSAM_ORDER, ROS_TO_GTSAM_ORDER)]
+    if frame == "body":
+        return c
+    R = np.asarray(T_world_body, dtype=np.float64)[:3, :3]
+    J = np.zeros((6, 6))
+    J[:3, :3] = R.T
+    J[3:, 3:] = R.T
+    return J @ c @ J.T

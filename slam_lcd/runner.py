@@ -37,6 +37,7 @@ from .frontend.camera import camera_mounting
 from .interrupts import defer_sigint
 from .output_set import PARTIAL_MARKER, OutputSet
 from .geometry import interpolate_poses, inv, rotation_angle_deg
+from .progress import progress_bar
 from .types import Trajectory
 
 log = logging.getLogger(__name__)
@@ -276,8 +277,6 @@ def run_log(
     written as one set (:class:`slam_lcd.output_set.OutputSet`). A Ctrl-C stops the stream
     and writes the result so far, marked partial (``PARTIAL.txt``); ``result.interrupted``.
     """
-    from tqdm import tqdm
-
     from .io import open_log
     from .io.decode import decode_camera_info
     from .io.tf import TfBuffer
@@ -338,7 +337,7 @@ def run_log(
         n_img = reader.topics[topics.image].count
         camera_set = False
         damaged: list[DamagedImageError] = []
-        bar = tqdm(total=n_img, desc="frames", unit="img", disable=not progress, dynamic_ncols=True)
+        bar = progress_bar(total=n_img, desc="frames", unit="img", enabled=progress)
         try:
             for m in reader.messages(wanted):
                 if m.topic == topics.odom:

@@ -34,3 +34,48 @@ def superpoint_weights(shared) -> Path:
     if not p.is_file():
         pytest.skip(f"SuperPoint test checkpoint not found at {p}")
     return p
+
+
+# --------------------------------------------------------------------------- offline first run
+OFFLINE_DEMO_ARGS = ["--frames", "470", "--size", "320x240"]  # a little more than one lap: loops close
+
+
+def free_port() -> int:
+    """A loopback port nothing listens on (bound, then released)."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def offline_env(cache: Path) -> dict:
+    """Environment of a machine with no SuperPoint weights anywhere and no network: an empty
+    cache, no $SLAM_LCD_SUPERPOINT_WEIGHTS, the download pointed at a closed loopback port."""
+    env = {k: v for k, v in os.environ.items() if k != "SLAM_LCD_SUPERPOINT_WEIGHTS"}
+    env["SLAM_LCD_CACHE_DIR"] = str(cache)
+    env["SLAM_LCD_SUPERPOINT_URL"] = f"http://127.0.0.1:{free_port()}/superpoint_v1.pth"
+    env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
+    return env
+
+
+@pytest.fixture(scope="session")
+def offline_demo(tmp_path_factory):
+    """`slam-lcd demo` run once as a user's first run offline: (completed process, out dir, demo log, env).
+
+    Shared by the offline-fallback test and the evo comparison on a demo run (one render,
+    one pipeline run for both)."""
+    import subprocess
+    import sys
+
+    root = tmp_path_factory.mktemp("offline")
+    cache = root / "cache"
+    cache.mkdir()
+    assert not any(cache.iterdir())
+    env = offline_env(cache)
+    out = root / "demo_out"
+    # progress on (the default): stderr is a pipe, so the demo prints one line per stage, no bar
+    proc = subprocess.run([sys.executable, "-m", "slam_lcd", "demo", *OFFLINE_DEMO_ARGS, "--out", str(out)],
+                          env=env, capture_output=True, text=True, timeout=1200)
+    logs = sorted((cache / "demo").glob("*.mcap")) if (cache / "demo").is_dir() else []
+    return proc, out, (logs[0] if logs else None), env

@@ -30,9 +30,31 @@ def test_unknown_key_in_file(tmp_path):
 
 
 def test_presets_load():
-    from slam_lcd.config import PRESET_DIR
+    from slam_lcd.config import preset_names
 
-    presets = sorted(PRESET_DIR.glob("*.yaml"))
-    assert presets, "data/configs holds the presets"
-    for p in presets:
-        load_config(p.stem)
+    names = preset_names()
+    assert "default" in names, "slam_lcd/data/configs holds the presets"
+    for name in names:
+        load_config(name)
+
+
+def test_unknown_preset_suggests_near_misses():
+    with pytest.raises(ConfigError, match=r"no preset named 'defualt'; did you mean 'default'"):
+        load_config("defualt")
+
+
+@pytest.mark.parametrize("assignment, hint", [
+    ("backend.loop_kernl=huber", "did you mean backend.loop_kernel"),
+    ("bakend.loop_kernel=huber", "did you mean backend.loop_kernel"),
+    ("lcd.tree=dp", "did you mean vocab.tree"),  # the key lives in another section
+])
+def test_unknown_override_suggests_near_misses(assignment, hint):
+    with pytest.raises(ConfigError, match=hint):
+        apply_override(Config(), assignment)
+
+
+def test_unknown_key_in_file_suggests(tmp_path):
+    p = tmp_path / "typo.yaml"
+    p.write_text(yaml.safe_dump({"lcd": {"top_kk": 3}}))
+    with pytest.raises(ConfigError, match="did you mean 'top_kk' -> 'top_k'"):
+        load_config(p)

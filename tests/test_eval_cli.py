@@ -46,7 +46,7 @@ def test_ate_cli_kitti_se3_equals_evo(tdir, tmp_path, capsys):
     )
     assert rc == 0, err
     report = json.loads(out_json.read_text())
-    ours = report["ate"]["translation_m"]["rmse"]
+    ours = report["ape"]["stats"]["rmse"]
     # evo's Umeyama on positions parsed by numpy (the full evo file path is exercised in
     # test_eval_metrics; reading KITTI through evo twice would double this test's time)
     from evo.core.geometry import umeyama_alignment
@@ -56,7 +56,7 @@ def test_ate_cli_kitti_se3_equals_evo(tdir, tmp_path, capsys):
     R, t, s = umeyama_alignment(p_est.T, p_ref.T, False)
     evo_rmse = float(np.sqrt(np.mean(np.sum((p_ref - (p_est @ R.T + t)) ** 2, axis=1))))
     assert abs(ours - evo_rmse) < 1e-4
-    assert report["ate"]["alignment"]["mode"] == "se3"
+    assert report["ape"]["alignment"]["mode"] == "se3"
     assert "SE(3)" in out and f"rmse {ours:.6f}" in out
 
 
@@ -66,7 +66,7 @@ def test_ate_cli_fr2_desk_sim3_equals_evo(tdir, tmp_path, capsys):
     ref_p, est_p = tdir / "fr2_desk_groundtruth.txt", tdir / "fr2_desk_ORB.txt"
     rc, out, err = _run(
         ["ate", str(ref_p), str(est_p), "-as", "--t_max_diff", "0.01", "--json", str(out_json),
-         "--plot", str(out_png), "--rpe", "1", "--rpe-unit", "m"],
+         "--save_plot", str(out_png)],
         capsys,
     )
     assert rc == 0, err
@@ -75,11 +75,16 @@ def test_ate_cli_fr2_desk_sim3_equals_evo(tdir, tmp_path, capsys):
         evo_file.read_tum_trajectory_file(str(ref_p)), evo_file.read_tum_trajectory_file(str(est_p)), max_diff=0.01
     )
     evo_rmse = _evo_ate_rmse(ref_e, est_e, correct_scale=True)
-    assert abs(report["ate"]["translation_m"]["rmse"] - evo_rmse) < 1e-4
-    assert report["ate"]["n_matched"] == ref_e.num_poses
-    assert report["ate"]["alignment"]["mode"] == "sim3" and "Sim(3)" in out
-    assert report["rpe"]["n_pairs"] > 5
+    assert abs(report["ape"]["stats"]["rmse"] - evo_rmse) < 1e-9
+    assert report["ape"]["n_matched"] == ref_e.num_poses
+    assert report["ape"]["alignment"]["mode"] == "sim3" and "Sim(3)" in out
     assert out_png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out_png.stat().st_size > 10_000
+    # the old RPE spelling (--rpe-unit) still works, now beside --rpe
+    rc, out, err = _run(["ate", str(ref_p), str(est_p), "--rpe", "-d", "1", "--rpe-unit", "m", "--json", str(out_json)],
+                        capsys)
+    assert rc == 0, err
+    rep = json.loads(out_json.read_text())["rpe"]
+    assert rep["delta_unit"] == "m" and rep["n_errors"] > 5 and "pairs from the estimate" in out
 
 
 def test_ate_cli_kitti_times_and_formats(tdir, tmp_path, capsys):
@@ -94,8 +99,8 @@ def test_ate_cli_kitti_times_and_formats(tdir, tmp_path, capsys):
     )
     assert rc == 0, err
     rep = json.loads((tmp_path / "j.json").read_text())
-    assert rep["ate"]["n_matched"] == 4541 and rep["ate"]["translation_m"]["max"] < 1e-9
-    assert rep["ate"]["alignment"]["mode"] == "none"
+    assert rep["ape"]["n_matched"] == 4541 and rep["ape"]["stats"]["max"] < 1e-9
+    assert rep["ape"]["alignment"]["mode"] == "none"
 
 
 def test_export_round_trip_all_text_formats(tdir, tmp_path, capsys):
@@ -163,7 +168,15 @@ def test_export_mcap_read_back_independently(tdir, tmp_path, capsys):
         (["export", "{d}/fr2_desk_ORB.txt", "--to", "tum", "{t}/x.tum", "--times-out", "{t}/t.txt"], "only applies"),
         (["export", "{d}/../bags/tf_example", "--to", "tum", "{t}/x.tum"], "LOG:TOPIC"),
         (["export", "{d}/../bags/ROS_example.bag:nope", "--to", "tum", "{t}/x.tum"], "available topics"),
-        (["ate", "{d}/fr2_desk_ORB.txt", "{d}/fr2_desk_ORB.txt", "--plot", "{t}"], "folder"),
+        (["ate", "{d}/fr2_desk_ORB.txt", "{d}/fr2_desk_ORB.txt", "--save_plot", "{t}"], "folder"),
+        (["ate", "{d}/fr2_desk_ORB.txt", "{d}/fr2_desk_ORB.txt", "--delta", "2"], "add --rpe"),
+        (["ate", "{d}/fr2_desk_ORB.txt", "{d}/fr2_desk_ORB.txt", "-r", "point_distance_error_ratio"], "add --rpe"),
+        (["ate", "{d}/fr2_desk_ORB.txt", "{d}/fr2_desk_ORB.txt", "-a", "--align_origin"], "not allowed with"),
+        (["ate", "{d}/fr2_desk_ORB.txt", "{d}/fr2_desk_ORB.txt", "--rpe", "-d", "1.5"], "whole number"),
+        (["ate", "{d}/fr2_desk_ORB.txt", "{d}/fr2_desk_ORB.txt", "--rpe", "-u", "km"], "invalid choice"),
+        (["ate", "{d}/fr2_desk_ORB.txt", "{d}/fr2_desk_ORB.txt", "--rpe", "-d", "1000", "-u", "m"], "no pose pair"),
+        (["ate", "{d}/fr2_desk_ORB.txt", "{d}/fr2_desk_ORB.txt", "--save_results", "{t}/r.zip", "--json",
+          "{t}/r.zip"], "different files"),
     ],
 )
 def test_bad_input_gives_one_line_and_status_2(tdir, tmp_path, capsys, argv_tail, needle):
@@ -193,8 +206,8 @@ def test_ate_cli_on_log_topics_equals_evo(shared_data, tmp_path, capsys):
         est_e = evo_file.read_bag_trajectory(reader, "ORB-SLAM")
     ref_e, est_e = evo_sync.associate_trajectories(ref_e, est_e, max_diff=0.01)
     report = json.loads(out_json.read_text())
-    assert report["ate"]["n_matched"] == ref_e.num_poses
-    assert abs(report["ate"]["translation_m"]["rmse"] - _evo_ate_rmse(ref_e, est_e, correct_scale=True)) < 1e-4
+    assert report["ape"]["n_matched"] == ref_e.num_poses
+    assert abs(report["ape"]["stats"]["rmse"] - _evo_ate_rmse(ref_e, est_e, correct_scale=True)) < 1e-6
 
 
 def test_export_tf_frame_pair(shared_data, tmp_path, capsys):

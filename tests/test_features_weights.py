@@ -12,12 +12,22 @@ import pytest
 
 from slam_lcd.errors import DownloadError, WeightsError
 from slam_lcd.features import FeaturesConfig, load_extractor, resolve_weights
-from slam_lcd.features.weights import ENV_CACHE, ENV_WEIGHTS, WEIGHTS_NAME, WeightsDownloadError, cache_dir
+from slam_lcd.features.weights import (
+    ENV_CACHE,
+    ENV_URL,
+    ENV_WEIGHTS,
+    WEIGHTS_NAME,
+    WeightsDownloadError,
+    WeightsUnavailableError,
+    cache_dir,
+    weights_report,
+)
 
 
 @pytest.fixture(autouse=True)
 def clean_env(monkeypatch, tmp_path):
     monkeypatch.delenv(ENV_WEIGHTS, raising=False)
+    monkeypatch.delenv(ENV_URL, raising=False)
     monkeypatch.setenv(ENV_CACHE, str(tmp_path / "cache"))
 
 
@@ -128,3 +138,32 @@ def test_http_404_is_a_weights_error(tmp_path):
     with serve_directory(tmp_path) as base:
         with pytest.raises(WeightsError, match="download"):
             resolve_weights(None, url=f"{base}/missing.pth", sha256=None)
+
+
+def test_unavailable_is_its_own_error_and_only_for_a_missing_file(tmp_path, monkeypatch, superpoint_weights):
+    """The demo's ORB fallback keys on WeightsUnavailableError: offline / disabled yes; a named
+    file that is missing or a checksum mismatch no."""
+    monkeypatch.setenv(ENV_URL, f"http://127.0.0.1:{free_port()}/superpoint_v1.pth")
+    with pytest.raises(WeightsUnavailableError) as e:
+        resolve_weights(None)  # the env var's URL is used when none is given
+    assert isinstance(e.value, WeightsDownloadError) and "127.0.0.1" in str(e.value) and "--features orb" in str(e.value)
+    with pytest.raises(WeightsUnavailableError):
+        resolve_weights(None, allow_download=False)
+    with pytest.raises(WeightsError) as e:
+        resolve_weights(tmp_path / "named.pth")
+    assert not isinstance(e.value, WeightsUnavailableError)
+    with serve_directory(superpoint_weights.parent) as base:
+        with pytest.raises(WeightsDownloadError) as e:
+            resolve_weights(None, url=f"{base}/{superpoint_weights.name}", sha256="ab" * 32)
+    assert not isinstance(e.value, WeightsUnavailableError)  # something came, and it was wrong
+
+
+def test_weights_report_follows_the_resolution_order(tmp_path, monkeypatch, superpoint_weights):
+    rep = weights_report()
+    assert [c.state for c in rep.candidates] == ["not given", "not set", "missing", "enabled"]
+    assert rep.used is None and rep.error is None
+    monkeypatch.setenv(ENV_WEIGHTS, str(superpoint_weights))
+    rep = weights_report()
+    assert rep.used == superpoint_weights and rep.sha256 == sha(superpoint_weights) and not rep.official
+    rep = weights_report(tmp_path / "gone.pth")  # a named file that is missing stops the search
+    assert rep.used is None and "gone.pth" in rep.error

@@ -80,6 +80,35 @@ def test_log_matches_gtsam_near_zero_and_pi():
         assert np.allclose(xi, gtsam.Pose3.Logmap(gtsam.Pose3(T)), atol=1e-6)
 
 
+def test_ros_covariance_to_gtsam_reorders_and_rotates_into_the_body_frame():
+    """A ROS [t, r] covariance about the parent axes becomes GTSAM's [r, t] about the body axes:
+    checked against samples drawn in ROS convention and mapped through the pose by hand."""
+    from slam_lcd.geometry import ros_covariance_to_gtsam, so3_exp
+
+    rng = np.random.default_rng(3)
+    R = so3_exp(np.array([0.3, -0.5, 1.1]))
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, [1.0, 2.0, 3.0]
+    A = rng.normal(size=(6, 6))
+    ros = A @ A.T * 1e-3  # [x y z rx ry rz] about the parent axes
+    samples = rng.multivariate_normal(np.zeros(6), ros, size=200_000)
+    # the same perturbations in GTSAM's order about the body axes
+    xi = np.hstack([samples[:, 3:] @ R, samples[:, :3] @ R])
+    got = ros_covariance_to_gtsam(ros.reshape(-1), T)
+    np.testing.assert_allclose(got, np.cov(xi.T), atol=5e-5)
+    # the rotation part of the pose is all that matters; 3x3 works too
+    np.testing.assert_allclose(ros_covariance_to_gtsam(ros, R), got, atol=1e-15)
+    # 'body': only the order changes (translation block moves to the lower right)
+    body = ros_covariance_to_gtsam(ros, T, frame="body")
+    np.testing.assert_array_equal(body[3:, 3:], ros[:3, :3])
+    np.testing.assert_array_equal(body[:3, :3], ros[3:, 3:])
+    # ROS's "unknown" conventions
+    assert ros_covariance_to_gtsam(np.zeros(36), T) is None
+    unknown = np.zeros(36)
+    unknown[0] = -1
+    assert ros_covariance_to_gtsam(unknown, T) is None
+
+
 def test_two_pose_interpolation_matches_scipy_slerp():
     """The per-frame fast path (two samples, one query) equals scipy's Slerp + linear translation."""
     from scipy.spatial.transform import Rotation, Slerp

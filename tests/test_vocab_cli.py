@@ -44,11 +44,13 @@ def test_train_from_mcap_log(corridor_dir, tmp_path):
     log = tmp_path / "frames.mcap"
     with open_writer(log, "mcap") as w:
         for i in range(1, 9):
-            img = cv2.imread(str(corridor_dir / f"{i}.jpg"), cv2.IMREAD_GRAYSCALE)
+            # the grey the folder reader gives (colour decode, then RGB -> grey, as eval-lcd reads folders)
+            img = cv2.cvtColor(cv2.imread(str(corridor_dir / f"{i}.jpg"), cv2.IMREAD_COLOR), cv2.COLOR_BGR2GRAY)
             stamp = i * 10**8
             w.write("/camera/image_raw", image_msg(img, stamp, "camera"), stamp)
     out = tmp_path / "from_log.npz"
-    assert main(["vocab", "train", str(log), "--topic", "/camera/image_raw", "--out", str(out), "--features", "orb"]) == 0
+    assert main(["vocab", "train", str(log), "--image-topic", "/camera/image_raw", "--out", str(out),
+                 "--features", "orb"]) == 0
     vocab = Vocabulary.load(out)
     assert vocab.n_images == 8
     # same frames from the folder give the same words
@@ -70,4 +72,4 @@ def test_errors_are_one_line(tmp_path, capsys, corridor_dir):
     assert "not found" in capsys.readouterr().err
     assert main(["vocab", "train", str(tmp_path / "nothing"), "--out", str(tmp_path / "v.npz")]) == 2
     assert main(["vocab", "train", str(corridor_dir / "1.jpg"), "--out", str(tmp_path / "v.npz"), "--features", "orb"]) == 2
-    assert "--topic" in capsys.readouterr().err
+    assert "--image-topic" in capsys.readouterr().err

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from .run import add_alias, add_config_args, config_from_args
 
 log = logging.getLogger(__name__)
 
@@ -29,42 +30,44 @@ def register(sub) -> None:
         help="evaluate loop-closure detection (precision-recall, recall at 100%% precision) against ground truth",
         description="Run BoW candidate retrieval + verification over SOURCE and compare with ground truth.",
     )
-    p.add_argument("source", help="image folder, or a bag/MCAP file with --topic")
+    p.add_argument("source", help="image folder (image files in natural name order), or a bag/MCAP file with "
+                                  "--image-topic")
     p.add_argument("--gt", required=True,
-                   help="loop matrix (RTAB-Map .bmp/.png, .npy, .csv pairs) or, with --gt-max-dist, a GT trajectory")
-    p.add_argument("--gt-max-dist", type=float, default=None, help="GT poses: loop if closer than this (m)")
-    p.add_argument("--gt-max-angle", type=float, default=30.0, help="GT poses: and rotated less than this (deg)")
-    p.add_argument("--topic", help="image topic when SOURCE is a log")
-    p.add_argument("--camera-info-topic", help="camera_info topic when SOURCE is a log")
-    p.add_argument("--features", choices=["superpoint", "orb"], default=None, help="feature extractor")
-    p.add_argument("--verify", choices=[*MODES, "all"], default="all", help="verification chain (default: all four)")
-    p.add_argument("--weights", help="SuperPoint weights file")
-    p.add_argument("--vocab", help="trained vocabulary (.npz); default: online vocabulary")
-    p.add_argument("--top-k", type=int, default=None, help="BoW candidates per query (lcd.top_k)")
-    p.add_argument("--exclude-recent", type=int, default=None, help="skip the last N frames (lcd.exclude_recent_n)")
+                   help="ground truth (required): loop matrix (RTAB-Map .bmp/.png, .npy, .csv pairs) or, with "
+                        "--gt-max-dist, a GT trajectory; a file inside the image folder is never read as a frame")
+    p.add_argument("--gt-max-dist", type=float, default=None,
+                   help="read --gt as poses: a loop if closer than this, m (default: --gt is a loop matrix)")
+    p.add_argument("--gt-max-angle", type=float, default=30.0,
+                   help="with --gt-max-dist: and rotated less than this, deg (default 30)")
+    p.add_argument("--image-topic", default=None,
+                   help="image topic when SOURCE is a log (required then; default: none for a folder)")
+    add_alias(p, "--topic", "image_topic")  # old spelling of --image-topic
+    p.add_argument("--camera-info-topic", default=None,
+                   help="camera_info topic when SOURCE is a log (default: none; intrinsics from "
+                        "--focal-factor)")
+    p.add_argument("--verify", choices=[*MODES, "all"], default="all",
+                   help="verification chain (default: all four, one PR curve each)")
+    p.add_argument("--vocab", default=None, help="trained vocabulary (.npz) (default: the online vocabulary)")
+    p.add_argument("--top-k", type=int, default=None, help="BoW candidates per query (default: the config's lcd.top_k, 5)")
+    p.add_argument("--exclude-recent", type=int, default=None,
+                   help="skip the last N frames as candidates (default: the config's lcd.exclude_recent_n, 20)")
     p.add_argument("--focal-factor", type=float, default=None,
-                   help="focal length = factor x width when the images have no intrinsics (lcd.default_focal_factor)")
-    p.add_argument("--config", help="preset name or YAML file")
-    p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE", help="override a config value")
-    p.add_argument("--out", default="lcd_eval", help="output folder (default: ./lcd_eval)")
-    p.add_argument("--no-feature-cache", action="store_true", help="do not read/write the on-disk feature cache")
+                   help="focal length = factor x width when the images have no intrinsics "
+                        "(default: the config's lcd.default_focal_factor, 0.9)")
+    p.add_argument("-o", "--out", default="lcd_eval", help="output folder (default: ./lcd_eval)")
+    add_config_args(p)
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    from ..config import load_config, validate_config
+    from ..config import validate_config
     from ..lcd import LoopDetector
     from ..lcd.evaluation import format_table, load_loop_matrix, precision_recall
     from ..output_set import OutputSet
     from ..lcd.sources import folder_frames, frame_to_keyframe, log_frames
+    from ..progress import progress_bar
 
-    cfg = load_config(args.config, args.set)
-    if args.features:
-        cfg.features = dataclasses.replace(cfg.features, kind=args.features)
-    if args.weights:
-        cfg.features = dataclasses.replace(cfg.features, weights=args.weights)
-    if args.no_feature_cache:
-        cfg.features = dataclasses.replace(cfg.features, feature_cache=False)
+    cfg = config_from_args(args)
     lcd = cfg.lcd
     if args.top_k is not None:
         lcd = dataclasses.replace(lcd, top_k=args.top_k)
@@ -87,9 +90,9 @@ def run(args) -> int:
     if src.is_dir() and not (src / "metadata.yaml").exists():
         names, stamps, frames = folder_frames(src, exclude=[args.gt])
     else:
-        if not args.topic:
-            raise InputError("SOURCE is not an image folder: give the image topic with --topic", src)
-        names, stamps, frames = log_frames(src, args.topic, args.camera_info_topic)
+        if not args.image_topic:
+            raise InputError("SOURCE is not an image folder: give the image topic with --image-topic", src)
+        names, stamps, frames = log_frames(src, args.image_topic, args.camera_info_topic)
 
     if args.gt_max_dist is not None:
         gt = _gt_from_trajectory(args.gt, stamps, args)
@@ -98,7 +101,7 @@ def run(args) -> int:
 
     from ..features import load_extractor
 
-    extractor = load_extractor(cfg.features, weights=cfg.features.weights)
+    extractor = load_extractor(cfg.features)
     vocab = None
     if args.vocab:
         from ..vocab import Vocabulary
@@ -111,13 +114,18 @@ def run(args) -> int:
         from ..features import FeatureCache
 
         cache = FeatureCache(extractor)
-    topic_name = args.topic or "images"
-    for k, fr in enumerate(frames):
-        kf = frame_to_keyframe(k, fr, None)
-        if cache is not None:
-            kf.features = cache.extract(src, topic_name, kf.stamp, kf.image)
-        det.add(kf)
-        log.info("frame %d/%d %s", k + 1, len(names), fr.name)
+    topic_name = args.image_topic or "images"
+    bar = progress_bar(total=len(names), desc="loop detection", unit="img", enabled=not args.no_progress)
+    try:
+        for k, fr in enumerate(frames):
+            kf = frame_to_keyframe(k, fr, None)
+            if cache is not None:
+                kf.features = cache.extract(src, topic_name, kf.stamp, kf.image)
+            det.add(kf)
+            bar.update(1)
+            log.info("frame %d/%d %s", k + 1, len(names), fr.name)
+    finally:
+        bar.close()
     elapsed = time.perf_counter() - t0
 
     results = [precision_recall(det.records, gt, m, lcd.exclude_recent_n) for m in modes]

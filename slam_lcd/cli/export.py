@@ -8,10 +8,12 @@ The output is written atomically and never onto the input.
 from __future__ import annotations
 
 from ..errors import InputError, NotBuiltError
+from .run import add_alias
 from .util import check_output_path, write_guard
 from ..io.trajectory_files import FORMATS
 
 TARGETS = (*FORMATS, "mcap")
+DEFAULT_TOPIC = "/slam_lcd/trajectory"
 
 
 def register(sub) -> None:
@@ -20,15 +22,24 @@ def register(sub) -> None:
         help="convert a trajectory (file or LOG:TOPIC) to TUM / KITTI / EuRoC / MCAP",
         description="Convert a trajectory (TUM / KITTI / EuRoC file or LOG:TOPIC) to another format.",
     )
-    p.add_argument("traj", metavar="TRAJ", help="input trajectory: file or LOG:TOPIC")
-    p.add_argument("--to", dest="to", required=True, choices=TARGETS, help="output format")
-    p.add_argument("out", metavar="OUT", help="output path")
-    p.add_argument("--format", dest="in_format", choices=FORMATS, default=None, help="input format (default: detect)")
-    p.add_argument("--times", default=None, metavar="FILE", help="KITTI times file of the input")
-    p.add_argument("--times-out", default=None, metavar="FILE", help="with --to kitti: also write the stamps (s) here")
-    p.add_argument("--topic", default="/slam_lcd/trajectory", help="with --to mcap: pose topic (default %(default)s)")
-    p.add_argument("--frame-id", default=None, help="with --to mcap: parent frame (default: the input's, else 'map')")
-    p.add_argument("--child-frame-id", default=None, help="with --to mcap: child frame (default: the input's, else 'base_link')")
+    p.add_argument("traj", metavar="TRAJ", help="input trajectory: file (format detected) or LOG:TOPIC")
+    p.add_argument("--to", dest="to", required=True, choices=TARGETS, help="output format (required)")
+    p.add_argument("out", metavar="OUT", nargs="?", default=None, help="output path (or give it with -o/--out)")
+    p.add_argument("-o", "--out", dest="out_opt", default=None, metavar="OUT", help="output path, as OUT (default: none; OUT or --out is required)")
+    p.add_argument("--format", dest="in_format", choices=FORMATS, default=None,
+                   help="input format (default: detected from the file's contents and suffix)")
+    p.add_argument("--times", default=None, metavar="FILE",
+                   help="KITTI times file of the input (default: none; KITTI poses get stamps 0, 1, 2 ... s)")
+    p.add_argument("--times-out", default=None, metavar="FILE",
+                   help="with --to kitti: also write the stamps (s) here (default: stamps are not written)")
+    p.add_argument("--out-topic", dest="topic", default=DEFAULT_TOPIC,
+                   help="with --to mcap: pose topic written (default %(default)s)")
+    add_alias(p, "--topic", "topic")  # old spelling of --out-topic
+    p.add_argument("--frame-id", default=None,
+                   help="with --to mcap: parent frame (default: the input's, else 'map')")
+    p.add_argument("--child-frame-id", default=None,
+                   help="with --to mcap: child frame (default: the input's, else 'base_link')")
+    p.late_positional = "out"  # OUT may follow the options (see cli.util.one_line_errors)
     p.set_defaults(func=run)
 
 
@@ -36,14 +47,20 @@ def run(args) -> int:
     from ..eval.sources import load_trajectory_source
     from ..io.trajectory_files import write_trajectory
 
+    if args.out and args.out_opt and args.out != args.out_opt:
+        raise InputError(f"two output paths given ({args.out} and --out {args.out_opt}); give one")
+    args.out = args.out or args.out_opt
+    if not args.out:
+        raise InputError("no output path: give OUT (or -o/--out OUT)")
     check_output_path(args.out, args.traj, args.times)
     if args.times_out is not None:
         if args.to != "kitti":
             raise InputError("--times-out only applies to --to kitti (the other formats keep their stamps)")
         check_output_path(args.times_out, args.traj, args.times, args.out)
     for opt in ("topic", "frame_id", "child_frame_id"):
-        if args.to != "mcap" and getattr(args, opt) not in (None, "/slam_lcd/trajectory"):
-            raise InputError(f"--{opt.replace('_', '-')} only applies to --to mcap")
+        if args.to != "mcap" and getattr(args, opt) not in (None, DEFAULT_TOPIC):
+            flag = "--out-topic" if opt == "topic" else f"--{opt.replace('_', '-')}"
+            raise InputError(f"{flag} only applies to --to mcap")
     traj = load_trajectory_source(args.traj, args.in_format, args.times)
     if args.to == "mcap":
         from .. import io as slam_io
@@ -58,7 +75,7 @@ def run(args) -> int:
         frame = args.frame_id or (traj.frame_id if traj.frame_id != "world" else "map")
         child = args.child_frame_id or (traj.child_frame_id if traj.child_frame_id != "body" else "base_link")
         if not args.topic.startswith("/"):
-            raise InputError(f"--topic must start with '/', got {args.topic!r}")
+            raise InputError(f"--out-topic must start with '/', got {args.topic!r}")
         with write_guard(args.out):
             counts = write_trajectory_log(args.out, traj, "mcap", topic=args.topic, frame_id=frame, child_frame_id=child)
         print(f"wrote {args.out} ({len(traj)} poses; " + ", ".join(f"{k}: {v}" for k, v in counts.items()) + ")")

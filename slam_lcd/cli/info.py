@@ -12,7 +12,7 @@ from datetime import datetime, timezone
 def register(sub) -> None:
     p = sub.add_parser("info", help="list topics, types, counts, duration and rates of a log")
     p.add_argument("log", help="ROS1 .bag, rosbag2 directory, or .mcap file")
-    p.add_argument("--no-scan", action="store_true", help="do not scan message times (rates from counts only)")
+    p.add_argument("--no-scan", action="store_true", help="do not scan message times: rates from counts / log duration (default: scan, real per-topic rates)")
     p.set_defaults(func=run)
 
 

@@ -3,6 +3,10 @@
 Library errors (:class:`slam_lcd.errors.SlamLcdError`) become one line on stderr and exit
 status 2; ``--debug`` shows the traceback instead. Each subcommand lives in its own module
 of this package and exposes ``register(subparsers)``, which sets ``func(args) -> int``.
+
+The global flags (``--debug``, ``-v/--verbose``, ``--no-progress``) are accepted before or
+after the subcommand: each subcommand parser gets them too, with a suppressed default so
+that a flag given before the subcommand is not reset by the subcommand's parser.
 """
 from __future__ import annotations
 
@@ -14,7 +18,7 @@ import warnings
 
 from .. import __version__
 from ..errors import SlamLcdError
-from .util import one_line_errors
+from .util import one_line_errors, subparsers_of
 
 # module name in slam_lcd.cli -> registered subcommands
 COMMAND_MODULES = [
@@ -26,7 +30,23 @@ COMMAND_MODULES = [
     "demo",
     "ate",
     "export",
+    "weights",
 ]
+
+# flags every command takes, before or after the subcommand name
+GLOBAL_FLAGS = [
+    (("--debug",), "show the full traceback on errors (default: a one-line message, exit status 2)"),
+    (("-v", "--verbose"), "log progress details (INFO) on stderr (default: warnings only)"),
+    (("--no-progress",), "no progress bars and no per-stage lines (default: a bar with rate and ETA when "
+                         "stderr is a terminal, otherwise one line per stage)"),
+]
+
+
+def add_global_flags(parser: argparse.ArgumentParser, *, suppress: bool) -> None:
+    group = parser.add_argument_group("global options (before or after the subcommand)")
+    for names, text in GLOBAL_FLAGS:
+        group.add_argument(*names, action="store_true", help=text,
+                           default=argparse.SUPPRESS if suppress else False)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -35,15 +55,15 @@ def build_parser() -> argparse.ArgumentParser:
         description="Loop-closure back end for visual SLAM (Bag of SuperPoints + graph verification + GTSAM iSAM2).",
     )
     parser.add_argument("--version", action="version", version=f"slam-lcd {__version__}")
-    parser.add_argument("--debug", action="store_true", help="show full tracebacks on errors")
-    parser.add_argument("-v", "--verbose", action="store_true", help="log progress details")
+    add_global_flags(parser, suppress=False)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMAND_MODULES:
         mod = importlib.import_module(f".{name}", __package__)
         mod.register(sub)
     # usage errors are one line too (exit status 2), for the root parser and every subcommand
     one_line_errors(parser)
-    for p in sub.choices.values():
+    for p in subparsers_of(parser):
+        add_global_flags(p, suppress=True)
         one_line_errors(p)
     return parser
 
@@ -55,6 +75,8 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("slam-lcd: interrupted", file=sys.stderr)
         return 130
+    except SystemExit as e:  # usage errors (one line, already printed), --help, --version
+        return int(e.code or 0) if not isinstance(e.code, str) else 2
     logging.basicConfig(
         level=logging.INFO if args.verbose else logging.WARNING,
         format="%(levelname)s: %(message)s",
@@ -71,6 +93,11 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"slam-lcd {args.command}: error: {e}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # `slam-lcd info x | head`: the reader left; not an error of ours
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except OSError as e:  # a file system error no subcommand turned into its own message
         if args.debug:
             raise

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .util import parse_size
+
 
 def register(sub) -> None:
     p = sub.add_parser(
@@ -12,22 +14,30 @@ def register(sub) -> None:
         "odometry (50 Hz) and ground truth as an MCAP file, rosbag2 folder, ROS1 bag or a plain folder. "
         "Ground-truth loop pairs are written beside the log as <name>_loops.csv.",
     )
-    p.add_argument("out", help="output path (.mcap file, rosbag2 folder, .bag file, or folder)")
+    p.add_argument("out", nargs="?", default=None, metavar="OUT",
+                   help="output path (.mcap file, rosbag2 folder, .bag file, or folder); or give it with -o/--out")
+    p.add_argument("-o", "--out", dest="out_opt", default=None, metavar="OUT", help="output path, as OUT (default: none; OUT or --out is required)")
     p.add_argument("--format", dest="fmt", choices=["mcap", "rosbag2", "rosbag1", "folder"], default=None,
-                   help="output format (default: from OUT's suffix: .mcap, .bag, otherwise rosbag2)")
-    p.add_argument("--frames", type=int, default=None, help="number of camera frames (default: 2 laps, about 850 frames)")
+                   help="output format (default: auto-detected from OUT's suffix: .mcap, .bag, otherwise rosbag2)")
+    p.add_argument("--frames", type=int, default=None,
+                   help="number of camera frames (default: --laps laps, 2 laps = about 850 frames)")
     p.add_argument("--seed", type=int, default=0, help="random seed of world, path, odometry and noise (default 0)")
-    p.add_argument("--stereo", action="store_true", help="also write the rectified right camera")
-    p.add_argument("--depth", dest="depth", action="store_true", default=True, help="write /camera/depth (default)")
-    p.add_argument("--no-depth", dest="depth", action="store_false", help="do not write depth images")
-    p.add_argument("--compressed", action="store_true", help="write JPEG sensor_msgs/CompressedImage instead of raw images")
-    p.add_argument("--color", action="store_true", help="RGB images (rgb8) instead of mono8")
-    p.add_argument("--trajectory", choices=["laps", "figure8"], default="laps", help="laps of block A or a figure eight")
+    p.add_argument("--stereo", action="store_true", help="also write the rectified right camera (default: off)")
+    p.add_argument("--depth", dest="depth", action="store_true", default=True, help="write /camera/depth (default: on)")
+    p.add_argument("--no-depth", dest="depth", action="store_false", help="do not write depth images (default: write them)")
+    p.add_argument("--compressed", action="store_true",
+                   help="write JPEG sensor_msgs/CompressedImage instead of raw images (default: raw)")
+    p.add_argument("--color", action="store_true", help="RGB images (rgb8) instead of mono8 (default: mono8)")
+    p.add_argument("--trajectory", choices=["laps", "figure8"], default="laps",
+                   help="laps of block A or a figure eight (default: laps)")
     p.add_argument("--laps", type=float, default=2.0, help="laps to drive when --frames is not given (default 2)")
-    p.add_argument("--size", default="640x480", help="image size WxH (default 640x480)")
+    p.add_argument("--size", default="640x480", type=parse_size, help="image size WxH (default 640x480)")
     p.add_argument("--hfov", type=float, default=70.0, help="horizontal field of view in degrees (default 70: fx = 457 at 640 px)")
     p.add_argument("--rate", type=float, default=10.0, help="camera rate in Hz (default 10; odometry is 50 Hz)")
-    p.add_argument("--loops-csv", default=None, help="where to write the ground-truth loop pairs (default beside OUT)")
+    p.add_argument("--loops-csv", default=None,
+                   help="where to write the ground-truth loop pairs (default: <name>_loops.csv beside OUT; "
+                        "loop_pairs.csv inside OUT with --format folder)")
+    p.late_positional = "out"  # OUT may follow the options (see cli.util.one_line_errors)
     p.set_defaults(func=run)
 
 
@@ -38,12 +48,12 @@ def run(args) -> int:
     from .util import write_guard
     from ..io.writers import format_for_path
 
-    try:
-        w, h = (int(v) for v in args.size.lower().split("x"))
-    except ValueError:
-        raise InputError(f"--size must look like 640x480, got {args.size!r}") from None
-    if w < 16 or h < 16:
-        raise InputError(f"--size {args.size} is too small (at least 16x16)")
+    w, h = args.size
+    if args.out and args.out_opt and args.out != args.out_opt:
+        raise InputError(f"two output paths given ({args.out} and --out {args.out_opt}); give one")
+    args.out = args.out or args.out_opt
+    if not args.out:
+        raise InputError("no output path: give OUT (or -o/--out OUT)")
     fmt = args.fmt or format_for_path(Path(args.out))
     # before rendering: an unwritable target (read-only, /proc, a file in the way) fails now
     check_writable_target(args.out, folder=fmt in ("rosbag2", "folder"))
@@ -53,6 +63,6 @@ def run(args) -> int:
         info = make_demo_log(args.out, fmt=fmt, frames=args.frames, seed=args.seed, stereo=args.stereo,
                              depth=args.depth, compressed=args.compressed, color=args.color, kind=args.trajectory,
                              laps=args.laps, width=w, height=h, hfov_deg=args.hfov, camera_rate=args.rate,
-                             loops_csv=args.loops_csv, progress=True)
+                             loops_csv=args.loops_csv, progress=not args.no_progress)
     print(info.summary())
     return 0

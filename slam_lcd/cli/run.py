@@ -1,17 +1,33 @@
 """`slam-lcd run LOG --out DIR`: loop-correct the trajectory of a recorded log."""
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 from ..config import load_config
 
 
-def add_config_args(p) -> None:
-    p.add_argument("--config", default=None, help="preset name (data/configs) or YAML file (default: 'default')")
+def add_config_args(p, *, device: bool = True) -> None:
+    """The configuration flags every command that builds a pipeline stage shares (one name per concept)."""
+    from ..config import preset_names
+
+    p.add_argument("--config", default=None, metavar="NAME|FILE",
+                   help=f"preset name ({', '.join(preset_names())}) or YAML file (default: default)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE",
-                   help="override one configuration key (repeatable), e.g. --set backend.loop_kernel=huber")
-    p.add_argument("--weights", default=None, help="SuperPoint weights file (superpoint_v1.pth layout)")
-    p.add_argument("--device", default=None, choices=["auto", "cpu", "cuda"], help="torch device for SuperPoint")
+                   help="override one configuration key (repeatable), e.g. --set backend.loop_kernel=huber "
+                        "(default: none)")
+    p.add_argument("--features", choices=["superpoint", "orb"], default=None,
+                   help="feature extractor (default: the config's features.kind, superpoint)")
+    p.add_argument("--weights", default=None, metavar="PATH",
+                   help="SuperPoint weights file, superpoint_v1.pth layout (default: $SLAM_LCD_SUPERPOINT_WEIGHTS, "
+                        "then superpoint_v1.pth in the cache, then a download; see `slam-lcd weights`)")
+    if device:
+        p.add_argument("--device", default=None, choices=["auto", "cpu", "cuda"],
+                       help="torch device for SuperPoint (default: the config's features.device, auto = CUDA "
+                            "when available, else CPU)")
+    p.add_argument("--no-feature-cache", action="store_true",
+                   help="do not read or write the on-disk feature cache (default: features are cached in "
+                        "$SLAM_LCD_CACHE_DIR or ~/.cache/slam-lcd)")
 
 
 def config_inputs(args) -> dict:
@@ -24,13 +40,23 @@ def config_inputs(args) -> dict:
     return inputs
 
 
-def config_from_args(args):
-    overrides = list(args.overrides)
+def config_from_args(args, extra: list[str] | tuple[str, ...] = ()):
+    """The run configuration: preset/file, then ``--set``, then the shortcut flags (they win)."""
+    overrides = list(getattr(args, "overrides", []) or [])
+    if getattr(args, "features", None):
+        overrides.append(f"features.kind={args.features}")
     if getattr(args, "weights", None):
         overrides.append(f"features.weights={args.weights}")
     if getattr(args, "device", None):
         overrides.append(f"features.device={args.device}")
-    return load_config(args.config or "default", overrides)
+    if getattr(args, "no_feature_cache", False):
+        overrides.append("features.feature_cache=false")
+    return load_config(args.config or "default", [*overrides, *extra])
+
+
+def add_alias(p, alias: str, dest: str, **kwargs) -> None:
+    """An old spelling kept working but not shown in --help."""
+    p.add_argument(alias, dest=dest, default=argparse.SUPPRESS, help=argparse.SUPPRESS, **kwargs)
 
 
 def register(sub) -> None:
@@ -39,15 +65,26 @@ def register(sub) -> None:
                                    "SuperPoint, Bag of SuperPoints, graph verification and GTSAM iSAM2; write the "
                                    "corrected trajectory, loops, reports and plots into --out.")
     p.add_argument("log", help="ROS1 .bag, rosbag2 folder or .mcap file")
-    p.add_argument("--out", "-o", required=True, help="output folder (created; files inside are replaced)")
-    p.add_argument("--image-topic", default=None)
-    p.add_argument("--odom-topic", default=None)
-    p.add_argument("--depth-topic", default=None)
+    p.add_argument("-o", "--out", required=True,
+                   help="output folder (required; created if missing; the files slam-lcd writes are replaced)")
+    p.add_argument("--image-topic", default=None,
+                   help="camera image topic (default: auto-detected, the only sensor_msgs/Image or CompressedImage "
+                        "topic without 'depth' or 'right' in its name)")
+    p.add_argument("--odom-topic", default=None,
+                   help="odometry topic (default: auto-detected, the only nav_msgs/Odometry topic; with none, the "
+                        "built-in RGB-D visual odometry runs on the depth topic)")
+    p.add_argument("--depth-topic", default=None,
+                   help="depth image topic (default: auto-detected, an image topic with 'depth' in its name in "
+                        "the camera's namespace; none: loops are scaled by triangulation)")
     g = p.add_mutually_exclusive_group()
-    g.add_argument("--gt-topic", default=None, help="ground-truth pose topic in the log")
-    g.add_argument("--gt", default=None, help="ground-truth trajectory file (TUM / KITTI / EuRoC)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument("--no-mcap", action="store_true", help="do not write corrected.mcap")
+    g.add_argument("--gt-topic", default=None,
+                   help="ground-truth pose topic in the log (default: auto-detected, the only pose topic named "
+                        "*ground_truth* or *groundtruth*; none: no ATE)")
+    g.add_argument("--gt", default=None, metavar="FILE",
+                   help="ground-truth trajectory file, TUM / KITTI / EuRoC (default: none; the log's "
+                        "ground-truth topic if any)")
+    p.add_argument("--no-mcap", action="store_true",
+                   help="do not write corrected.mcap (default: write it, run.write_mcap)")
     add_config_args(p)
     p.set_defaults(func=run)
 

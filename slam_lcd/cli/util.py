@@ -7,22 +7,66 @@ import types
 
 
 def one_line_errors(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
-    """Make argparse usage errors one line on stderr with exit status 2 (no usage dump)."""
+    """Make argparse usage errors one line on stderr with exit status 2 (no usage dump), with a
+    near-miss suggestion for a mistyped subcommand, choice or option."""
 
     def error(self, message: str):  # noqa: ANN001 - argparse's signature
-        print(f"{self.prog}: error: {' '.join(str(message).split())}", file=sys.stderr)
+        message = " ".join(str(message).split())
+        print(f"{self.prog}: error: {message}{_suggest_choice(message)}", file=sys.stderr)
         sys.exit(2)
 
     def parse_known_args(self, args=None, namespace=None):
         # unknown options would otherwise reach the top-level parser, which prints its usage
         ns, extras = argparse.ArgumentParser.parse_known_args(self, args, namespace)
+        late = getattr(self, "late_positional", None)
+        if late and len(extras) == 1 and not extras[0].startswith("-") and getattr(ns, late, None) is None:
+            # an optional positional after options (`export A --to tum B`): argparse leaves it over
+            setattr(ns, late, extras.pop())
         if extras:
-            self.error(f"unrecognized arguments: {' '.join(extras)}")
+            self.error(f"unrecognized arguments: {' '.join(extras)}{_suggest_option(self, extras)}")
         return ns, extras
 
     parser.error = types.MethodType(error, parser)
     parser.parse_known_args = types.MethodType(parse_known_args, parser)
     return parser
+
+
+def _suggest_choice(message: str) -> str:
+    """'; did you mean 'run'?' for argparse's "invalid choice: 'rn' (choose from 'run', ...)"."""
+    import difflib
+    import re
+
+    m = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)", message)
+    if not m:
+        return ""
+    choices = re.findall(r"'([^']*)'", m.group(2)) or [c.strip() for c in m.group(2).split(",")]
+    close = difflib.get_close_matches(m.group(1), choices, n=2, cutoff=0.5)
+    return f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
+
+
+def _suggest_option(parser: argparse.ArgumentParser, extras: list[str]) -> str:
+    """'; did you mean --image-topic?' for a mistyped long option."""
+    import difflib
+
+    known = [o for a in parser._actions for o in a.option_strings if o.startswith("--")]
+    hints = []
+    for x in extras:
+        if x.startswith("--"):
+            close = difflib.get_close_matches(x.split("=", 1)[0], known, n=1, cutoff=0.6)
+            if close:
+                hints.append(close[0] if len(extras) == 1 else f"{close[0]} (for {x})")
+    return f"; did you mean {', '.join(hints)}?" if hints else ""
+
+
+def subparsers_of(parser: argparse.ArgumentParser) -> list[argparse.ArgumentParser]:
+    """Every subcommand parser below ``parser`` (nested ones too, e.g. ``vocab train``)."""
+    found = []
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in dict.fromkeys(action.choices.values()):  # aliases map to the same parser
+                found.append(sub)
+                found += subparsers_of(sub)
+    return found
 
 
 def describe(spec: str, fmt: str | None, n: int) -> str:
@@ -64,3 +108,14 @@ def write_guard(out):
             raise InputError(f"cannot write output ({e.strerror or e}); nothing was written there", out) from None
 
     return guard()
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """argparse type of ``--size WxH`` (at least 16x16)."""
+    try:
+        w, h = (int(v) for v in str(text).lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--size must look like 640x480, got {text!r}") from None
+    if w < 16 or h < 16:
+        raise argparse.ArgumentTypeError(f"--size {text} is too small (at least 16x16)")
+    return w, h

@@ -7,31 +7,29 @@ where SOURCE is an image folder (files in natural name order) or a log with ``--
 from __future__ import annotations
 
 import logging
-import re
 import time
 from pathlib import Path
 
 from ..errors import FileMissingError, InputError
+from .run import add_alias, add_config_args, config_from_args
 
 log = logging.getLogger(__name__)
-
-IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp", ".pgm", ".ppm", ".tif", ".tiff"}
-
 
 def register(sub) -> None:
     p = sub.add_parser("vocab", help="train or inspect a Bag of SuperPoints vocabulary")
     vsub = p.add_subparsers(dest="vocab_command", metavar="ACTION")
     t = vsub.add_parser("train", help="train a vocabulary from an image folder or a log's image topic")
-    t.add_argument("source", help="image folder, or a ROS1/ROS2 bag or MCAP file (with --topic)")
-    t.add_argument("--out", required=True, help="output vocabulary (.npz)")
-    t.add_argument("--topic", help="image topic when SOURCE is a log")
-    t.add_argument("--features", choices=["superpoint", "orb"], default=None, help="descriptor kind (default: config)")
-    t.add_argument("--weights", help="SuperPoint weights file")
-    t.add_argument("--tree", choices=["dp", "hkmeans"], default=None, help="word tree (default: config vocab.tree)")
+    t.add_argument("source", help="image folder (image files in natural name order; files named *GT* / "
+                                  "*groundtruth* are left out), or a ROS1/ROS2 bag or MCAP file with --image-topic")
+    t.add_argument("-o", "--out", required=True, help="output vocabulary (.npz) (required)")
+    t.add_argument("--image-topic", default=None,
+                   help="image topic when SOURCE is a log (required then; default: none for a folder)")
+    add_alias(t, "--topic", "image_topic")  # old spelling of --image-topic
+    t.add_argument("--tree", choices=["dp", "hkmeans"], default=None,
+                   help="word tree (default: the config's vocab.tree, dp)")
     t.add_argument("--every", type=int, default=1, help="use every n-th image (default 1)")
-    t.add_argument("--max-images", type=int, default=None, help="stop after this many images")
-    t.add_argument("--config", help="preset name or YAML file")
-    t.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE", help="config override")
+    t.add_argument("--max-images", type=int, default=None, help="stop after this many images (default: all)")
+    add_config_args(t)
     t.set_defaults(func=run_train)
     i = vsub.add_parser("info", help="print words, depth and branching of a vocabulary")
     i.add_argument("vocab", help="vocabulary file (.npz)")
@@ -39,37 +37,57 @@ def register(sub) -> None:
     p.set_defaults(func=lambda args: (p.print_help(), 2)[1])
 
 
-def _natural_key(path: Path):
-    return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", path.name)]
+FOLDER_TOPIC = "images"  # feature-cache topic of an image folder (the same as eval-lcd's)
+
+
+def source_image_count(source: Path, topic: str | None, every: int = 1, max_images: int | None = None) -> int | None:
+    """How many images :func:`iter_source_images` yields (for the progress bar); None if unknown."""
+    every = max(1, every)
+    if source.is_dir() and not (source / "metadata.yaml").exists():
+        from ..io.image_folder import list_image_files
+
+        n = len(list_image_files(source)[::every])
+    elif source.exists() and topic:
+        from ..io import open_log
+
+        with open_log(source) as reader:
+            info = reader.topics.get(topic)
+            if info is None:
+                return None
+            n = -(-info.count // every)
+    else:
+        return None
+    return n if max_images is None else min(n, max_images)
 
 
 def iter_source_images(source: Path, topic: str | None, every: int = 1, max_images: int | None = None,
                        skipped: list | None = None):
-    """Grey uint8 images of an image folder (natural order) or of one image topic of a log.
+    """``(topic, stamp, image)`` of an image folder (natural order, image files only, stamps and
+    pixels as eval-lcd reads them) or grey images of one image topic of a log (as ``run``
+    reads them). The (source, topic, stamp) triple is the feature-cache key, so a vocabulary
+    trained after ``run`` or before ``eval-lcd`` on the same source reuses their features.
 
     Damaged or unreadable images are skipped when ``skipped`` (a list) is given: their
     errors are appended to it (the caller warns once); otherwise they raise.
     """
-    import cv2
-
     from ..errors import DamagedImageError, SlamLcdError, in_context, stamp_text
-    from ..image_files import read_image
 
     every = max(1, every)
     count = 0
     if source.is_dir() and not (source / "metadata.yaml").exists():
-        files = sorted((f for f in source.iterdir() if f.suffix.lower() in IMAGE_SUFFIXES), key=_natural_key)
-        if not files:
-            raise InputError("no images (.png/.jpg/...) in this folder", source)
-        for f in files[::every]:
+        from ..io.image_folder import read_frame
+        from ..lcd.sources import folder_frames
+
+        names, stamps, _ = folder_frames(source)  # the listing and stamps eval-lcd uses (images read below)
+        for n in range(0, len(names), every):
             try:
-                img = read_image(f, cv2.IMREAD_GRAYSCALE)
+                img = read_frame(source / names[n])
             except InputError as e:
                 if skipped is None:
                     raise
                 skipped.append(e)
                 continue
-            yield img
+            yield FOLDER_TOPIC, stamps[n], img
             count += 1
             if max_images is not None and count >= max_images:
                 return
@@ -77,7 +95,7 @@ def iter_source_images(source: Path, topic: str | None, every: int = 1, max_imag
     if not source.exists():
         raise FileMissingError("training source not found", source)
     if not topic:
-        raise InputError("SOURCE is a log: give the image topic with --topic", source)
+        raise InputError("SOURCE is a log: give the image topic with --image-topic", source)
     from ..io import open_log
     from ..io.decode import decode_compressed_image, decode_image, image_to_gray
 
@@ -85,7 +103,7 @@ def iter_source_images(source: Path, topic: str | None, every: int = 1, max_imag
         (name,) = reader.resolve_topics([topic])
         msgtype = reader.topics[name].msgtype
         if msgtype not in ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage"):
-            raise InputError(f"--topic {name} carries {msgtype}, not a camera image", source)
+            raise InputError(f"--image-topic {name} carries {msgtype}, not a camera image", source)
         for n, m in enumerate(reader.messages([name])):
             if n % every:
                 continue
@@ -98,7 +116,7 @@ def iter_source_images(source: Path, topic: str | None, every: int = 1, max_imag
                     raise err from None
                 skipped.append(err)
                 continue
-            yield gray
+            yield name, m.stamp, gray
             count += 1
             if max_images is not None and count >= max_images:
                 return
@@ -106,8 +124,9 @@ def iter_source_images(source: Path, topic: str | None, every: int = 1, max_imag
 
 def run_train(args) -> int:
     from ..atomic import check_no_clash, check_writable_target
-    from ..config import load_config, validate_config
+    from ..config import validate_config
     from ..features import load_extractor
+    from ..progress import progress_bar, stage
     from ..vocab import train_hkmeans, train_vocabulary
     from .util import write_guard
 
@@ -119,19 +138,23 @@ def run_train(args) -> int:
     check_writable_target(out)
     check_no_clash([out], {"SOURCE": source, "--config": args.config if args.config and Path(args.config).exists() else None,
                            "--weights": args.weights})
-    cfg = load_config(args.config, args.set)
-    if args.features:
-        cfg.features.kind = args.features
-    if args.weights:
-        cfg.features.weights = args.weights
-    validate_config(cfg)
+    cfg = validate_config(config_from_args(args))
     tree = args.tree or cfg.vocab.tree
     extractor = load_extractor(cfg.features)
     t0 = time.perf_counter()
+    cache = None
+    if cfg.features.feature_cache:
+        from ..features import FeatureCache
+
+        cache = FeatureCache(extractor)
     sets = []
     skipped: list = []
-    for img in iter_source_images(source, args.topic, args.every, args.max_images, skipped=skipped):
-        sets.append(extractor.extract(img).descriptors)
+    total = source_image_count(source, args.image_topic, args.every, args.max_images)
+    images = iter_source_images(source, args.image_topic, args.every, args.max_images, skipped=skipped)
+    for topic, stamp, img in progress_bar(images, total=total, desc="features", unit="img",
+                                          enabled=not args.no_progress):
+        feats = cache.extract(source, topic, stamp, img) if cache is not None else extractor.extract(img)
+        sets.append(feats.descriptors)
     if skipped:
         log.warning("%d damaged or unreadable image(s) skipped; the first: %s", len(skipped), skipped[0])
     if not sets:
@@ -139,10 +162,12 @@ def run_train(args) -> int:
     n_desc = sum(len(d) for d in sets)
     log.info("extracted %d descriptors from %d images in %.1f s", n_desc, len(sets), time.perf_counter() - t0)
     t1 = time.perf_counter()
-    if tree == "dp":
-        vocab = train_vocabulary(sets, cfg.vocab, features=cfg.features.kind)
-    else:
-        vocab = train_hkmeans(sets, cfg.vocab.hk_branching, cfg.vocab.hk_depth, cfg.vocab.seed, features=cfg.features.kind)
+    with stage(f"training a {tree} tree on {n_desc} descriptors", enabled=not args.no_progress):
+        if tree == "dp":
+            vocab = train_vocabulary(sets, cfg.vocab, features=cfg.features.kind)
+        else:
+            vocab = train_hkmeans(sets, cfg.vocab.hk_branching, cfg.vocab.hk_depth, cfg.vocab.seed,
+                                  features=cfg.features.kind)
     with write_guard(out):
         vocab.save(out)
     print(f"{out}: {len(vocab)} words, depth {vocab.depth}, tree {tree}, {cfg.features.kind} features "

@@ -22,6 +22,7 @@ ALIGN_LABELS = {
     "se3": "SE(3) Umeyama alignment",
     "sim3": "Sim(3) Umeyama alignment",
     "scale": "scale-only correction",
+    "origin": "origin alignment",  # evo's --align_origin (slam_lcd.eval.relations)
 }
 
 

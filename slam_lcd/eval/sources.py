@@ -30,13 +30,15 @@ def split_log_topic(spec: str) -> tuple[str, str] | None:
     return None
 
 
-def load_trajectory_source(spec: str, fmt: str | None = None, times_path: str | None = None) -> Trajectory:
-    """Read a trajectory from a file (format ``fmt`` or detected) or from ``LOG:TOPIC``."""
+def load_trajectory_source(spec: str, fmt: str | None = None, times_path: str | None = None, *,
+                           file_rotations: bool = False) -> Trajectory:
+    """Read a trajectory from a file (format ``fmt`` or detected) or from ``LOG:TOPIC``
+    (``file_rotations``: KITTI matrices as written, see :func:`slam_lcd.io.trajectory_files.read_kitti`)."""
     log_topic = split_log_topic(str(spec))
     if log_topic is None:
         if not Path(spec).exists():
             raise FileMissingError("trajectory file not found", spec)
-        return read_trajectory(spec, fmt, times_path=times_path)
+        return read_trajectory(spec, fmt, times_path=times_path, file_rotations=file_rotations)
     log, topic = log_topic
     if not Path(log).exists():
         raise FileMissingError("log not found (argument read as LOG:TOPIC)", log)

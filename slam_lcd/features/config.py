@@ -48,6 +48,7 @@ class FeaturesConfig:
     feature_cache: bool = True
     # allow downloading the official weights when none are found locally
     allow_download: bool = True
-    # download source and expected sha256 of the SuperPoint weights
-    weights_url: str = SUPERPOINT_URL
+    # download source of the SuperPoint weights; None = $SLAM_LCD_SUPERPOINT_URL, else the
+    # official release (SUPERPOINT_URL); the download is checked against weights_sha256
+    weights_url: str | None = None
     weights_sha256: str = SUPERPOINT_SHA256

@@ -7,10 +7,14 @@ Resolution order (first hit wins):
 3. ``superpoint_v1.pth`` in the user cache directory (``$SLAM_LCD_CACHE_DIR`` or
    ``~/.cache/slam-lcd``);
 4. a download of the official Magic Leap release, checked against its sha256, into that
-   cache directory (written atomically, so an interrupted download leaves nothing).
+   cache directory (written atomically, so an interrupted download leaves nothing). The
+   download address is ``features.weights_url``, else ``$SLAM_LCD_SUPERPOINT_URL`` (a mirror;
+   tests point it at a closed loopback port to play "offline"), else the official release.
 
 An explicit path or environment variable that points nowhere is an error, never silently
-skipped: a user who names a file means that file.
+skipped: a user who names a file means that file. "No weights anywhere and no download"
+is its own error (:class:`WeightsUnavailableError`), so that ``slam-lcd demo`` can fall
+back to ORB on exactly that case and nothing else.
 """
 from __future__ import annotations
 
@@ -18,9 +22,9 @@ import hashlib
 import os
 import urllib.error
 import urllib.request
+from dataclasses import dataclass
 from pathlib import Path
 
-import torch
 
 from ..atomic import atomic_path
 from ..errors import DownloadError, WeightsError
@@ -28,11 +32,26 @@ from .config import SUPERPOINT_SHA256, SUPERPOINT_URL
 
 ENV_WEIGHTS = "SLAM_LCD_SUPERPOINT_WEIGHTS"
 ENV_CACHE = "SLAM_LCD_CACHE_DIR"
+ENV_URL = "SLAM_LCD_SUPERPOINT_URL"
 WEIGHTS_NAME = "superpoint_v1.pth"
+
+
+class WeightsUnavailableError(WeightsError):
+    """No weights file anywhere it is looked for, and none could be downloaded (offline,
+    HTTP error, or downloading disabled). A named file that is missing is *not* this error."""
 
 
 class WeightsDownloadError(WeightsError, DownloadError):
     """The download of the weights failed (offline, HTTP error, checksum mismatch)."""
+
+
+class WeightsOfflineError(WeightsDownloadError, WeightsUnavailableError):
+    """The download could not reach the file (no network, refused connection, HTTP error)."""
+
+
+def download_url(url: str | None = None) -> str:
+    """Where the weights are downloaded from: ``url``, ``$SLAM_LCD_SUPERPOINT_URL``, the official release."""
+    return url or os.environ.get(ENV_URL) or SUPERPOINT_URL
 
 
 def cache_dir(override: str | Path | None = None) -> Path:
@@ -71,10 +90,10 @@ def download_weights(url: str, target: Path, sha256: str | None, timeout: float 
                 )
     except (urllib.error.URLError, OSError, ValueError) as e:
         reason = getattr(e, "reason", None) or e
-        raise WeightsDownloadError(
+        raise WeightsOfflineError(
             f"SuperPoint weights not found locally and the download from {url} failed ({reason}). "
             f"Put the official weights file at {target}, or pass --weights PATH, "
-            f"or set ${ENV_WEIGHTS}",
+            f"or set ${ENV_WEIGHTS} (or use the ORB baseline: --features orb)",
             target,
         ) from None
     return target
@@ -84,7 +103,7 @@ def resolve_weights(
     path: str | Path | None = None,
     *,
     cache: str | Path | None = None,
-    url: str = SUPERPOINT_URL,
+    url: str | None = None,
     sha256: str | None = SUPERPOINT_SHA256,
     allow_download: bool = True,
 ) -> Path:
@@ -104,12 +123,13 @@ def resolve_weights(
     if target.is_file():
         return target
     if not allow_download:
-        raise WeightsError(
+        raise WeightsUnavailableError(
             f"SuperPoint weights not found and downloading is disabled. Put the official weights file "
-            f"({WEIGHTS_NAME}) at {target}, or pass --weights PATH, or set ${ENV_WEIGHTS}",
+            f"({WEIGHTS_NAME}) at {target}, or pass --weights PATH, or set ${ENV_WEIGHTS} "
+            f"(or use the ORB baseline: --features orb)",
             target,
         )
-    return download_weights(url, target, sha256)
+    return download_weights(download_url(url), target, sha256)
 
 
 def _unwrap(obj):
@@ -125,8 +145,10 @@ def _unwrap(obj):
     return obj
 
 
-def load_state_dict_checked(model: torch.nn.Module, path: str | Path) -> None:
+def load_state_dict_checked(model: "torch.nn.Module", path: str | Path) -> None:
     """Load ``path`` into ``model`` with ``strict=True``; any problem is a one-line WeightsError."""
+    import torch  # here, not at import: `slam-lcd weights` and the resolver need no torch
+
     path = Path(path)
     try:
         obj = torch.load(path, map_location="cpu", weights_only=True)
@@ -166,3 +188,54 @@ def load_state_dict_checked(model: torch.nn.Module, path: str | Path) -> None:
     if bad:
         raise WeightsError(f"weights contain NaN/inf values in {bad[:4]}", path)
     model.load_state_dict({k: v.float() for k, v in sd.items()}, strict=True)
+
+
+# --------------------------------------------------------------------------- report (`slam-lcd weights`)
+@dataclass
+class WeightsCandidate:
+    """One place the resolver looks, in order, and what is there."""
+
+    source: str  # how it is named: the flag, the environment variable, the cache, the download
+    location: str  # a path, or the download URL
+    state: str  # 'not given', 'found', 'missing', 'would download', ...
+
+
+@dataclass
+class WeightsReport:
+    candidates: list[WeightsCandidate]
+    used: Path | None  # the file a run would load now (None: a download is needed)
+    error: str | None = None  # why there is no file (a named file that is missing)
+    sha256: str | None = None
+
+    @property
+    def official(self) -> bool:
+        return self.sha256 == SUPERPOINT_SHA256
+
+
+def weights_report(
+    path: str | Path | None = None,
+    *,
+    cache: str | Path | None = None,
+    url: str | None = None,
+    allow_download: bool = True,
+) -> WeightsReport:
+    """Where weights are looked for (the order of :func:`resolve_weights`) and which file is used; no download."""
+    env = os.environ.get(ENV_WEIGHTS)
+    target = cache_dir(cache) / WEIGHTS_NAME
+    rows = [
+        WeightsCandidate("--weights / features.weights", str(Path(path).expanduser()) if path else "-",
+                         "not given" if not path else ("found" if Path(path).expanduser().is_file() else "missing")),
+        WeightsCandidate(f"${ENV_WEIGHTS}", env or "-",
+                         "not set" if not env else ("found" if Path(env).expanduser().is_file() else "missing")),
+        WeightsCandidate("cache", str(target), "found" if target.is_file() else "missing"),
+        WeightsCandidate("download", download_url(url), "enabled" if allow_download else "disabled"),
+    ]
+    used = error = None
+    for k, row in enumerate(rows[:3]):
+        if row.state == "found":
+            used = Path(row.location)
+            break
+        if row.state == "missing" and k < 2:  # a named file that is missing stops the search (never skipped)
+            error = f"{row.source} names {row.location}, which does not exist"
+            break
+    return WeightsReport(rows, used, error, sha256_of(used) if used is not None else None)

@@ -260,8 +260,13 @@ def read_kitti_times(path: str | Path) -> tuple[np.ndarray, list[int]]:
     return np.asarray(stamps, dtype=np.int64), lines
 
 
-def read_kitti(path: str | Path, times_path: str | Path | None = None) -> Trajectory:
-    """Read a KITTI pose file (12 values per line); stamps from ``times_path`` or frame index (s)."""
+def read_kitti(path: str | Path, times_path: str | Path | None = None, *, file_rotations: bool = False) -> Trajectory:
+    """Read a KITTI pose file (12 values per line); stamps from ``times_path`` or frame index (s).
+
+    The 3x3 blocks are orthonormal only to the printed precision (~1e-7 in KITTI-00) and are
+    projected to the nearest rotation; ``file_rotations=True`` keeps them as written (after the
+    same check), as evo does, so that ``slam-lcd ate`` equals evo to the last digits.
+    """
     path = Path(path)
     lines, rows = _collect(path, 12, "(row-major 3x4 [R|t], KITTI)")
     if not rows:
@@ -277,7 +282,7 @@ def read_kitti(path: str | Path, times_path: str | Path | None = None) -> Trajec
             f"line {lines[i]}: 3x3 part is not a rotation matrix (off by {deviation[i]:.3g})", path
         )
     poses = np.tile(np.eye(4), (len(values), 1, 1))
-    poses[:, :3, :3] = R_fixed
+    poses[:, :3, :3] = R if file_rotations else R_fixed
     poses[:, :3, 3] = values[:, :, 3]
     if times_path is not None:
         stamps, _ = read_kitti_times(times_path)
@@ -366,13 +371,14 @@ def detect_format(path: str | Path) -> str:
     raise TrajectoryFormatError("no poses in file", path)
 
 
-def read_trajectory(path: str | Path, fmt: str | None = None, *, times_path: str | Path | None = None) -> Trajectory:
-    """Read a TUM / KITTI / EuRoC file; ``fmt=None`` detects the format."""
+def read_trajectory(path: str | Path, fmt: str | None = None, *, times_path: str | Path | None = None,
+                    file_rotations: bool = False) -> Trajectory:
+    """Read a TUM / KITTI / EuRoC file; ``fmt=None`` detects the format (``file_rotations``: see :func:`read_kitti`)."""
     fmt = detect_format(path) if fmt is None else fmt.lower()
     if fmt == "tum":
         return read_tum(path)
     if fmt == "kitti":
-        return read_kitti(path, times_path=times_path)
+        return read_kitti(path, times_path=times_path, file_rotations=file_rotations)
     if fmt == "euroc":
         return read_euroc(path)
     raise UnsupportedFormatError(f"unknown trajectory format {fmt!r}; known: {', '.join(FORMATS)}", path)

@@ -14,10 +14,9 @@ import math
 import numpy as np
 
 from ..errors import InvalidPoseError
-from ..geometry import quat_to_rot, rot_to_quat
+from ..geometry import ROS_TO_GTSAM_ORDER, quat_to_rot, ros_covariance_to_gtsam, rot_to_quat
 
-# permutation from ROS [x y z rx ry rz] to GTSAM [rx ry rz tx ty tz]
-_ROS_TO_GTSAM = np.array([3, 4, 5, 0, 1, 2])
+_ROS_TO_GTSAM = ROS_TO_GTSAM_ORDER  # permutation from ROS [x y z rx ry rz] to GTSAM [rx ry rz tx ty tz]
 
 
 def checked_quat(x: float, y: float, z: float, w: float, what: str = "quaternion") -> tuple[float, float, float, float]:
@@ -59,18 +58,10 @@ def tq_from_pose(T: np.ndarray, what: str = "pose") -> tuple[tuple[float, float,
 def ros_cov_to_gtsam(cov36, R: np.ndarray) -> np.ndarray | None:
     """ROS 6x6 pose covariance (parent axes, [x y z rx ry rz]) -> GTSAM tangent order in body frame.
 
-    Returns None for the ROS "unknown" conventions (all zeros, or ``cov[0] == -1``).
+    Returns None for the ROS "unknown" conventions (all zeros, or ``cov[0] == -1``); the public
+    name is :func:`slam_lcd.geometry.ros_covariance_to_gtsam`.
     """
-    c = np.asarray(cov36, dtype=np.float64).reshape(6, 6)
-    if not c.any() or c[0, 0] == -1:
-        return None
-    if not np.all(np.isfinite(c)):
-        raise InvalidPoseError("covariance has NaN/inf values")
-    c = c[np.ix_(_ROS_TO_GTSAM, _ROS_TO_GTSAM)]
-    J = np.zeros((6, 6))
-    J[:3, :3] = R.T
-    J[3:, 3:] = R.T
-    return J @ c @ J.T
+    return ros_covariance_to_gtsam(cov36, R, frame="parent")
 
 
 def gtsam_cov_to_ros(cov: np.ndarray | None, R: np.ndarray) -> np.ndarray:

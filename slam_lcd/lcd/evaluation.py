@@ -25,25 +25,13 @@ from ..atomic import atomic_path, write_text
 from ..errors import FileMissingError, InputError, UnsupportedFormatError
 from .detector import CandidateRecord
 
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".pgm", ".ppm", ".tif", ".tiff")
-
-
-def natural_key(name: str):
-    """Sort '2.jpg' before '10.jpg' (and timestamps numerically)."""
-    parts = re.split(r"(\d+(?:\.\d+)?)", name)
-    return [(0, float(t), "") if re.fullmatch(r"\d+(\.\d+)?", t) else (1, 0.0, t) for t in parts if t]
+from ..io.image_folder import IMAGE_SUFFIXES, list_image_files, natural_key  # noqa: F401  (re-exported)
 
 
 def list_images(folder: str | Path, exclude: Iterable[str | Path] = ()) -> list[Path]:
-    """Image files of ``folder`` in natural order, without the files in ``exclude`` (e.g. a GT image)."""
-    folder = Path(folder)
-    if not folder.is_dir():
-        raise FileMissingError("image folder not found", folder)
-    skip = {Path(e).resolve() for e in exclude if e is not None}
-    files = [p for p in folder.iterdir()
-             if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES and p.resolve() not in skip]
-    files.sort(key=lambda p: natural_key(p.name))
-    return files
+    """Image files of ``folder`` in natural order, without ``exclude`` and ground-truth files
+    (see :mod:`slam_lcd.io.image_folder`)."""
+    return list_image_files(folder, exclude)
 
 
 # ----------------------------------------------------------------------------- ground truth

@@ -209,9 +209,9 @@ def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int =
         workers = 1 if (os.cpu_count() or 1) >= 2 else 0
     frames_iter = render_frames(sc, color=color, depth=depth, stereo=stereo, seed=seed, workers=workers)
     if progress:
-        from tqdm import tqdm
+        from ..progress import progress_bar
 
-        frames_iter = tqdm(frames_iter, total=len(sc.cam_stamps), unit="frame", desc="rendering", leave=False)
+        frames_iter = progress_bar(frames_iter, total=len(sc.cam_stamps), unit="frame", desc="rendering")
     try:
         if fmt == "folder":
             counts = _write_folder(out, sc, frames_iter, color=color, depth=depth, stereo=stereo)

@@ -1,0 +1,70 @@
+"""Image folders as a source of frames: which files are frames, in which order.
+
+Why here: ``vocab train`` and ``eval-lcd`` both read image folders, and both must agree on
+what a frame is. A frame is a file with an image extension whose header an OpenCV decoder
+recognises, in natural name order (``2.jpg`` before ``10.jpg``, TUM stamps numerically).
+Ground-truth files kept beside the frames are never frames: a file passed as ground truth
+(``exclude``) and any file whose name marks it as ground truth (``samples_GT.bmp``,
+``groundtruth.png``, ``gt.png``: a ``GT`` word, or "groundtruth" / "ground_truth") are
+left out. A file with an image extension that no decoder recognises is an error naming it,
+not a silent skip: skipping would shift every later frame's index against a loop matrix.
+"""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Iterable
+
+from ..errors import FileMissingError, InputError
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".pgm", ".ppm", ".tif", ".tiff")
+
+# a 'GT' word in the stem (samples_GT, gt, loops-gt, GT_matrix), case-insensitive, or
+# 'groundtruth' / 'ground_truth' / 'ground-truth' anywhere
+_GT_WORD = re.compile(r"(?:^|[^a-z0-9])gt(?:$|[^a-z0-9])", re.IGNORECASE)
+_GT_LONG = re.compile(r"ground[_\- ]?truth", re.IGNORECASE)
+
+
+def natural_key(name: str):
+    """Sort '2.jpg' before '10.jpg' (and timestamps numerically)."""
+    parts = re.split(r"(\d+(?:\.\d+)?)", name)
+    return [(0, float(t), "") if re.fullmatch(r"\d+(\.\d+)?", t) else (1, 0.0, t) for t in parts if t]
+
+
+def is_ground_truth_name(path: str | Path) -> bool:
+    """True for a file whose name says it is ground truth (``samples_GT.bmp``), not a frame."""
+    stem = Path(path).stem
+    return bool(_GT_WORD.search(stem) or _GT_LONG.search(stem))
+
+
+def list_image_files(folder: str | Path, exclude: Iterable[str | Path | None] = ()) -> list[Path]:
+    """The frames of ``folder`` in natural order (see the module docstring for what is left out)."""
+    import cv2
+
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise FileMissingError("image folder not found", folder)
+    skip = {Path(e).resolve() for e in exclude if e is not None}
+    files = [p for p in folder.iterdir()
+             if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES and p.resolve() not in skip
+             and not is_ground_truth_name(p)]
+    for p in files:
+        if not cv2.haveImageReader(str(p)):
+            raise InputError(f"has an image extension but no image decoder recognises its contents "
+                             f"(move it out of the folder {folder})", p)
+    files.sort(key=lambda p: natural_key(p.name))
+    return files
+
+
+def read_frame(path: str | Path):
+    """One frame as eval-lcd's folder reader gives it (:func:`slam_lcd.lcd.sources.folder_frames`):
+    the file's own channels, colour as RGB. Unreadable → InputError, damaged → DamagedImageError
+    (:func:`slam_lcd.image_files.read_image`), each naming the file."""
+    import cv2
+
+    from ..image_files import read_image
+
+    img = read_image(path, cv2.IMREAD_UNCHANGED)
+    if img.ndim == 3:
+        img = cv2.cvtColor(img[:, :, :3], cv2.COLOR_BGR2RGB)
+    return img
