@@ -168,13 +168,13 @@ def test_fresh_words_are_searched_exhaustively_then_indexed():
 def test_index_is_refitted_as_the_vocabulary_grows():
     rng = np.random.default_rng(2)
     centres = clustered_words(rng, 9000)
-    ix = WordIndex(32, min_words=1000, pca_dims=16, fresh_images=0, rebuild_growth=2.0)
+    ix = WordIndex(32, min_words=1000, pca_dims=32, fresh_images=0, rebuild_growth=2.0)
     sizes = [1000, 1500, 2100, 4500, 9000]
     for n in sizes:
         ix.update(centres[:n], np.arange(n))
     assert ix.n_builds == 4  # at 1000, 2100 (>= 2x1000), 4500 (>= 2x2100), 9000 (>= 2x4500)
     assert ix.n_indexed == ix.graph.ntotal == 9000
-    grows = WordIndex(32, min_words=1000, pca_dims=16, fresh_images=0)  # default: the graph just grows
+    grows = WordIndex(32, min_words=1000, pca_dims=32, fresh_images=0)  # default: the graph just grows
     for n in sizes:
         grows.update(centres[:n], np.arange(n))
     assert grows.n_builds == 1 and grows.graph.ntotal == 9000

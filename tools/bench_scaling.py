@@ -165,7 +165,8 @@ def grow(stream: PlaceStream, n: int, conf, checkpoints: list[int], label: str, 
     from slam_lcd.vocab import BowDatabase
     from slam_lcd.vocab.descriptors import as_unit_vectors
 
-    rss0 = rss_bytes()
+    rss0 = rss_prev = rss_bytes()
+    kf_prev = 0
     db = BowDatabase(None, conf)
     times = np.zeros((n, 3))
     hits = []
@@ -191,18 +192,20 @@ def grow(stream: PlaceStream, n: int, conf, checkpoints: list[int], label: str, 
             row = {"path": label, "keyframes": k + 1, "words": db.n_words,
                    "quantise": times[lo:k + 1, 0].mean() * 1e3, "query": times[lo:k + 1, 1].mean() * 1e3,
                    "insert": times[lo:k + 1, 2].mean() * 1e3, "rss_kb_per_kf": (rss_bytes() - rss0) / (k + 1) / 1024,
+                   "rss_kb_marginal": (rss_bytes() - rss_prev) / (k + 1 - kf_prev) / 1024,
                    "revisit_top1": float(np.mean(hits)) if hits else float("nan"), "agree": float("nan"),
                    "exhaustive_ms": float("nan"), "index": db.words.index.stats()}
             row["total"] = row["quantise"] + row["query"] + row["insert"]
             if measure_recall:
                 row["agree"], row["nearest_recall"], row["exhaustive_ms"] = _agreement(db, as_unit_vectors(next_desc))
             rows.append(row)
+            rss_prev, kf_prev = rss_bytes(), k + 1
             print(_fmt(row), flush=True)
     return rows
 
 
 _HEAD = (f"{'path':10s} {'kf':>6s} {'words':>8s} {'quant':>7s} {'query':>7s} {'insert':>7s} {'total':>7s} ms/kf "
-         f"{'kB/kf':>6s} {'agree':>6s} {'nn-rec':>6s} {'exh.ms':>7s} {'revisit@1':>9s}  index")
+         f"{'kB/kf':>6s} {'(marg)':>6s} {'agree':>6s} {'nn-rec':>6s} {'exh.ms':>7s} {'revisit@1':>9s}  index")
 
 
 def _fmt(r: dict) -> str:
@@ -210,7 +213,8 @@ def _fmt(r: dict) -> str:
     share = ix["hinted"] / max(1, ix["hinted"] + ix["searched"])
     ixs = f"graph: {ix['indexed']} words, {share:.0%} of lookups by track hints" if ix["active"] else "exact"
     return (f"{r['path']:10s} {r['keyframes']:6d} {r['words']:8d} {r['quantise']:7.2f} {r['query']:7.2f} "
-            f"{r['insert']:7.2f} {r['total']:7.2f}       {r['rss_kb_per_kf']:6.1f} {r['agree']:6.3f} "
+            f"{r['insert']:7.2f} {r['total']:7.2f}       {r['rss_kb_per_kf']:6.1f} {r['rss_kb_marginal']:6.1f} "
+            f"{r['agree']:6.3f} "
             f"{r.get('nearest_recall', float('nan')):6.3f} {r['exhaustive_ms']:7.1f} {r['revisit_top1']:9.3f}  {ixs}")
 
 
@@ -224,7 +228,7 @@ def bench_database(args) -> None:
     n = args.keyframes
     checkpoints = sorted({c for c in (100, 1000, 5000, 10000) if c <= n} | {n})
     base_n = min(args.baseline_keyframes, n)
-    base_checks = sorted({c for c in (100, 1000) if c <= base_n} | {base_n})
+    base_checks = sorted({c for c in (100, 1000) if c <= base_n} | {base_n}) if base_n > 0 else []
     overrides = dict(kv.split("=", 1) for kv in args.set)
     conf = VocabConfig(idf_source="database", **{k: type(getattr(VocabConfig, k))(v) for k, v in overrides.items()})
     exhaustive = VocabConfig(idf_source="database", ann_min_words=2**62)
@@ -237,7 +241,8 @@ def bench_database(args) -> None:
           "nn-rec = nearest word equal to exhaustive's")
     print(_HEAD)
     t0 = time.perf_counter()
-    base = grow(PlaceStream(n, args.seed, landmarks=table), base_n, exhaustive, base_checks, "exhaustive", False)
+    base = grow(PlaceStream(n, args.seed, landmarks=table), base_n, exhaustive, base_checks, "exhaustive", False) \
+        if base_n > 0 else []
     t_base = time.perf_counter() - t0
     t0 = time.perf_counter()
     new = grow(PlaceStream(n, args.seed, landmarks=table), n, conf, checkpoints, "indexed", True)
@@ -250,6 +255,10 @@ def bench_database(args) -> None:
         if r:
             print(f"  {b['keyframes']:6d} keyframes: quantise x{b['quantise'] / r['quantise']:.1f}  "
                   f"insert x{b['insert'] / r['insert']:.1f}  total x{b['total'] / r['total']:.1f}")
+    print("exhaustive quantise of one keyframe on the indexed run's words (same run) / indexed quantise:")
+    for r in new:
+        print(f"  {r['keyframes']:6d} keyframes, {r['words']:7d} words: {r['exhaustive_ms']:8.1f} ms vs "
+              f"{r['quantise']:6.2f} ms  x{r['exhaustive_ms'] / r['quantise']:.0f}")
     early = by_kf.get(1000) or new[0]
     late = new[-1]
     print(f"growth late/early (total ms/kf at {late['keyframes']} / at {early['keyframes']} keyframes): "
@@ -271,8 +280,8 @@ def main(argv=None) -> None:
     sub = ap.add_subparsers(dest="section", required=True)
     db = sub.add_parser("database", help="BoW database (online vocabulary) grown to N keyframes")
     db.add_argument("--keyframes", type=int, default=10000)
-    db.add_argument("--baseline-keyframes", type=int, default=1000,
-                    help="the exhaustive-search baseline grows to this many keyframes")
+    db.add_argument("--baseline-keyframes", type=int, default=300,
+                    help="the exhaustive-search baseline grows to this many keyframes (0: none)")
     db.add_argument("--landmarks", help=".npz with an array 'desc' of real descriptors used as landmarks")
     db.add_argument("--seed", type=int, default=0)
     db.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="VocabConfig override, e.g. ann_nprobe=4")

@@ -61,9 +61,9 @@ class VocabConfig:
     # links per word in the graph (HNSW M)
     ann_hnsw_m: int = 16
     # beam width of a graph search (more: higher recall, slower)
-    ann_ef_search: int = 32
+    ann_ef_search: int = 24
     # words per descriptor taken from the graph and re-ranked exactly against the current centres
-    ann_candidates: int = 16
+    ann_candidates: int = 12
     # words founded in the last this-many images are searched exhaustively (their centres still move most)
     ann_fresh_images: int = 2
     # a feature matched to the previous image is decided among its match's best words (and the

@@ -154,6 +154,7 @@ class BowDatabase:
         self._logdf_sum = _Growable(np.float64)  # sum tf*ln(1+df) per keyframe (database idf)
         self._df = _Growable(np.float64)  # keyframes containing each word (database idf)
         self._post = _Postings()
+        self._last_gather: tuple | None = None  # (keyframes then, words, kf, tf, pos) of the last scores()
         self._bow_words: list[np.ndarray] = []  # int32 word ids per keyframe (BowVector on access)
         self._bow_counts: list[np.ndarray] = []
 
@@ -245,7 +246,7 @@ class BowDatabase:
             self._df.n = max(self._df.n, self.n_words)
             # df of this keyframe's words rises by one: refresh the normalisers of the keyframes on
             # their postings (only those: the cost is that of a query with these words)
-            kf, tf, pos = self._post.gather(bow.words)
+            kf, tf, pos = self._gather(bow.words)
             old = self._df.a[bow.words]
             delta = np.log(2.0 + old) - np.log(1.0 + old)
             if len(kf):
@@ -263,6 +264,23 @@ class BowDatabase:
         self._index_of[kf_id] = index
         self._bow_words.append(bow.words.astype(np.int32))
         self._bow_counts.append(np.asarray(bow.counts, dtype=np.float64))
+
+    def _gather(self, words: np.ndarray):
+        """Postings of ``words`` (sorted unique), re-using what the last query gathered when no keyframe
+        was added since (the loop detector queries a keyframe, then inserts it: mostly the same words)."""
+        c = self._last_gather
+        if c is None or c[0] != len(self) or not len(c[1]) or not len(words):
+            return self._post.gather(words)
+        c_words, c_kf, c_tf, c_pos = c[1:]
+        loc = np.searchsorted(words, c_words)
+        hit = (loc < len(words)) & (words[np.minimum(loc, len(words) - 1)] == c_words)
+        take = hit[c_pos]
+        missing = np.ones(len(words), dtype=bool)
+        missing[loc[hit]] = False
+        at = np.flatnonzero(missing)
+        kf, tf, pos = self._post.gather(words[at])
+        return (np.concatenate([c_kf[take], kf]), np.concatenate([c_tf[take], tf]),
+                np.concatenate([loc[c_pos[take]], at[pos]]))
 
     def bow(self, kf_id: int) -> BowVector:
         i = self._index_of[kf_id]
@@ -284,6 +302,7 @@ class BowDatabase:
             return out
         a = wq / sq
         kf, tf, pos = self._post.gather(words)
+        self._last_gather = (len(self), words, kf, tf, pos)
         if not len(kf):
             return out
         nk = self._norms_at(kf)

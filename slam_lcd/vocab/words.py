@@ -6,9 +6,10 @@ the word of the feature it matched, whose centre moves (running mean of the memb
 re-normalised); an unmatched feature founds a new word. The number of words therefore
 follows the scene, not a k chosen in advance.
 
-A word keeps its unit centre (float32) and the length of its member sum (float64): the sum is
-``centre * length``, so the running mean needs no second (float64) copy of every centre, which
-halves the memory of a long online run. In online mode (``radius`` set) the nearest existing
+Training keeps each word's member sum in float64 and normalises it (exactly reproducible). In
+online mode (``radius`` set: long runs, up to ~10^6 words) a word keeps its unit centre
+(float32) and the length of its member sum (float64) instead: the sum is ``centre * length``,
+so the running mean needs no float64 copy of every centre (1 kB instead of 3 kB per word). In online mode (``radius`` set) the nearest existing
 word of an unmatched feature comes from a :class:`~slam_lcd.vocab.word_index.WordIndex`
 (exact for small vocabularies, sub-linear above a size).
 """
@@ -16,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .descriptors import default_match_distance
+from .descriptors import default_match_distance, group_sums, normalise_rows
 from .word_index import WordIndex, exact_nearest
 
 
@@ -79,7 +80,9 @@ class IncrementalWords:
         self.radius = radius
         self.index = index
         self.version = 0  # bumped whenever words move or are founded (invalidates cached searches)
-        self._lengths = np.zeros(1024, dtype=np.float64)  # |sum of members| per word
+        # training: float64 member sums; online: |sum of members| per word (sum = centre * length)
+        self._sums = np.zeros((1024, dim), dtype=np.float64) if radius is None else None
+        self._lengths = np.zeros(1024, dtype=np.float64)
         self._centres = np.zeros((1024, dim), dtype=np.float32)
         self._counts = np.zeros(1024, dtype=np.int64)  # features per word
         self._images = np.zeros(1024, dtype=np.int64)  # images in which the word occurs
@@ -110,8 +113,10 @@ class IncrementalWords:
         if need <= cap:
             return
         new = max(need, 2 * cap)
-        for name in ("_lengths", "_centres", "_counts", "_images"):
+        for name in ("_sums", "_lengths", "_centres", "_counts", "_images"):
             old = getattr(self, name)
+            if old is None:
+                continue
             arr = np.zeros((new,) + old.shape[1:], dtype=old.dtype)
             arr[:cap] = old
             setattr(self, name, arr)
@@ -206,10 +211,14 @@ class IncrementalWords:
         touched = words[:0]
         if n:
             touched, inv, per = np.unique(words, return_inverse=True, return_counts=True)
-            sums = self._centres[touched] * self._lengths[touched, None] + _member_sums(desc, inv, per)
-            length = np.linalg.norm(sums, axis=1)
-            self._lengths[touched] = length
-            self._centres[touched] = sums / np.maximum(length, 1e-12)[:, None]
+            if self._sums is not None:
+                self._sums[touched] += group_sums(desc, inv, len(touched))
+                self._centres[touched] = normalise_rows(self._sums[touched])
+            else:
+                sums = self._centres[touched] * self._lengths[touched, None] + _member_sums(desc, inv, per)
+                length = np.linalg.norm(sums, axis=1)
+                self._lengths[touched] = length
+                self._centres[touched] = sums / np.maximum(length, 1e-12)[:, None]
             self._counts[touched] += per
             self._images[touched] += 1
             self.version += 1
