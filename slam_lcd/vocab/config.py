@@ -51,3 +51,25 @@ class VocabConfig:
     # --- online mode (no pre-trained vocabulary) ---
     # an unmatched feature closer than this to an existing word joins it instead of founding a new word
     online_word_radius: float = 0.7
+    # --- online nearest-word search (issue #13; docs/vocab.md "Nearest word at scale") ---
+    # below this many words the nearest word is found exhaustively (one matrix product); from
+    # here on a graph index (faiss HNSW) over projected centres proposes candidates that are
+    # re-ranked exactly (a huge value keeps exhaustive search; the corridor's ~4k words stay exact)
+    ann_min_words: int = 5000
+    # dimensions of the projection (top eigenvectors of the centres' second moment) the graph holds
+    ann_pca_dims: int = 64
+    # links per word in the graph (HNSW M)
+    ann_hnsw_m: int = 16
+    # beam width of a graph search (more: higher recall, slower)
+    ann_ef_search: int = 24
+    # words per descriptor taken from the graph and re-ranked exactly against the current centres
+    ann_candidates: int = 12
+    # words founded in the last this-many images are searched exhaustively (their centres still move most)
+    ann_fresh_images: int = 2
+    # a feature matched to the previous image is decided among its match's best words (and the
+    # match's word) instead of searching the graph, for up to this many images in a row (0: always search)
+    ann_hint_images: int = 2
+    # ... and only when the match is closer than this (a far match says little about the feature's neighbourhood)
+    ann_hint_max_distance: float = 0.5
+    # re-fit the projection and rebuild the graph when the vocabulary has grown by this factor (0: never)
+    ann_rebuild_growth: float = 0.0

@@ -9,6 +9,11 @@ idf comes from the vocabulary's training images, or (``idf_source='database'``, 
 online mode) from the database so far, smoothed as ``ln((1+N)/(1+n_w)) + 1``. Postings store
 raw term counts and each keyframe's normaliser is kept up to date incrementally as document
 frequencies change, so old keyframes stay consistent while words and keyframes are added.
+
+Cost per keyframe: a query visits the postings of its words, and an insert refreshes the
+normalisers of exactly the keyframes on those postings (the same entries), so neither touches
+keyframes that share no word with it. In online mode the nearest-word search is sub-linear in
+the word count above ``ann_min_words`` (:mod:`slam_lcd.vocab.word_index`).
 """
 from __future__ import annotations
 
@@ -21,6 +26,7 @@ from ..types import LoopCandidate
 from .config import VocabConfig
 from .descriptors import as_unit_vectors, descriptor_kind
 from .vocabulary import Vocabulary
+from .word_index import WordIndex
 from .words import IncrementalWords
 
 
@@ -58,42 +64,49 @@ def bow_similarity(a: BowVector, b: BowVector, idf: np.ndarray) -> float:
 
 
 class _Postings:
-    """Per-word growable arrays of (keyframe index, term count)."""
+    """Per-word growable arrays of (keyframe index int32, term count float64), in lists indexed by word id."""
 
     def __init__(self):
-        self.kf: dict[int, np.ndarray] = {}
-        self.tf: dict[int, np.ndarray] = {}
-        self.size: dict[int, int] = {}
+        self.kf: list[np.ndarray | None] = []
+        self.tf: list[np.ndarray | None] = []
+        self.size = np.zeros(0, dtype=np.int64)  # entries per word
 
     def append(self, kf_index: int, bow: BowVector) -> None:
         kf, tf, size = self.kf, self.tf, self.size
-        for w, c in zip(bow.words.tolist(), bow.counts.tolist()):
-            n = size.get(w, 0)
+        top = int(bow.words[-1]) + 1 if len(bow) else 0
+        if top > len(size):
+            grow = max(top, 2 * len(size)) - len(size)
+            kf.extend([None] * grow)
+            tf.extend([None] * grow)
+            self.size = size = np.concatenate([size, np.zeros(grow, np.int64)])
+        words = bow.words
+        counts = size[words]
+        for w, n, c in zip(words.tolist(), counts.tolist(), bow.counts.tolist()):
             if n == 0:
-                kf[w] = np.empty(4, dtype=np.int64)
-                tf[w] = np.empty(4, dtype=np.float64)
+                kf[w] = np.empty(2, dtype=np.int32)
+                tf[w] = np.empty(2, dtype=np.float64)
             elif n == len(kf[w]):
-                kf[w] = np.concatenate([kf[w], np.empty(n, dtype=np.int64)])
+                kf[w] = np.concatenate([kf[w], np.empty(n, dtype=np.int32)])
                 tf[w] = np.concatenate([tf[w], np.empty(n, dtype=np.float64)])
             kf[w][n] = kf_index
             tf[w][n] = c
-            size[w] = n + 1
+        size[words] = counts + 1
 
     def gather(self, words: np.ndarray):
         """Concatenated postings of ``words``: (keyframe index, term count, position of the word in ``words``)."""
-        ks, ts, lens = [], [], []
-        kf, tf, size = self.kf, self.tf, self.size
-        for w in words.tolist():
-            n = size.get(w, 0)
-            lens.append(n)
-            if n:
-                ks.append(kf[w][:n])
-                ts.append(tf[w][:n])
-        if not ks:
+        size = self.size
+        lens = np.zeros(len(words), dtype=np.int64)
+        inside = words < len(size)
+        lens[inside] = size[words[inside]]
+        at = np.flatnonzero(lens)
+        if not len(at):
             e = np.zeros(0, dtype=np.int64)
             return e, np.zeros(0), e
-        pos = np.repeat(np.arange(len(words)), lens)
-        return np.concatenate(ks), np.concatenate(ts), pos
+        ws, ns = words[at].tolist(), lens[at].tolist()
+        kf, tf = self.kf, self.tf
+        k = np.concatenate([kf[w][:n] for w, n in zip(ws, ns)]).astype(np.int64)
+        t = np.concatenate([tf[w][:n] for w, n in zip(ws, ns)])
+        return k, t, np.repeat(at, lens[at])
 
 
 class _Growable:
@@ -141,7 +154,9 @@ class BowDatabase:
         self._logdf_sum = _Growable(np.float64)  # sum tf*ln(1+df) per keyframe (database idf)
         self._df = _Growable(np.float64)  # keyframes containing each word (database idf)
         self._post = _Postings()
-        self._bows: list[BowVector] = []
+        self._last_gather: tuple | None = None  # (keyframes then, words, kf, tf, pos) of the last scores()
+        self._bow_words: list[np.ndarray] = []  # int32 word ids per keyframe (BowVector on access)
+        self._bow_counts: list[np.ndarray] = []
 
     def __len__(self) -> int:
         return len(self.kf_ids)
@@ -161,10 +176,11 @@ class BowDatabase:
         df = self._df.a[: max(self.n_words, self._df.n)] if words is None else self._df.a[words]
         return np.log((1.0 + len(self)) / (1.0 + df)) + 1.0
 
-    def _norms(self) -> np.ndarray:
+    def _norms_at(self, kf: np.ndarray) -> np.ndarray:
+        """Normalisers ``sum_w tf_w * idf_w`` of the keyframes at indices ``kf`` (current idf)."""
         if not self.idf_from_database:
-            return self._norm_fixed.view
-        return (np.log(1.0 + len(self)) + 1.0) * self._total.view - self._logdf_sum.view
+            return self._norm_fixed.a[kf]
+        return (np.log(1.0 + len(self)) + 1.0) * self._total.a[kf] - self._logdf_sum.a[kf]
 
     # ------------------------------------------------------------- quantising
     def _check(self, desc: np.ndarray) -> np.ndarray:
@@ -188,10 +204,8 @@ class BowDatabase:
             return BowVector.from_word_ids(np.zeros(0, dtype=np.int64))
         # online: nearest existing word, as add() would assign it; a feature farther than the word
         # radius would found a new word that no keyframe holds yet, so it is left out
-        u = as_unit_vectors(d)
-        sims = u @ self.words.centres.T
-        best = sims.argmax(axis=1)
-        dist = np.sqrt(np.maximum(2.0 - 2.0 * sims[np.arange(len(u)), best], 0.0))
+        best, sim = self.words.nearest(as_unit_vectors(d))
+        dist = np.sqrt(np.maximum(2.0 - 2.0 * sim, 0.0))
         return BowVector.from_word_ids(best[dist < self.conf.online_word_radius])
 
     # ------------------------------------------------------------------- add
@@ -208,7 +222,8 @@ class BowDatabase:
             u = as_unit_vectors(d)
             if self.words is None:
                 self.words = IncrementalWords(u.shape[1], self.conf.match_ratio, self.conf.match_max_distance,
-                                              self._desc_kind, radius=self.conf.online_word_radius)
+                                              self._desc_kind, radius=self.conf.online_word_radius,
+                                              index=WordIndex.from_config(u.shape[1], self.conf))
             bow = BowVector.from_word_ids(self.words.add_image(u))
         self._insert(kf_id, stamp_ns, bow)
         return bow
@@ -229,13 +244,13 @@ class BowDatabase:
         if self.idf_from_database:
             self._df.ensure(self.n_words)
             self._df.n = max(self._df.n, self.n_words)
-            # df of this keyframe's words rises by one: refresh the normalisers of keyframes that share them
-            kf, tf, pos = self._post.gather(bow.words)
+            # df of this keyframe's words rises by one: refresh the normalisers of the keyframes on
+            # their postings (only those: the cost is that of a query with these words)
+            kf, tf, pos = self._gather(bow.words)
             old = self._df.a[bow.words]
             delta = np.log(2.0 + old) - np.log(1.0 + old)
             if len(kf):
-                n = self._logdf_sum.n
-                self._logdf_sum.a[:n] += np.bincount(kf, weights=tf * delta[pos], minlength=n)
+                np.add.at(self._logdf_sum.a, kf, tf * delta[pos])
             self._df.a[bow.words] = old + 1.0
             self._logdf_sum.push(float((bow.counts * np.log(2.0 + old)).sum()))
             self._norm_fixed.push(0.0)
@@ -247,10 +262,29 @@ class BowDatabase:
         self._post.append(index, bow)
         self.kf_ids.append(kf_id)
         self._index_of[kf_id] = index
-        self._bows.append(bow)
+        self._bow_words.append(bow.words.astype(np.int32))
+        self._bow_counts.append(np.asarray(bow.counts, dtype=np.float64))
+
+    def _gather(self, words: np.ndarray):
+        """Postings of ``words`` (sorted unique), re-using what the last query gathered when no keyframe
+        was added since (the loop detector queries a keyframe, then inserts it: mostly the same words)."""
+        c = self._last_gather
+        if c is None or c[0] != len(self) or not len(c[1]) or not len(words):
+            return self._post.gather(words)
+        c_words, c_kf, c_tf, c_pos = c[1:]
+        loc = np.searchsorted(words, c_words)
+        hit = (loc < len(words)) & (words[np.minimum(loc, len(words) - 1)] == c_words)
+        take = hit[c_pos]
+        missing = np.ones(len(words), dtype=bool)
+        missing[loc[hit]] = False
+        at = np.flatnonzero(missing)
+        kf, tf, pos = self._post.gather(words[at])
+        return (np.concatenate([c_kf[take], kf]), np.concatenate([c_tf[take], tf]),
+                np.concatenate([loc[c_pos[take]], at[pos]]))
 
     def bow(self, kf_id: int) -> BowVector:
-        return self._bows[self._index_of[kf_id]]
+        i = self._index_of[kf_id]
+        return BowVector(self._bow_words[i].astype(np.int64), self._bow_counts[i])
 
     # ----------------------------------------------------------------- query
     def scores(self, bow: BowVector) -> np.ndarray:
@@ -268,10 +302,10 @@ class BowDatabase:
             return out
         a = wq / sq
         kf, tf, pos = self._post.gather(words)
+        self._last_gather = (len(self), words, kf, tf, pos)
         if not len(kf):
             return out
-        norms = self._norms()
-        nk = norms[kf]
+        nk = self._norms_at(kf)
         b = np.divide(tf * idf_q[pos], nk, out=np.zeros_like(tf), where=nk > 0)
         return np.bincount(kf, weights=np.minimum(a[pos], b), minlength=n)
 

@@ -5,13 +5,62 @@ previous one (mutual nearest neighbours, ratio and distance tests): a matched fe
 the word of the feature it matched, whose centre moves (running mean of the members,
 re-normalised); an unmatched feature founds a new word. The number of words therefore
 follows the scene, not a k chosen in advance.
+
+Training keeps each word's member sum in float64 and normalises it (exactly reproducible). In
+online mode (``radius`` set: long runs, up to ~10^6 words) a word keeps its unit centre
+(float32) and the length of its member sum (float64) instead: the sum is ``centre * length``,
+so the running mean needs no float64 copy of every centre (1 kB instead of 3 kB per word). In online mode (``radius`` set) the nearest existing
+word of an unmatched feature comes from a :class:`~slam_lcd.vocab.word_index.WordIndex`
+(exact for small vocabularies, sub-linear above a size).
 """
 from __future__ import annotations
 
 import numpy as np
 
-from ..features.matching import mutual_nn_match
 from .descriptors import default_match_distance, group_sums, normalise_rows
+from .word_index import WordIndex, exact_nearest
+
+
+def mutual_nn_unit(d1: np.ndarray, d2: np.ndarray, ratio: float | None, max_distance: float | None,
+                   return_distances: bool = False):
+    """:func:`slam_lcd.features.matching.mutual_nn_match` for unit vectors, from one similarity product.
+
+    Same rule (mutual nearest neighbours, ``best < ratio * second``, ``best < max_distance``)
+    with the distance ``sqrt(2 - 2 s)`` of unit vectors; no full distance matrix is formed
+    (the product is most of the cost of growing the words, so the passes over it are few).
+    """
+    n1, n2 = len(d1), len(d2)
+    if n1 == 0 or n2 == 0:
+        m = np.zeros((0, 2), dtype=np.int64)
+        return (m, np.zeros(0, np.float32)) if return_distances else m
+    s = d1 @ d2.T
+    nn12 = s.argmax(axis=1)
+    nn21 = s.argmax(axis=0)
+    i1 = np.arange(n1)
+    best = s[i1, nn12]
+    keep = nn21[nn12] == i1
+    d_best = np.sqrt(np.maximum(2.0 - 2.0 * best, 0.0))
+    if ratio is not None and n2 > 1:
+        s[i1, nn12] = -np.inf
+        d_second = np.sqrt(np.maximum(2.0 - 2.0 * s.max(axis=1), 0.0))
+        keep &= d_best < ratio * np.maximum(d_second, 1e-12)
+    if max_distance is not None:
+        keep &= d_best < max_distance
+    m = np.stack([i1[keep], nn12[keep]], axis=1).astype(np.int64)
+    return (m, d_best[keep].astype(np.float32)) if return_distances else m
+
+
+def _member_sums(desc: np.ndarray, inv: np.ndarray, per: np.ndarray) -> np.ndarray:
+    """Sum of the rows of ``desc`` per word (``inv``: row -> touched word, ``per``: rows per word), float64.
+
+    Most words get one member per image: those rows are copied, only the rest are added up.
+    """
+    out = np.zeros((len(per), desc.shape[1]), dtype=np.float64)
+    single = per[inv] == 1
+    out[inv[single]] = desc[single]
+    if not single.all():
+        np.add.at(out, inv[~single], desc[~single].astype(np.float64))
+    return out
 
 
 class IncrementalWords:
@@ -20,15 +69,20 @@ class IncrementalWords:
     ``radius``: in online mode, an unmatched feature whose nearest existing word is closer
     than this joins that word instead of founding a new one (so a revisited place reuses its
     old words); ``None`` is the paper's training rule (unmatched always founds a word).
+    ``index``: the nearest-word search used with ``radius`` (default: exact search).
     """
 
     def __init__(self, dim: int, ratio: float | None = 0.9, max_distance: float | None = None,
-                 kind: str = "float", radius: float | None = None):
+                 kind: str = "float", radius: float | None = None, index: WordIndex | None = None):
         self.dim = dim
         self.ratio = ratio
         self.max_distance = default_match_distance(kind) if max_distance is None else max_distance
         self.radius = radius
-        self._sums = np.zeros((1024, dim), dtype=np.float64)
+        self.index = index
+        self.version = 0  # bumped whenever words move or are founded (invalidates cached searches)
+        # training: float64 member sums; online: |sum of members| per word (sum = centre * length)
+        self._sums = np.zeros((1024, dim), dtype=np.float64) if radius is None else None
+        self._lengths = np.zeros(1024, dtype=np.float64)
         self._centres = np.zeros((1024, dim), dtype=np.float32)
         self._counts = np.zeros(1024, dtype=np.int64)  # features per word
         self._images = np.zeros(1024, dtype=np.int64)  # images in which the word occurs
@@ -36,6 +90,10 @@ class IncrementalWords:
         self.n_images = 0
         self._prev_desc: np.ndarray | None = None
         self._prev_words: np.ndarray | None = None
+        self._prev_cands: np.ndarray | None = None  # each previous feature's candidate words (index mode)
+        self._prev_age: np.ndarray | None = None  # images since that feature's candidates came from the index
+        self._match_cache: tuple | None = None  # (n_images, descriptors, matches to the previous image)
+        self._search_cache: tuple | None = None  # (version, descriptors, ids, sims, candidates, age)
 
     # ------------------------------------------------------------------ state
     @property
@@ -55,11 +113,75 @@ class IncrementalWords:
         if need <= cap:
             return
         new = max(need, 2 * cap)
-        for name in ("_sums", "_centres", "_counts", "_images"):
+        for name in ("_sums", "_lengths", "_centres", "_counts", "_images"):
             old = getattr(self, name)
+            if old is None:
+                continue
             arr = np.zeros((new,) + old.shape[1:], dtype=old.dtype)
             arr[:cap] = old
             setattr(self, name, arr)
+
+    # ----------------------------------------------------------------- search
+    @staticmethod
+    def _same(cached: np.ndarray, desc: np.ndarray) -> bool:
+        return cached is desc or (cached.shape == desc.shape and np.array_equal(cached, desc))
+
+    def _match(self, desc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Matches (row, previous row) of ``desc`` to the previous image and their distances (kept for the same image)."""
+        c = self._match_cache
+        if c is not None and c[0] == self.n_images and self._same(c[1], desc):
+            return c[2], c[3]
+        if len(desc) and self._prev_desc is not None and len(self._prev_desc):
+            m, dist = mutual_nn_unit(desc, self._prev_desc, self.ratio, self.max_distance, return_distances=True)
+        else:
+            m, dist = np.zeros((0, 2), dtype=np.int64), np.zeros(0, np.float32)
+        self._match_cache = (self.n_images, desc, m, dist)
+        return m, dist
+
+    def nearest(self, desc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(word id, similarity) of the nearest existing word of each unit-vector row.
+
+        With an active index, a feature that matches one of the previous image's is decided
+        among that feature's candidate words and its word (see ``ann_hint_images``); the others
+        search the index. The answer is kept until the words change, so a keyframe's query
+        followed by its insertion (the loop detector's order) searches once.
+        """
+        desc = np.ascontiguousarray(desc, dtype=np.float32)
+        return self._searched(desc)[:2]
+
+    def _searched(self, desc: np.ndarray) -> tuple:
+        c = self._search_cache
+        if c is not None and c[0] == self.version and self._same(c[1], desc):
+            return c[2:]
+        n = len(desc)
+        cands = age = None
+        if self.index is None or not self.index.active:
+            ids, sims = exact_nearest(self.centres, desc)
+        else:
+            hints = search = None
+            age = np.zeros(n, dtype=np.int64)
+            m, dist = self._match(desc)
+            if self._prev_cands is not None and len(m):
+                i, j = m[:, 0], m[:, 1]
+                ok = (self._prev_age[j] < self.index.hint_images) & (dist < self.index.hint_max_distance)
+                i, j = i[ok], j[ok]
+                kc = self._prev_cands.shape[1]
+                hints = np.full((n, kc + 1), -1, dtype=np.int64)
+                hints[i, :kc] = self._prev_cands[j]
+                hints[i, kc] = self._prev_words[j]
+                search = np.ones(n, dtype=bool)
+                search[i] = False
+                age[i] = self._prev_age[j] + 1
+            ids, sims, cands = self.index.nearest(self.centres, desc, hints, search)
+        self._search_cache = (self.version, desc, ids, sims, cands, age)
+        return ids, sims, cands, age
+
+    def _nearest_rows(self, desc: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Nearest words of ``desc[rows]`` (exhaustive search, or the cached answer for ``desc``)."""
+        c = self._search_cache
+        if c is not None and c[0] == self.version and self._same(c[1], desc):
+            return c[2][rows], c[3][rows]
+        return exact_nearest(self.centres, desc[rows])
 
     # ----------------------------------------------------------------- update
     def add_image(self, desc: np.ndarray) -> np.ndarray:
@@ -67,28 +189,43 @@ class IncrementalWords:
         desc = np.ascontiguousarray(desc, dtype=np.float32)
         n = len(desc)
         words = np.full(n, -1, dtype=np.int64)
-        if n and self._prev_desc is not None and len(self._prev_desc):
-            m = mutual_nn_match(desc, self._prev_desc, ratio=self.ratio, max_distance=self.max_distance)
-            words[m[:, 0]] = self._prev_words[m[:, 1]]
+        m, _ = self._match(desc)
+        words[m[:, 0]] = self._prev_words[m[:, 1]] if len(m) else words[:0]
+        cands = age = None
         if self.radius is not None and self.n_words:
             free = np.flatnonzero(words < 0)
-            if len(free):
-                sims = desc[free] @ self.centres.T
-                best = sims.argmax(axis=1)
-                dist = np.sqrt(np.maximum(2.0 - 2.0 * sims[np.arange(len(free)), best], 0.0))
-                near = dist < self.radius
-                words[free[near]] = best[near]
+            if self.index is not None and self.index.active:
+                # every row's candidates are kept for the next image's tracked features
+                ids, sims, cands, age = self._searched(desc)
+                best, sim = ids[free], sims[free]
+            else:
+                best, sim = self._nearest_rows(desc, free) if len(free) else (free, np.zeros(0, np.float32))
+            dist = np.sqrt(np.maximum(2.0 - 2.0 * sim, 0.0))
+            near = dist < self.radius
+            words[free[near]] = best[near]
         new = np.flatnonzero(words < 0)
         if len(new):
             self._grow(self.n_words + len(new))
             words[new] = np.arange(self.n_words, self.n_words + len(new))
             self.n_words += len(new)
+        touched = words[:0]
         if n:
             touched, inv, per = np.unique(words, return_inverse=True, return_counts=True)
-            self._sums[touched] += group_sums(desc, inv, len(touched))
+            if self._sums is not None:
+                self._sums[touched] += group_sums(desc, inv, len(touched))
+                self._centres[touched] = normalise_rows(self._sums[touched])
+            else:
+                sums = self._centres[touched] * self._lengths[touched, None] + _member_sums(desc, inv, per)
+                length = np.linalg.norm(sums, axis=1)
+                self._lengths[touched] = length
+                self._centres[touched] = sums / np.maximum(length, 1e-12)[:, None]
             self._counts[touched] += per
             self._images[touched] += 1
-            self._centres[touched] = normalise_rows(self._sums[touched])
+            self.version += 1
+        if self.index is not None:
+            self.index.update(self.centres, touched)
         self.n_images += 1
         self._prev_desc, self._prev_words = desc, words
+        self._prev_cands, self._prev_age = cands, age
+        self._match_cache = self._search_cache = None
         return words

@@ -1,0 +1,225 @@
+"""Nearest-word search of the online vocabulary at scale (issue #13): index vs exhaustive search.
+
+The inverted file only switches on above ``ann_min_words`` (20k by default, beyond the
+corridor's few thousand words); these tests force a low threshold so that the index decides
+while the real sequences grow their words, and compare every decision with exhaustive search
+on the same words.
+"""
+from __future__ import annotations
+
+import functools
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from slam_lcd.vocab import BowDatabase, VocabConfig, as_unit_vectors
+from slam_lcd.vocab.word_index import WordIndex, exact_nearest
+from slam_lcd.vocab.words import IncrementalWords, mutual_nn_unit
+
+FORCED = dict(idf_source="database", ann_min_words=1000)
+
+
+def unit(x):
+    x = np.asarray(x, np.float32)
+    return x / np.linalg.norm(x, axis=1, keepdims=True)
+
+
+@functools.lru_cache(maxsize=None)
+def frame_descriptors(folder: str, weights: str) -> tuple:
+    """SuperPoint descriptors (default settings, at most 1000 per frame) of an image folder, via the feature cache."""
+    from slam_lcd.features import FeatureCache, FeaturesConfig, load_extractor
+    from slam_lcd.lcd.sources import folder_frames
+
+    ex = load_extractor(FeaturesConfig(), weights=weights, device="cpu")
+    cache = FeatureCache(ex)
+    _, _, frames = folder_frames(folder)
+    return tuple(cache.extract(Path(folder), "images", fr.stamp, fr.image).descriptors for fr in frames)
+
+
+@pytest.fixture(scope="module")
+def real_sequences(shared_data, superpoint_weights):
+    """(name, descriptor sets) of the real sequences: 20 KITTI frames (~870 features each, long
+    tracks), 20 TUM desk frames, the 84 corridor frames (~100 features, a revisit)."""
+    from lcd_corridor_cache import corridor_features
+
+    out = []
+    for name in ("kitti", "tum_fr2_desk"):
+        folder = shared_data / "frames" / name
+        if not folder.is_dir():
+            pytest.skip(f"{folder} not found")
+        out.append((name, frame_descriptors(str(folder), str(superpoint_weights))))
+    root = shared_data / "rtabmap_corridor"
+    if not (root / "samples_GT.bmp").is_file():
+        pytest.skip("corridor frames not found")
+    feats = corridor_features(str(root), "superpoint", str(superpoint_weights))
+    out.append(("corridor", tuple(f.descriptors for f in feats)))
+    return out
+
+
+def assignment(ids, sims, radius):
+    """The online rule: the nearest word if within the radius, else -1 (a new word)."""
+    return np.where(np.sqrt(np.maximum(2.0 - 2.0 * sims, 0.0)) < radius, ids, -1)
+
+
+def grow_and_compare(sets, conf):
+    """Grow an online database over ``sets``; before each image, compare the index's decision
+    with exhaustive search over the same words. Returns (assignment agreement, nearest-word
+    recall, descriptors compared, the database)."""
+    db = BowDatabase(None, VocabConfig(**conf))
+    same = same_nn = total = 0
+    for i, d in enumerate(sets):
+        u = as_unit_vectors(d)
+        if db.words is not None and db.words.index.active:
+            ids, sims = db.words.nearest(u)
+            ex_ids, ex_sims = exact_nearest(db.words.centres, u)
+            r = db.conf.online_word_radius
+            same += int((assignment(ids, sims, r) == assignment(ex_ids, ex_sims, r)).sum())
+            same_nn += int((ids == ex_ids).sum())
+            total += len(u)
+        if len(db):
+            db.query(d, top_k=5, exclude_recent_n=5)
+        db.add(i, i * 10**9, d)
+    return same / max(total, 1), same_nn / max(total, 1), total, db
+
+
+def test_index_agrees_with_exhaustive_search_on_real_superpoint(real_sequences):
+    # one stream through all three sequences: the graph is built on KITTI words, then grows on TUM
+    # and corridor words; tracked features are decided by their match's candidates part of the time
+    sets = [d for _, seq in real_sequences for d in seq]
+    agree, recall, total, db = grow_and_compare(sets, FORCED)
+    stats = db.words.index.stats()
+    print(f"\nreal SuperPoint, {len(sets)} images, {db.n_words} words, {total} descriptors decided by the index: "
+          f"same assignment as exhaustive {agree:.4f}, same nearest word {recall:.4f}, index {stats}")
+    assert stats["active"] and stats["hinted"] > 0.2 * total and total > 30000
+    assert agree >= 0.98 and recall >= 0.95
+
+
+def test_every_feature_searches_the_index_when_hints_are_off(real_sequences):
+    # ann_hint_images=0: tracked features search the index too (the pure inverted-file recall)
+    kitti = dict(real_sequences)["kitti"]
+    agree, recall, total, _ = grow_and_compare(list(kitti), dict(FORCED, ann_hint_images=0))
+    assert total > 5000 and agree >= 0.98 and recall >= 0.95
+
+
+def test_same_input_gives_the_same_words(real_sequences):
+    sets = list(dict(real_sequences)["kitti"])
+    runs = []
+    for _ in range(2):
+        db = BowDatabase(None, VocabConfig(**FORCED))
+        bows = [db.add(i, i * 10**9, d) for i, d in enumerate(sets)]
+        runs.append((db, bows))
+    (a, bows_a), (b, bows_b) = runs
+    assert a.words.index.active and a.n_words == b.n_words
+    assert all(np.array_equal(x.words, y.words) and np.array_equal(x.counts, y.counts) for x, y in zip(bows_a, bows_b))
+    assert np.array_equal(a.words.centres, b.words.centres)
+    q = as_unit_vectors(sets[3])
+    assert np.array_equal(a.words.nearest(q)[0], b.words.nearest(q)[0])
+
+
+def test_unit_vector_matching_equals_the_shared_matcher(real_sequences):
+    from slam_lcd.features.matching import mutual_nn_match
+
+    kitti = [as_unit_vectors(d) for d in dict(real_sequences)["kitti"][:6]]
+    for a, b in zip(kitti[1:], kitti[:-1]):
+        m1 = mutual_nn_match(a, b, ratio=0.9, max_distance=0.8)
+        m2 = mutual_nn_unit(a, b, 0.9, 0.8)
+        assert len(m1) > 300 and np.array_equal(m1, m2)
+
+
+# ----------------------------------------------------------------------------- synthetic, fast
+def clustered_words(rng, n, dim=32):
+    return unit(rng.normal(size=(n, dim)))
+
+
+def test_moved_words_are_found_at_their_new_place():
+    rng = np.random.default_rng(0)
+    centres = clustered_words(rng, 3000)
+    ix = WordIndex(32, min_words=1000, pca_dims=16, fresh_images=0)
+    ix.update(centres, np.arange(3000))
+    assert ix.active and ix.n_indexed == ix.graph.ntotal == 3000
+    # members join 300 words and move their centres by ~0.3 (a revisit's worth): the graph holds the
+    # new projected positions, and queries near the new centres find them
+    moved = np.arange(0, 3000, 10)
+    centres[moved] = unit(centres[moved] + 0.3 / np.sqrt(32) * rng.normal(size=(len(moved), 32)))
+    ix.update(centres, moved)
+    assert np.allclose(ix._storage()[moved], centres[moved] @ ix.proj, atol=1e-6)
+    q = unit(centres[moved] + 0.02 * rng.normal(size=(len(moved), 32)))
+    ids, sims, _ = ix.nearest(centres, q)
+    ex_ids, ex_sims = exact_nearest(centres, q)
+    assert (ids == ex_ids).mean() >= 0.97
+    assert np.allclose(sims[ids == ex_ids], ex_sims[ids == ex_ids], atol=1e-5)  # exact similarity, current centre
+
+
+def test_fresh_words_are_searched_exhaustively_then_indexed():
+    rng = np.random.default_rng(1)
+    centres = clustered_words(rng, 2000)
+    ix = WordIndex(32, min_words=1000, pca_dims=16, fresh_images=2)
+    for k in range(4):  # four images of 500 new words each
+        ix.update(centres[: 500 * (k + 1)], np.arange(500 * k, 500 * (k + 1)))
+    assert ix.active and ix.n_indexed == 1000  # the last two images' words are still fresh
+    q = unit(centres[1500:1600] + 0.01 * rng.normal(size=(100, 32)))
+    ids, _, _ = ix.nearest(centres, q)
+    assert np.array_equal(ids, np.arange(1500, 1600))
+    ix.update(centres, np.zeros(0, np.int64))
+    assert ix.n_indexed == 1500
+
+
+def test_index_is_refitted_as_the_vocabulary_grows():
+    rng = np.random.default_rng(2)
+    centres = clustered_words(rng, 9000)
+    ix = WordIndex(32, min_words=1000, pca_dims=32, fresh_images=0, rebuild_growth=2.0)
+    sizes = [1000, 1500, 2100, 4500, 9000]
+    for n in sizes:
+        ix.update(centres[:n], np.arange(n))
+    assert ix.n_builds == 4  # at 1000, 2100 (>= 2x1000), 4500 (>= 2x2100), 9000 (>= 2x4500)
+    assert ix.n_indexed == ix.graph.ntotal == 9000
+    grows = WordIndex(32, min_words=1000, pca_dims=32, fresh_images=0)  # default: the graph just grows
+    for n in sizes:
+        grows.update(centres[:n], np.arange(n))
+    assert grows.n_builds == 1 and grows.graph.ntotal == 9000
+    q = unit(centres[::9] + 0.02 * rng.normal(size=(1000, 32)))
+    for index in (ix, grows):
+        assert (index.nearest(centres, q)[0] == exact_nearest(centres, q)[0]).mean() > 0.97
+
+
+def test_ties_go_to_the_lowest_word_id_like_argmax():
+    # ORB-like vectors (+-1/16): many exact ties in similarity
+    rng = np.random.default_rng(3)
+    bits = rng.integers(0, 2, size=(1500, 64)).astype(np.float32)
+    centres = ((2 * bits - 1) / 8.0).astype(np.float32)
+    centres = np.concatenate([centres, centres[:200]])  # duplicates: equal similarity, higher id
+    ix = WordIndex(64, min_words=1000, pca_dims=32, fresh_images=0)
+    ix.update(centres, np.arange(len(centres)))
+    ids, _, _ = ix.nearest(centres, centres[:200])
+    assert np.array_equal(ids, np.arange(200))
+
+
+def test_online_words_with_index_keep_scores_exact():
+    from slam_lcd.vocab import bow_similarity
+
+    rng = np.random.default_rng(4)
+    landmarks = unit(rng.normal(size=(3000, 64)))
+    db = BowDatabase(None, VocabConfig(idf_source="database", ann_min_words=500))
+    for i in range(30):
+        lm = landmarks[(i * 90 + np.arange(150)) % 3000]
+        db.add(i, i * 10**9, unit(lm + 0.03 * rng.normal(size=lm.shape)))
+    assert db.words.index.active
+    idf = db.idf()
+    for k in (0, 13, 29):
+        direct = [bow_similarity(db.bow(k), db.bow(j), idf) for j in range(30)]
+        assert np.allclose(db.scores(db.bow(k)), direct, atol=1e-9)
+    # revisit of image 4: found, and its words are old ones
+    lm = landmarks[(4 * 90 + np.arange(150)) % 3000]
+    n_before = db.n_words
+    bow = db.add(30, 30 * 10**9, unit(lm + 0.03 * rng.normal(size=lm.shape)))
+    assert db.n_words == n_before
+    assert db.query(bow, top_k=1, exclude_recent_n=1)[0].match_id in (3, 4, 5)
+
+
+def test_training_words_need_no_index():
+    rng = np.random.default_rng(5)
+    w = IncrementalWords(128)
+    for _ in range(3):
+        w.add_image(unit(rng.normal(size=(40, 128))))
+    assert w.index is None and w.n_words == 120
