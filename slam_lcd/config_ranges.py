@@ -81,6 +81,15 @@ RANGES: dict[str, str] = {
     "vocab.exclude_recent_n": "[0, inf)",
     "vocab.min_previous_score": "[0, 1]",
     "vocab.online_word_radius": "(0, 2]",  # on unit vectors
+    "vocab.ann_min_words": "[1, inf)",
+    "vocab.ann_pca_dims": "[1, 4096]",
+    "vocab.ann_hnsw_m": "[2, 256]",
+    "vocab.ann_ef_search": "[1, inf)",
+    "vocab.ann_candidates": "[1, inf)",
+    "vocab.ann_fresh_images": "[0, inf)",
+    "vocab.ann_hint_images": "[0, inf)",
+    "vocab.ann_hint_max_distance": "(0, 2]",
+    "vocab.ann_rebuild_growth": "0 or [1, inf)",  # 0: never
     # lcd
     "lcd.top_k": "[1, inf)",
     "lcd.verify_max_matches": "0 or [3, inf)",  # 0: no budget
