@@ -21,11 +21,26 @@ descriptors (see ``LandmarkTable``), or, with ``--landmarks FILE.npz`` (array ``
 descriptors.
 
     python tools/bench_scaling.py database [--keyframes 10000] [--baseline-keyframes 1000]
+
+Section ``log``: a long demo log (``--laps 10``: ~4,200 frames, ~835 keyframes) run twice
+through ``run_log`` with the default config; the first pass fills the feature cache, the
+second is measured: loop detection per keyframe and per part (BoW query/insert, matching,
+graph, RANSAC, pose), back end, resident memory, all against the keyframe count, the growth
+ratio (last 100 keyframes / keyframes 100-200) and the real-time factor.
+
+Section ``demo``: the 2-lap demo with an empty feature cache, wall time against the log's
+duration and against the bare SuperPoint forward (``forward_raw``, the same model settings)
+of its keyframes, measured in the same run.
+
+    python tools/bench_scaling.py log [--laps 10] [--work DIR] [--weights W]
+    python tools/bench_scaling.py demo [--work DIR] [--weights W]
 """
 from __future__ import annotations
 
 import argparse
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -275,6 +290,130 @@ def bench_database(args) -> None:
           f"{'OK' if ok_m else 'MISSED'}")
 
 
+# ----------------------------------------------------------------------------- whole-log benchmarks
+
+
+def _demo_log(path: Path, laps: float, seed: int) -> Path:
+    from slam_lcd.sim import make_demo_log
+
+    if not path.exists():
+        print(f"rendering a {laps:g}-lap demo log into {path} ...", flush=True)
+        make_demo_log(path, "mcap", laps=laps, seed=seed, depth=True)
+    return path
+
+
+def _config(args, cache_dir: Path, extra: list[str] = ()):
+    from slam_lcd.config import load_config
+
+    sets = [f"features.cache_dir={cache_dir}", "run.plots=false", *extra, *args.set]
+    if args.weights:
+        sets.append(f"features.weights={args.weights}")
+    return load_config("default", sets)
+
+
+def _bare_forward_seconds(log: Path, stamps: np.ndarray, weights, sample: int) -> tuple[float, int]:
+    """Bare SuperPoint network time (forward_raw) over the keyframes' images (a sample, scaled)."""
+    import torch
+
+    from slam_lcd.features import FeaturesConfig, load_extractor
+    from slam_lcd.features.extract import to_gray_float
+    from slam_lcd.io import open_log
+    from slam_lcd.io.decode import decode_image, image_to_gray
+
+    ex = load_extractor(FeaturesConfig(kind="superpoint", feature_cache=False), weights=weights, device="cpu")
+    pick = set(stamps[np.linspace(0, len(stamps) - 1, min(sample, len(stamps))).astype(int)].tolist())
+    images = []
+    with open_log(log) as r:
+        topic = next(t for t, i in r.topics.items() if i.msgtype == "sensor_msgs/msg/Image" and "depth" not in t)
+        for m in r.messages([topic]):
+            if m.stamp in pick:
+                images.append(to_gray_float(image_to_gray(decode_image(m.msg))))
+    times = []
+    with torch.inference_mode():
+        for i, g in enumerate(images):
+            x = torch.from_numpy(g)[None, None]
+            t0 = time.perf_counter()
+            ex.model.forward_raw(x)
+            if i:  # the first call pays one-off set-up
+                times.append(time.perf_counter() - t0)
+    return float(np.mean(times)) * len(stamps), len(images)
+
+
+def _keyframe_stamps(out_dir: Path) -> np.ndarray:
+    from slam_lcd.io.trajectory_files import read_tum
+
+    return read_tum(out_dir / "keyframes_corrected.tum").stamps
+
+
+def _run(log: Path, out_dir: Path, cfg, gt_topic: str | None):
+    from slam_lcd.runner import run_log
+
+    t0 = time.perf_counter()
+    res = run_log(log, out_dir, cfg, gt_topic=gt_topic, progress=False)
+    return res, time.perf_counter() - t0
+
+
+def bench_demo(args) -> None:
+    """2-lap demo, empty feature cache: wall time vs the log's duration and vs bare SuperPoint."""
+    work = Path(args.work)
+    work.mkdir(parents=True, exist_ok=True)
+    log = Path(args.log) if args.log else _demo_log(work / "demo_2laps.mcap", 2.0, args.seed)
+    cache = Path(tempfile.mkdtemp(prefix="cache-", dir=work))  # empty feature cache
+    out = work / "out_demo"
+    res, wall = _run(log, out, _config(args, cache), "/ground_truth/pose")
+    stamps = _keyframe_stamps(out)
+    sp, n = _bare_forward_seconds(log, stamps, args.weights, args.forward_sample)
+    print(f"\n2-lap demo, empty feature cache ({log.name}, {res.log_duration_s:.1f} s of log)")
+    print(f"  keyframes {res.n_keyframes}, loops accepted {res.loops_accepted}, false {res.false_loops_accepted}, "
+          f"ATE {res.ate_before:.3f} m -> {res.ate_after:.3f} m ({100 * res.ate_after / res.ate_before:.1f} %)")
+    print(f"  wall {wall:.1f} s   real-time factor (wall / log) {wall / res.log_duration_s:.2f}")
+    print(f"  bare SuperPoint forward of its {len(stamps)} keyframes {sp:.1f} s (mean of {n}, scaled)   "
+          f"wall / forward {wall / sp:.2f}")
+    for k, v in sorted(res.stages.items()):
+        print(f"    stage {k:20s} {v['seconds']:8.2f} s  {v['calls']:6d} calls")
+
+
+def bench_log(args) -> None:
+    """Per-keyframe loop detection + back end over a long log with features cached."""
+    work = Path(args.work)
+    work.mkdir(parents=True, exist_ok=True)
+    log = Path(args.log) if args.log else _demo_log(work / f"demo_{args.laps:g}laps.mcap", args.laps, args.seed)
+    cache = work / "feature-cache"
+    cfg = _config(args, cache)
+    out = work / "out_log"
+    if not args.skip_warm:
+        print("first pass (fills the feature cache) ...", flush=True)
+        _run(log, work / "out_warm", cfg, "/ground_truth/pose")
+    res, wall = _run(log, out, cfg, "/ground_truth/pose")
+    rows = res.keyframe_seconds
+    n = len(rows)
+    parts = ["bow_query", "matching", "graph", "ransac", "pose", "bow_add", "points3d", "store"]
+    ks = np.array([[r.get("loop_detection", 0.0), r.get("backend", 0.0), r.get("rss_kb", 0)]
+                   + [r.get(p, 0.0) for p in parts] for r in rows], dtype=np.float64)
+    per = ks[:, 0] + ks[:, 1]
+    print(f"\nlong log, features cached ({log.name}, {res.log_duration_s:.1f} s of log, {n} keyframes)")
+    print(f"  loops accepted {res.loops_accepted}, false {res.false_loops_accepted}, "
+          f"ATE {res.ate_before:.3f} m -> {res.ate_after:.3f} m")
+    print(f"  wall {wall:.1f} s   real-time factor {wall / res.log_duration_s:.3f}")
+    head = "".join(f"{p:>9s}" for p in parts)
+    print(f"  keyframes    LCD mean  median     max  backend {head}   RSS MB   (ms per keyframe)")
+    edges = sorted(set([0, 100, 200] + list(range(300, n - 100, max(100, n // 8))) + [max(n - 100, 0), n]))
+    for a, b in zip(edges[:-1], edges[1:]):
+        if b <= a or a >= n:
+            continue
+        seg = ks[a:b]
+        cols = "".join(f"{1e3 * seg[:, 3 + i].mean():9.1f}" for i in range(len(parts)))
+        print(f"  {a:5d}-{b:5d} {1e3 * seg[:, 0].mean():8.1f} {1e3 * np.median(seg[:, 0]):7.1f} "
+              f"{1e3 * seg[:, 0].max():7.1f} {1e3 * seg[:, 1].mean():8.2f} {cols} {seg[-1, 2] / 1024:8.0f}")
+    early = per[100:200].mean() if n >= 200 else float("nan")
+    late = per[-100:].mean()
+    print(f"  LCD + back end per keyframe: keyframes 100-200 {1e3 * early:.1f} ms, last 100 {1e3 * late:.1f} ms, "
+          f"growth late/early {late / early:.2f}")
+    if n > 200:
+        kb = (ks[-1, 2] - ks[100, 2]) / (n - 101)
+        print(f"  resident memory growth after keyframe 100: {kb:.0f} kB per keyframe")
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     sub = ap.add_subparsers(dest="section", required=True)
@@ -286,6 +425,21 @@ def main(argv=None) -> None:
     db.add_argument("--seed", type=int, default=0)
     db.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="VocabConfig override, e.g. ann_nprobe=4")
     db.set_defaults(func=bench_database)
+    for name, func, helptext in (
+        ("log", bench_log, "loop detection + back end per keyframe over a long demo log, features cached"),
+        ("demo", bench_demo, "2-lap demo, empty feature cache: wall vs log duration and vs bare SuperPoint"),
+    ):
+        p = sub.add_parser(name, help=helptext)
+        p.add_argument("--log", help="an existing demo log (default: render one into --work)")
+        p.add_argument("--laps", type=float, default=10.0, help="laps of the rendered log (log section; default 10)")
+        p.add_argument("--seed", type=int, default=0)
+        p.add_argument("--work", default="bench-scaling", help="folder for logs, caches and outputs (default ./bench-scaling)")
+        p.add_argument("--weights", help="SuperPoint weights (default: the usual search)")
+        p.add_argument("--skip-warm", action="store_true", help="log: the feature cache in --work is already filled")
+        p.add_argument("--forward-sample", type=int, default=60,
+                       help="demo: keyframes whose bare forward is timed (mean scaled to all; default 60)")
+        p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE", help="config override")
+        p.set_defaults(func=func)
     args = ap.parse_args(argv)
     args.func(args)
 
