@@ -93,3 +93,18 @@ def test_temporal_consistency_filters_single_detections(corridor, superpoint_wei
             assert any(r.reason.startswith("temporal_pending") for r in det.records)
     # the first two detections of every run of consecutive loops wait for confirmation
     assert 0 < counts[3] <= counts[0] - 2
+
+
+def test_first_accepted_mode_verifies_fewer_candidates_and_records_the_rest(corridor, superpoint_weights):
+    """lcd.verify_until='first_accepted' stops after the first accepted candidate; the others are recorded as skipped."""
+    feats = corridor_features(str(corridor), "superpoint", str(superpoint_weights))
+    counts = {}
+    for mode in ("all", "first_accepted"):
+        det = LoopDetector(LcdConfig(verify="graph+ransac", pose=False, verify_until=mode))
+        for k, f in enumerate(feats):
+            det.add(Keyframe(k, k * 1_000_000_000, np.eye(4), features=f))
+        counts[mode] = (len(det.records), sum(r.reason == "skipped_after_accept" for r in det.records),
+                        sum(r.graph is not None for r in det.records))
+    assert counts["all"][0] == counts["first_accepted"][0]  # every candidate is listed either way
+    assert counts["all"][1] == 0 and counts["first_accepted"][1] > 0
+    assert counts["first_accepted"][2] < counts["all"][2]  # fewer graph verifications

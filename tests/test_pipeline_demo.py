@@ -97,3 +97,20 @@ def test_every_output_written(runs):
     with open_log(d / "corrected.mcap") as r:
         assert "/slam_lcd/corrected" in r.topics and "/odom" in r.topics
         assert r.topics["/slam_lcd/corrected"].count == len(read_tum(d / "corrected.tum"))
+
+
+def test_written_graph_is_at_its_optimum(runs):
+    """graph.g2o of a demo run: graph error at the written values within 1% of an LM solve of that file."""
+    import gtsam
+
+    _, d = runs["mcap"]
+    graph, initial = gtsam.readG2o(str(d / "graph.g2o"), True)
+    first = min(initial.keys())
+    graph.add(gtsam.PriorFactorPose3(first, initial.atPose3(first), gtsam.noiseModel.Isotropic.Sigma(6, 1e-4)))
+    params = gtsam.LevenbergMarquardtParams()
+    params.setRelativeErrorTol(1e-10)
+    params.setMaxIterations(200)
+    optimum = graph.error(gtsam.LevenbergMarquardtOptimizer(graph, initial, params).optimize())
+    at_written = graph.error(initial)
+    print(f"\ngraph.g2o: error at the written values {at_written:.3f}, LM optimum {optimum:.3f}")
+    assert at_written <= 1.01 * optimum + 1e-6

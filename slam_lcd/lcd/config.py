@@ -20,6 +20,13 @@ class LcdConfig:
     match_ratio: float | None = 0.9  # Lowe ratio on top of mutual nearest neighbours (None: off)
     match_max_distance_sp: float | None = 0.8  # max L2 distance between SuperPoint descriptors (None: off)
     match_max_distance_orb: float | None = 64.0  # max Hamming distance between ORB descriptors (None: off)
+    # 'all': every top-K candidate is verified and the one with the most verified
+    # correspondences wins. 'first_accepted': candidates are verified in BoW order until one is
+    # accepted (the rest are recorded as skipped): graph verification ~4x cheaper per keyframe
+    # on the demo (29 vs 110 ms), same 0 false loops there, but with graph-only verification
+    # on the corridor it accepts a false loop that 'all' avoids, so it is not the default.
+    # Evaluation (run_all_checks) always verifies all.
+    verify_until: Literal["all", "first_accepted"] = "all"
     verify_max_matches: int = 400  # budget: at most this many one-to-one matches go to graph/RANSAC/pose (0: all)
     verify_spread_cells: int = 4  # budget picks the best by distance round-robin over an NxN grid of the query image (0: globally best)
 

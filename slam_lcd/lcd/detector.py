@@ -265,7 +265,16 @@ class LoopDetector:
                 exclude_recent_n=c.exclude_recent_n, query_id=kf.id, stamp_ns=int(kf.stamp),
             )
         clock.lap("bow_query")
-        records = [self._verify(entry, desc, cand, rank, clock) for rank, cand in enumerate(candidates)]
+        records = []
+        stop = c.verify_until == "first_accepted" and not self.run_all_checks
+        for rank, cand in enumerate(candidates):
+            if stop and any(r.accepted for r in records):
+                # bounded work per keyframe: the BoW ranking already put the likeliest first
+                records.append(CandidateRecord(kf.id, cand.match_id, rank, float(cand.bow_score),
+                                               reason="skipped_after_accept", query_stamp=int(kf.stamp),
+                                               match_stamp=self._entries[cand.match_id].stamp))
+                continue
+            records.append(self._verify(entry, desc, cand, rank, clock))
         self.records.extend(records)
 
         accepted = [r for r in records if r.accepted]
