@@ -20,6 +20,7 @@ import yaml
 
 from .atomic import write_text
 from .backend.config import BackendConfig
+from .batch.config import BatchConfig
 from .errors import ConfigError, FileMissingError
 from .eval.config import EvalConfig
 from .features.config import FeaturesConfig
@@ -91,6 +92,7 @@ class Config:
     backend: BackendConfig = field(default_factory=BackendConfig)
     eval: EvalConfig = field(default_factory=EvalConfig)
     run: RunConfig = field(default_factory=RunConfig)
+    batch: BatchConfig = field(default_factory=BatchConfig)
 
 
 def _coerce(value: Any, tp: Any, where: str) -> Any:

@@ -265,6 +265,7 @@ def run_log(
     gt_file: str | Path | None = None,
     depth_topic: str | None = None,
     extractor=None,
+    vocab=None,
     progress: bool = True,
     write_mcap: bool = True,
     input_paths: dict | None = None,
@@ -276,6 +277,8 @@ def run_log(
     topics must have the right types and their first messages must decode. Outputs are
     written as one set (:class:`slam_lcd.output_set.OutputSet`). A Ctrl-C stops the stream
     and writes the result so far, marked partial (``PARTIAL.txt``); ``result.interrupted``.
+    ``extractor`` and ``vocab`` (a :class:`slam_lcd.vocab.Vocabulary`; None: the online
+    vocabulary) are used as given, so a caller running many logs loads each once.
     """
     from .io import open_log
     from .io.decode import decode_camera_info
@@ -317,7 +320,7 @@ def run_log(
         wanted = [t for t in (topics.image, topics.odom, topics.camera_info, topics.depth, topics.gt) if t]
         from .pipeline import Pipeline  # imported late: topic errors need no model
 
-        pipe = Pipeline(cfg, extractor=extractor)
+        pipe = Pipeline(cfg, extractor=extractor, vocab=vocab)
         pipe.expect_depth = topics.depth is not None
         if cfg.features.feature_cache:
             from .features import FeatureCache

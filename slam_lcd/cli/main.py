@@ -27,6 +27,7 @@ COMMAND_MODULES = [
     "vocab",
     "eval_lcd",
     "run",
+    "batch",
     "demo",
     "ate",
     "export",

@@ -1,0 +1,37 @@
+"""slam_lcd.batch: ``slam-lcd batch``, one ``run`` per log on a local process pool or on Ray.
+
+``run_batch(logs, out_dir, config, workers=..., ray=...)`` returns a
+:class:`~slam_lcd.batch.run.BatchResult` (one summary row per log) and writes
+``summary.csv``, ``summary.md`` and ``ate_before_after.png`` into ``out_dir`` beside one
+output folder per log. See docs/batch.md.
+
+Names are imported lazily (PEP 562): the configuration imports this package's ``config``
+module, which must not pull in the runner (and torch) with it.
+"""
+from __future__ import annotations
+
+import importlib
+
+from .config import BatchConfig
+
+_LAZY = {
+    "run_batch": ".run",
+    "BatchResult": ".run",
+    "make_engine": ".run",
+    "discover_logs": ".discovery",
+    "InlineEngine": ".engines",
+    "LocalPoolEngine": ".engines",
+    "RayEngine": ".engines",
+    "read_summary_csv": ".summary",
+    "COLUMNS": ".rows",
+}
+
+__all__ = ["BatchConfig", *_LAZY]
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        value = getattr(importlib.import_module(_LAZY[name], __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,0 +1,30 @@
+"""Configuration section `batch` (owned by :mod:`slam_lcd.batch`): what one log's task asks of a worker.
+
+Why in the configuration and not only on the command line: a cluster run is described by a
+config file that travels with the command; the resources a log needs (one CPU core for the
+ORB path, a GPU share for SuperPoint) belong to the run's description like the extractor
+choice that causes them.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass
+class BatchConfig:
+    # CPU cores one log's task takes: Ray's num_cpus per task; in every worker process also
+    # the number of torch / OpenCV threads (so N workers do not oversubscribe N cores)
+    cpus_per_task: float = 1.0
+    # GPUs one task takes (Ray's num_gpus; fractions share a GPU, e.g. 0.25 = four logs per
+    # GPU); None = 1 when features.kind is superpoint and features.device is cuda, else 0
+    gpus_per_task: float | None = None
+    # Ray only: times a task is re-run when its worker process dies (machine lost, killed
+    # for memory); a log that fails with an error is not retried, it becomes an error row
+    max_retries: int = 2
+
+
+def gpus_per_task(conf: BatchConfig, features) -> float:
+    """The GPU share of one task (see :attr:`BatchConfig.gpus_per_task`)."""
+    if conf.gpus_per_task is not None:
+        return float(conf.gpus_per_task)
+    return 1.0 if (features.kind == "superpoint" and features.device == "cuda") else 0.0

@@ -1,0 +1,66 @@
+"""`slam-lcd batch LOG_OR_GLOB... --out DIR`: one `run` per log, on a local process pool or on Ray.
+
+Exit status: 0 when every log is ok or skipped; 2 when any log failed (its error row says
+why; the others ran) or when the batch cannot start (bad flags, no log, unwritable --out);
+130 after a Ctrl-C (finished logs kept, the summary written marked partial).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from .run import add_config_args, config_from_args, config_inputs
+
+
+def register(sub) -> None:
+    p = sub.add_parser("batch", help="run many logs (one `run` each) and summarise them, locally or on Ray",
+                       description="Run `slam-lcd run` on every log into DIR/<log name>/ (the same outputs), on a "
+                                   "local process pool or as Ray tasks, and write DIR/summary.csv, summary.md and "
+                                   "ate_before_after.png with one row per log. A failing log becomes an error row "
+                                   "and the others go on; logs with complete outputs of the same configuration are "
+                                   "skipped (--force redoes them). Exit status 0 when all logs are ok or skipped, "
+                                   "2 when any failed, 130 after Ctrl-C. See docs/batch.md.")
+    p.add_argument("logs", nargs="+", metavar="LOG_OR_GLOB",
+                   help="ROS1 .bag, .mcap, rosbag2 folder, a folder holding logs, or a glob pattern (quote it: "
+                        "'fleet/**/*.bag')")
+    p.add_argument("-o", "--out", required=True,
+                   help="output folder (required; created if missing): one folder per log and the summary")
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="logs run at once (default: one per CPU core / batch.cpus_per_task, at most one per log; "
+                        "1 = one after the other in this process; with --ray: the most logs in flight, default all)")
+    p.add_argument("--ray", nargs="?", const="local", default=None, metavar="auto|local|ADDRESS",
+                   help="run as Ray tasks (needs `pip install slam-lcd[ray]`): local = start a Ray on this machine "
+                        "(the default when --ray is given without a value), auto = join the running cluster, or a "
+                        "cluster address (ray://head:10001). Default: no Ray, a local process pool")
+    p.add_argument("--force", action="store_true",
+                   help="redo logs whose complete outputs exist (default: skip them)")
+    p.add_argument("--image-topic", default=None, help="camera image topic of every log (default: auto-detected per log)")
+    p.add_argument("--odom-topic", default=None, help="odometry topic of every log (default: auto-detected per log)")
+    p.add_argument("--depth-topic", default=None, help="depth image topic of every log (default: auto-detected per log)")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--gt-from-topic", dest="gt_topic", default=None, metavar="TOPIC",
+                   help="ground-truth pose topic in every log (default: auto-detected per log, a pose topic named "
+                        "*ground_truth*; none: no ATE)")
+    g.add_argument("--gt-dir", default=None, metavar="DIR",
+                   help="folder of ground-truth files, DIR/<log name>.<tum|txt|csv...> (TUM / KITTI / EuRoC); a log "
+                        "without one is an error row (default: none)")
+    p.add_argument("--vocab", default=None, metavar="FILE",
+                   help="trained vocabulary (.npz) used by every log, loaded once per worker (default: the online "
+                        "vocabulary of each run)")
+    p.add_argument("--no-mcap", action="store_true", help="do not write corrected.mcap (default: write it)")
+    add_config_args(p)
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from ..batch import run_batch
+
+    cfg = config_from_args(args)
+    res = run_batch(args.logs, Path(args.out), cfg, workers=args.workers, ray=args.ray, force=args.force,
+                    image_topic=args.image_topic, odom_topic=args.odom_topic, depth_topic=args.depth_topic,
+                    gt_topic=args.gt_topic, gt_dir=args.gt_dir, vocab=args.vocab, write_mcap=not args.no_mcap,
+                    progress=not args.no_progress, input_paths=config_inputs(args))
+    for line in res.summary_lines():
+        print(line)
+    if res.interrupted:
+        return 130
+    return 2 if res.failed else 0
