@@ -28,6 +28,8 @@ log = logging.getLogger(__name__)
 OnRow = Callable[[dict], None]
 # seconds the driver waits, after a Ctrl-C, for running Ray tasks to write their partial sets
 RAY_STOP_WAIT_S = 60.0
+# modules the local pool's fork server imports once for all its workers
+PRELOAD = ["slam_lcd.batch.worker", "slam_lcd.runner", "slam_lcd.pipeline", "slam_lcd.features.extract"]
 
 
 class Engine:
@@ -53,9 +55,11 @@ class InlineEngine(Engine):
 class LocalPoolEngine(Engine):
     """``workers`` processes on this machine (``concurrent.futures.ProcessPoolExecutor``).
 
-    Processes are spawned, not forked: a fork of a driver that has started torch or OpenMP
-    threads can deadlock. Each worker is one process for its whole life, so the weights it
-    loads serve every log it runs.
+    Workers are forked from a fresh server process (multiprocessing's ``forkserver``), not
+    from the driver: a fork of a driver that has started torch or OpenMP threads can
+    deadlock. The server imports the run's modules (torch, GTSAM, OpenCV) once, so each
+    worker starts without paying that import again. Each worker is one process for its
+    whole life: the weights it loads serve every log it runs.
     """
 
     name = "local"
@@ -67,7 +71,8 @@ class LocalPoolEngine(Engine):
         import multiprocessing as mp
         from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
-        ctx = mp.get_context("spawn")
+        ctx = mp.get_context("forkserver")
+        ctx.set_forkserver_preload(PRELOAD)
         stop = ctx.Event()
         ex = ProcessPoolExecutor(max_workers=min(self.workers, len(tasks)) or 1, mp_context=ctx,
                                  initializer=pool_worker_init, initargs=(stop, shared.threads))

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .run import add_config_args, config_from_args, config_inputs
+from .run import add_alias, add_config_args, config_from_args, config_inputs
 
 
 def register(sub) -> None:
@@ -37,9 +37,10 @@ def register(sub) -> None:
     p.add_argument("--odom-topic", default=None, help="odometry topic of every log (default: auto-detected per log)")
     p.add_argument("--depth-topic", default=None, help="depth image topic of every log (default: auto-detected per log)")
     g = p.add_mutually_exclusive_group()
-    g.add_argument("--gt-from-topic", dest="gt_topic", default=None, metavar="TOPIC",
+    g.add_argument("--gt-topic", dest="gt_topic", default=None, metavar="TOPIC",
                    help="ground-truth pose topic in every log (default: auto-detected per log, a pose topic named "
                         "*ground_truth*; none: no ATE)")
+    add_alias(g, "--gt-from-topic", "gt_topic")  # the spelling
     g.add_argument("--gt-dir", default=None, metavar="DIR",
                    help="folder of ground-truth files, DIR/<log name>.<tum|txt|csv...> (TUM / KITTI / EuRoC); a log "
                         "without one is an error row (default: none)")
