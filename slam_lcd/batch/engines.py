@@ -35,6 +35,12 @@ PRELOAD = ["slam_lcd.batch.worker", "slam_lcd.runner", "slam_lcd.pipeline", "sla
 class Engine:
     name = "engine"
 
+    def prepare(self) -> None:
+        """Start what the engine needs (a Ray connection) before any log; errors here stop the batch."""
+
+    def close(self) -> None:
+        """Release what :meth:`prepare` started."""
+
     def run(self, tasks: Sequence[LogTask], shared: SharedWork, on_row: OnRow) -> None:
         raise NotImplementedError
 
@@ -153,14 +159,21 @@ class RayEngine(Engine):
             raise InputError(f"cannot start or reach Ray ({type(e).__name__}: {e})", f"--ray {self.address}") from None
         return True
 
+    _started = False
+
+    def prepare(self) -> None:
+        self._started = self._init(import_ray()) or self._started
+
+    def close(self) -> None:
+        if self._started:
+            import_ray().shutdown()
+            self._started = False
+
     def run(self, tasks, shared, on_row) -> None:
         ray = import_ray()
-        started = self._init(ray)
-        try:
-            self._run(ray, tasks, shared, on_row)
-        finally:
-            if started:
-                ray.shutdown()
+        if not ray.is_initialized():
+            self.prepare()
+        self._run(ray, tasks, shared, on_row)
 
     def _run(self, ray, tasks, shared, on_row) -> None:
         remote = ray.remote(run_task).options(num_cpus=self.cpus, num_gpus=self.gpus, max_retries=self.max_retries,

@@ -180,7 +180,7 @@ def run_batch(
     stream = status_stream if status_stream is not None else sys.stdout
     from ..progress import progress_bar
 
-    bar = progress_bar(total=len(tasks), desc="logs", unit="log", enabled=progress)
+    bar = None
 
     def say(line: str) -> None:
         if hasattr(bar, "write"):  # a tqdm bar: print above it
@@ -195,21 +195,26 @@ def run_batch(
         if on_row is not None:
             on_row(row)
 
+    skipped, todo = [], []
+    for t in tasks:
+        report = None if (force or t.problem) else completed_report(t.out_dir, cfg, t.log)[0]
+        (skipped.append(skipped_row(t, report)) if report is not None else todo.append(t))
     interrupted = False
     try:
-        todo = []
-        for t in tasks:
-            report = None if (force or t.problem) else completed_report(t.out_dir, cfg, t.log)[0]
-            if report is not None:
-                take(skipped_row(t, report))
-            else:
-                todo.append(t)
         if todo:
-            eng.run(todo, shared, take)
-    except KeyboardInterrupt:
-        interrupted = True
+            eng.prepare()  # e.g. reaching Ray: fails before the bar, as any bad flag
+        bar = progress_bar(total=len(tasks), desc="logs", unit="log", enabled=progress)
+        try:
+            for row in skipped:
+                take(row)
+            if todo:
+                eng.run(todo, shared, take)
+        except KeyboardInterrupt:
+            interrupted = True
+        finally:
+            bar.close()
     finally:
-        bar.close()
+        eng.close()
     ordered = [rows.get(t.name) or cancelled_row(t.name, t.log, t.out_dir) for t in tasks]
     interrupted = interrupted or any(r["status"] in ("interrupted", "cancelled") for r in ordered)
     result = BatchResult(out, ordered, interrupted, eng.name, time.perf_counter() - t0)
