@@ -171,9 +171,10 @@ def run_batch(
     eng = engine or make_engine(ray, workers, cfg)
     env = _prepare_shared(cfg, vocab)
     tasks = _tasks(entries, out, gt_dir)
-    threads = None if isinstance(eng, InlineEngine) else max(1, int(round(cfg.batch.cpus_per_task)))
+    inline = isinstance(eng, InlineEngine)  # this process: its environment and threads are the caller's
+    threads = None if inline else max(1, int(round(cfg.batch.cpus_per_task)))
     shared = SharedWork(cfg, image_topic, odom_topic, depth_topic, gt_topic, write_mcap,
-                        None if vocab is None else str(Path(vocab).resolve()), env, threads,
+                        None if vocab is None else str(Path(vocab).resolve()), {} if inline else env, threads,
                         {k: str(v) for k, v in (input_paths or {}).items() if v is not None})
 
     rows: dict[str, dict] = {}
