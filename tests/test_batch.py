@@ -224,23 +224,32 @@ def test_ctrl_c_on_local_pool_keeps_finished_logs(batch_inputs, tmp_path):
     assert not again.interrupted and not (out / "PARTIAL.txt").exists()
 
 
-def test_cli_exit_status_and_real_ctrl_c(batch_inputs, tmp_path):
-    """`slam-lcd batch`: exit 2 with an error row; SIGINT after the first log: exit 130, summary partial."""
+@pytest.mark.parametrize("workers", [1, 2])
+def test_cli_exit_status_and_real_ctrl_c(batch_inputs, tmp_path, workers):
+    """`slam-lcd batch`: a Ctrl-C as a terminal sends it (SIGINT to the whole process group) after the
+    first log: exit 130, finished logs kept, the others partial, the summary partial, no traceback.
+    With 1 worker the run in the driver takes it; with 2 the pool's workers get it from the driver.
+    Then: exit 2 when a log fails."""
     logs, cfg = batch_inputs
     env = {**os.environ, "PYTHONPATH": str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", "")}
     sets = [a for s in [*LOOPY, f"features.cache_dir={cfg.features.cache_dir}"] for a in ("--set", s)]
     out = tmp_path / "out"
     argv = [sys.executable, "-m", "slam_lcd", "batch", str(log_path(logs, "demo_mcap")), str(log_path(logs, "demo_ros1")),
-            str(log_path(logs, "demo_ros2")), "--out", str(out), "--workers", "1", "--no-progress", *sets]
-    proc = subprocess.Popen(argv, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+            str(log_path(logs, "demo_ros2")), "--out", str(out), "--workers", str(workers), "--no-progress", *sets]
+    proc = subprocess.Popen(argv, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
     first = proc.stdout.readline()
     assert first.startswith("[1/3] ok"), (first, proc.stderr.read() if proc.poll() is not None else "")
-    proc.send_signal(signal.SIGINT)
+    os.killpg(proc.pid, signal.SIGINT)
     rest, err = proc.communicate(timeout=120)
     assert proc.returncode == 130, (rest, err)
     assert "Traceback" not in err
-    assert (out / "PARTIAL.txt").exists() and (out / "demo_mcap" / "report.json").exists()
+    assert (out / "PARTIAL.txt").exists()
+    done = first.split()[2].rstrip(":")
+    assert (out / done / "report.json").exists() and not (out / done / "PARTIAL.txt").exists()
     assert "interrupted" in rest
+    if workers == 2:
+        return
 
     bad = subprocess.run([sys.executable, "-m", "slam_lcd", "batch", str(log_path(logs, "corrupt")), "--out",
                           str(tmp_path / "bad"), "--no-progress", *sets], env=env, capture_output=True, text=True,
