@@ -161,7 +161,7 @@ def run_batch(
     if gt_dir is not None and not Path(gt_dir).is_dir():
         raise FileMissingError("ground-truth folder not found (--gt-dir)", gt_dir)
     if gt_dir is not None and gt_topic is not None:
-        raise InputError("give --gt-from-topic or --gt-dir, not both")
+        raise InputError("give --gt-topic or --gt-dir, not both")
     if vocab is not None and not Path(vocab).is_file():
         raise FileMissingError("vocabulary file not found (--vocab)", vocab)
     entries = discover_logs(logs)
