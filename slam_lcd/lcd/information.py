@@ -8,16 +8,19 @@ covariance
 
     C_i = s^2 I + J_X,i Sigma_X,i J_X,i^T
 
-- ``s``: the keypoint noise: the inlier residuals' RMS per axis (with the ``2N / (2N - 6)``
-  degrees-of-freedom correction), floored at ``pixel_sigma_px``, over sqrt(2) because a
-  residual holds the noise of two keypoints (the query's here, the match's in ``Sigma_X``);
+- ``s``: the keypoint noise (query and match keypoints alike), estimated from the inlier
+  residuals by moment matching: their summed squares (with the ``2N / (2N - 6)``
+  degrees-of-freedom correction) = the sum of ``tr(C_i)``, so the part the depth noise
+  explains is not counted twice; floored so that a residual axis has at least
+  ``pixel_sigma_px``;
 - ``Sigma_X,i``: the 3-D point's covariance in the match camera: depth noise along the ray
   (RGB-D: ``max(depth_floor_m, depth_rel * z)``; stereo: disparity noise
   ``z^2 sigma_d / (f b)`` with the same floor; triangulated landmarks: ``landmark_rel * z``)
   plus the match keypoint's own pixel noise across the ray; ``J_X`` is the residual's
   Jacobian with respect to the point;
 
-and ``Info = sum J_i^T C_i^-1 J_i / k``, where ``k >= 1`` inflates for few inliers
+and, because the pose comes from *unweighted* Gauss-Newton, the sandwich information
+``Info = H M^-1 H / k`` with ``H = sum J_i^T J_i`` and ``M = sum J_i^T C_i J_i``, where ``k >= 1`` inflates for few inliers
 (``1 + few_inliers_ref / N``) and for inliers clustered in a small part of the image
 (coverage = the inliers' spread against a uniform spread over the image; below
 ``cluster_coverage`` ``k`` grows as ``(coverage / cluster_coverage)^-1/2``, at most
@@ -101,22 +104,29 @@ def loop_information(T_cm_cq: np.ndarray, X_m: np.ndarray, xn_q: np.ndarray, foc
     JP[:, 2, 0], JP[:, 2, 1] = -y, x
     JP[:, :, 3:] = -np.eye(3)
     J = Jp @ JP  # (n, 2, 6)
-    # residual noise per axis from the residuals (dof-corrected), floored; a residual holds the
-    # noise of both keypoints (query and match), so each keypoint gets s / sqrt(2)
-    s_res = max(float(np.sqrt(np.sum(r**2) / max(2 * n - 6, 1))), floor)
-    s = s_res / np.sqrt(2.0)
-    # 3-D point covariance in the match camera: along the ray (depth) + across it (match keypoint)
+    # 3-D point covariance in the match camera: depth noise along the ray (D) and the match
+    # keypoint's noise across it (L, per unit keypoint variance)
     zm = X_m[:, 2]
     d = X_m / zm[:, None]  # ray with unit z
     sz = _point_sigma_z(zm, source, cam_m, m)
-    lat = (s * zm / cam_m.fx) ** 2
-    SX = sz[:, None, None] ** 2 * (d[:, :, None] * d[:, None, :])
-    SX[:, 0, 0] += lat
-    SX[:, 1, 1] += lat
+    D = sz[:, None, None] ** 2 * (d[:, :, None] * d[:, None, :])
+    L = np.zeros((n, 3, 3))
+    L[:, 0, 0] = L[:, 1, 1] = (zm / cam_m.fx) ** 2
     JX = Jp @ R  # (n, 2, 3) residual w.r.t. the point in the match camera
-    C = s**2 * np.eye(2) + JX @ SX @ np.transpose(JX, (0, 2, 1))
-    Ci = np.linalg.inv(C)
-    info = np.einsum("nai,nab,nbj->ij", J, Ci, J)
+    JXt = np.transpose(JX, (0, 2, 1))
+    CD, CL = JX @ D @ JXt, JX @ L @ JXt
+    # keypoint noise s (both images) by moment matching: sum |r_i|^2 (dof-corrected) =
+    # sum (2 s^2 + s^2 tr(CL_i) + tr(CD_i)); floored at pixel_sigma_px per residual axis
+    r2 = float(np.sum(r**2)) * (2 * n) / max(2 * n - 6, 1)
+    s2 = (r2 - np.trace(CD, axis1=1, axis2=2).sum()) / (2 * n + np.trace(CL, axis1=1, axis2=2).sum())
+    s2 = max(s2, 0.5 * floor**2)
+    C = s2 * (np.eye(2) + CL) + CD
+    # the refinement is unweighted least squares, so its covariance is the sandwich
+    # H^-1 (sum J^T C J) H^-1 (H = sum J^T J), not (sum J^T C^-1 J)^-1: it would be that only
+    # for a solver weighting each residual by C_i^-1
+    H = np.einsum("nai,naj->ij", J, J)
+    M = np.einsum("nai,nab,nbj->ij", J, C, J)
+    info = H @ np.linalg.solve(M, H)
     cov_ratio = max(coverage(xn_q, cam_q), 1e-6) / m.cluster_coverage
     k = (1.0 + m.few_inliers_ref / n) * min(m.max_cluster_inflation, max(1.0, 1.0 / np.sqrt(cov_ratio)))
     info = info / k
