@@ -179,6 +179,19 @@ def test_gate_on_a_users_graph_asks_isam2_marginals():
     rel = MarginalRelatives(lambda i: X(i), isam=isam)
     T, C = rel.estimate(5, 60)
     assert T.shape == (4, 4) and np.all(np.linalg.eigvalsh(C) > 0)
+    # the gate alone on the user's graph: no PoseGraph involved
+    info = np.diag([1e4] * 3 + [400.0] * 3)
+    good = LoopClosure(60, 20, inv(gt[20]) @ gt[60], info)
+    bad = LoopClosure(60, 5, se3_exp(np.r_[0, 0, 0.5, 3.0, 0, 0]), info)
+    assert PcmGate().check(GateLoop.from_closure(good, 20, 60), rel).accept
+    d = Chi2Gate().check(GateLoop.from_closure(bad, 5, 60), rel)
+    assert not d.accept and d.chi2 > d.threshold
+    values = isam.calculateEstimate()
+    joint = MarginalRelatives(lambda i: X(i), marginals=gtsam.Marginals(isam.getFactorsUnsafe(), values), values=values)
+    Tj, Cj = joint.estimate(20, 60)
+    assert np.allclose(Tj, rel.estimate(20, 60)[0], atol=1e-9)
+    # the exact joint marginal knows the two poses are correlated: smaller than the uncorrelated bound
+    assert np.trace(Cj) < np.trace(rel.estimate(20, 60)[1]) and PcmGate().check(GateLoop.from_closure(good, 20, 60), joint).accept
     g = PoseGraph(BackendConfig(), isam=isam, key=lambda i: X(i), add_odometry=False)
     with pytest.raises(InputError):
         g.add_loop(LoopClosure(1, 0, np.eye(4), np.eye(6)))  # keyframes never registered

@@ -49,6 +49,13 @@ class GateLoop:
     chi2: float | None = None  # its chi-square statistic against the estimate when it was checked
     excluded: bool = False  # no PCM partner any more (e.g. a batch re-check found it an outlier)
 
+    @classmethod
+    def from_closure(cls, closure, a: int, b: int) -> "GateLoop":
+        """A :class:`~slam_lcd.types.LoopClosure` at positions ``a`` (its match) and ``b`` (its query)."""
+        info = np.asarray(closure.information, dtype=np.float64)
+        return cls(int(a), int(b), np.asarray(closure.T_match_query, dtype=np.float64),
+                   np.linalg.inv(0.5 * (info + info.T)))
+
 
 @dataclass
 class GateDecision:

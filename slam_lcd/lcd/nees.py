@@ -56,8 +56,8 @@ class NeesReport:
         q = lambda a: f"{np.median(a):.3g} (p90 {np.percentile(a, 90):.3g})"  # noqa: E731
         return [f"rotation error deg {q(rot_err)} vs claimed 1-sigma {q(rot_sig)}",
                 f"translation error m {q(tr_err)} vs claimed 1-sigma {q(tr_sig)}",
-                f"NEES quartiles {np.percentile(self.nees, [25, 50, 75]).round(2).tolist()}, max {self.nees.max():.1f};"
-                f" inliers median {np.median(self.inliers):.0f}"]
+                f"NEES quartiles {np.percentile(self.nees, [25, 50, 75]).round(2).tolist()}, max {self.nees.max():.1f}"
+                + (f"; PnP inliers median {np.median(self.inliers):.0f}" if np.any(self.inliers) else "")]
 
 
 def report(closures, gt_poses: dict) -> NeesReport:
