@@ -19,7 +19,7 @@ Run on the demo world (rendered keyframes with exact ground truth)::
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -34,7 +34,7 @@ from slam_lcd.backend.config import BackendConfig  # noqa: E402
 from slam_lcd.geometry import inv, se3_exp  # noqa: E402
 from slam_lcd.lcd import LcdConfig, LoopDetector  # noqa: E402
 from slam_lcd.sim import simulate_odometry  # noqa: E402
-from slam_lcd.types import Trajectory  # noqa: E402
+from slam_lcd.types import Keyframe, Trajectory  # noqa: E402
 
 # the user's own noise models
 ODOM_SIGMAS = np.array([1e-3, 1e-3, 0.01, 0.03, 0.03, 1e-3])  # per keyframe step, [rx ry rz tx ty tz]
@@ -104,7 +104,10 @@ def run(frames, extractor=None, seed: int = 0, backend: BackendConfig | None = N
         slots = isam.update(f, v).getNewFactorsIndices()
         run_.user_factors += [(int(s), f.at(j)) for j, s in enumerate(slots)]
         # --- slam-lcd: the keyframe (own id = the user's key) into the detector, its loops through the gate
-        kf = replace(kf, id=keys[i])
+        # the user's minimal keyframe: their id (the GTSAM key), image, camera and mounting, depth;
+        # no pose needed (features are passed when the user has them, else extracted)
+        kf = Keyframe(keys[i], kf.stamp, np.eye(4), image=kf.image, camera=kf.camera,
+                      T_body_camera=kf.T_body_camera, depth=kf.depth, features=kf.features)
         graph.add_keyframe(kf.id, kf.stamp)
         for c in det.add(kf):
             run_.closures.append(c)

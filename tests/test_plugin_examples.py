@@ -83,18 +83,27 @@ def test_example_loops_to_g2o(user_run, tmp_path):
     assert ex_a.ate(r.gt, est) < 0.5 * ex_a.ate(r.gt, r.odometry)
 
 
+@pytest.fixture(scope="module")
+def rgbd_detector(demo_keyframes_rgbd, superpoint_cpu):
+    from slam_lcd.lcd.nees import run_detector
+
+    return run_detector(demo_keyframes_rgbd, superpoint_cpu)
+
+
 @pytest.mark.parametrize("sensor", ["rgbd", "stereo"])
-def test_loop_information_nees_on_the_demo_world(sensor, demo_keyframes_rgbd, superpoint_cpu, capsys):
+def test_loop_information_nees_on_the_demo_world(sensor, rgbd_detector, demo_keyframes_rgbd, superpoint_cpu, capsys):
     """NEES = err^T Info err of the detector's loops vs exact ground truth: median in [3, 12], <= 5% above chi2 99%.
 
     Stereo: the same left images (cached features) with a rendered right image, 3-D points
     from SGBM disparity instead of the depth image.
     """
-    from slam_lcd.lcd.nees import CHI2_6_99, demo_loop_nees
+    from slam_lcd.lcd.nees import CHI2_6_99, demo_loop_nees, detector_nees
     from slam_lcd.sim.keyframes import demo_keyframes
 
-    frames = demo_keyframes_rgbd if sensor == "rgbd" else demo_keyframes(superpoint_cpu, sensor="stereo")
-    rep = demo_loop_nees(superpoint_cpu, frames=frames)
+    if sensor == "rgbd":
+        rep = detector_nees(rgbd_detector, demo_keyframes_rgbd)
+    else:
+        rep = demo_loop_nees(superpoint_cpu, frames=demo_keyframes(superpoint_cpu, sensor="stereo"))
     with capsys.disabled():
         print(f"\n[loop NEES, demo {sensor}] {rep.summary()}")
         for line in rep.detail_lines():
@@ -105,28 +114,23 @@ def test_loop_information_nees_on_the_demo_world(sensor, demo_keyframes_rgbd, su
     assert CHI2_6_99 == pytest.approx(16.81, abs=0.01)
 
 
-def test_detector_takes_user_keyframes_with_their_own_ids(demo_keyframes_rgbd, superpoint_cpu):
-    """Keyframes with arbitrary distinct ids (GTSAM keys, not in order) give the same loops as ids 0..N-1."""
+def test_detector_takes_user_keyframes_with_their_own_ids(user_run, rgbd_detector, demo_keyframes_rgbd):
+    """Minimal user keyframes with their own ids (GTSAM keys; example (a)) give the same loops as ids 0..N-1."""
     from dataclasses import replace
 
     from slam_lcd.errors import InputError
-    from slam_lcd.lcd import LcdConfig, LoopDetector
-    from slam_lcd.types import Keyframe
+    from slam_lcd.lcd import LoopDetector
 
-    conf = LcdConfig(exclude_recent_s=20.0, exclude_recent_n=0)
-    kfs = demo_keyframes_rgbd.keyframes
-    ids = [int(gtsam.symbol("k", 1000 - 3 * k)) for k in range(len(kfs))]  # descending, far from 0..N-1
-    plain, own = LoopDetector(conf, extractor=superpoint_cpu), LoopDetector(conf, extractor=superpoint_cpu)
-    for k, kf in enumerate(kfs):
-        plain.add(kf)
-        # a user's minimal keyframe: image, camera (+ mounting), depth, their own id; no odometry pose
-        own.add(Keyframe(ids[k], kf.stamp, np.eye(4), image=kf.image, camera=kf.camera,
-                         T_body_camera=kf.T_body_camera, depth=kf.depth, features=kf.features))
-    a = [(c.query_id, c.match_id) for c in plain.closures]
-    b = [(ids.index(c.query_id), ids.index(c.match_id)) for c in own.closures]
-    assert a == b and len(a) >= 20
-    assert all(np.allclose(x.T_match_query, y.T_match_query) for x, y in zip(plain.closures, own.closures))
+    _, r = user_run
+    index = {k: i for i, k in enumerate(r.keys)}
+    plain = [(c.query_id, c.match_id) for c in rgbd_detector.closures]
+    own = [(index[c.query_id], index[c.match_id]) for c in r.closures]
+    assert own == plain and len(own) >= 20
+    assert all(np.allclose(x.T_match_query, y.T_match_query) and np.allclose(x.information, y.information)
+               for x, y in zip(rgbd_detector.closures, r.closures))
+    kf = demo_keyframes_rgbd.keyframes[0]
+    det = LoopDetector()
     with pytest.raises(InputError, match="not an integer"):
-        own.add(replace(kfs[0], id="x3"))
+        det.add(replace(kf, id="x3"))
     with pytest.raises(InputError, match="landmarks"):
-        own.add(replace(kfs[0], id=1, landmarks=np.zeros((3, 3))))
+        det.add(replace(kf, id=1, landmarks=np.zeros((3, 3))))

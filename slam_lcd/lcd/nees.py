@@ -85,16 +85,27 @@ def demo_loop_nees(extractor, *, sensor: str = "rgbd", laps: float = 2.0, width:
     ``frames``: already rendered :class:`~slam_lcd.sim.keyframes.DemoKeyframes` (a test's session fixture).
     """
     from ..sim.keyframes import demo_keyframes
+
+    dk = frames or demo_keyframes(extractor, laps=laps, width=width, height=height, sensor=sensor)
+    return detector_nees(run_detector(dk, extractor, conf), dk)
+
+
+def run_detector(frames, extractor, conf=None):
+    """A :class:`~slam_lcd.lcd.LoopDetector` fed with every keyframe of ``frames`` (demo settings)."""
     from .config import LcdConfig
     from .detector import LoopDetector
 
-    dk = frames or demo_keyframes(extractor, laps=laps, width=width, height=height, sensor=sensor)
     det = LoopDetector(conf or LcdConfig(exclude_recent_s=20.0, exclude_recent_n=0), extractor=extractor)
-    for kf in dk.keyframes:
+    for kf in frames.keyframes:
         det.add(kf)
-    gt = {kf.id: dk.gt.poses[k] for k, kf in enumerate(dk.keyframes)}
+    return det
+
+
+def detector_nees(det, frames) -> NeesReport:
+    """NEES of a detector's closures on demo keyframes, and how many are false (ground truth)."""
+    gt = {kf.id: frames.gt.poses[k] for k, kf in enumerate(frames.keyframes)}
     rep = report(det.closures, gt)
-    cams = {kf.id: dk.gt.poses[k] @ dk.T_body_camera for k, kf in enumerate(dk.keyframes)}
+    cams = {kf.id: frames.gt.poses[k] @ frames.T_body_camera for k, kf in enumerate(frames.keyframes)}
     for c in det.closures:  # a false loop: cameras far apart or looking elsewhere
         D = inv(cams[c.match_id]) @ cams[c.query_id]
         ang = np.degrees(np.arccos(np.clip((np.trace(D[:3, :3]) - 1) / 2, -1, 1)))
