@@ -34,24 +34,32 @@ def write_loops_g2o(path, ids: list[int], odometry: np.ndarray, odom_information
 
 
 def main(argv=None) -> int:
+    import argparse
     import os
 
+    from slam_lcd.errors import SlamLcdError
     from slam_lcd.features import FeaturesConfig, load_extractor
     from slam_lcd.lcd import LcdConfig, LoopDetector
     from slam_lcd.sim import simulate_odometry
     from slam_lcd.sim.keyframes import demo_keyframes
     from slam_lcd.types import Trajectory
 
-    out = Path((argv or sys.argv[1:] or ["loops.g2o"])[0])
-    ex = load_extractor(FeaturesConfig(kind="superpoint"), weights=os.environ.get("SLAM_LCD_SUPERPOINT_WEIGHTS"),
-                        device="cpu")
-    dk = demo_keyframes(ex)
-    odom = simulate_odometry(Trajectory(dk.gt.stamps, dk.gt.poses)).poses
-    det = LoopDetector(LcdConfig(exclude_recent_s=20.0, exclude_recent_n=0), extractor=ex)
-    closures = [c for kf in dk.keyframes for c in det.add(kf)]
-    info = np.diag(1.0 / np.array([1e-3, 1e-3, 0.01, 0.03, 0.03, 1e-3]) ** 2)
-    n = write_loops_g2o(out, [kf.id for kf in dk.keyframes], odom, info, closures)
-    print(f"{out}: {len(dk.keyframes)} vertices, {n} edges ({len(closures)} loops)")
+    ap = argparse.ArgumentParser(description="demo-world loops + odometry as a g2o file")
+    ap.add_argument("out", help="g2o file to write")
+    ap.add_argument("--weights", default=os.environ.get("SLAM_LCD_SUPERPOINT_WEIGHTS"), help="SuperPoint weights")
+    args = ap.parse_args(argv)
+    try:
+        ex = load_extractor(FeaturesConfig(kind="superpoint"), weights=args.weights, device="cpu")
+        dk = demo_keyframes(ex)
+        odom = simulate_odometry(Trajectory(dk.gt.stamps, dk.gt.poses)).poses
+        det = LoopDetector(LcdConfig(exclude_recent_s=20.0, exclude_recent_n=0), extractor=ex)
+        closures = [c for kf in dk.keyframes for c in det.add(kf)]
+        info = np.diag(1.0 / np.array([1e-3, 1e-3, 0.01, 0.03, 0.03, 1e-3]) ** 2)
+        n = write_loops_g2o(args.out, [kf.id for kf in dk.keyframes], odom, info, closures)
+    except SlamLcdError as e:
+        print(f"loops_to_g2o: {e}", file=sys.stderr)
+        return 2
+    print(f"{args.out}: {len(dk.keyframes)} vertices, {n} edges ({len(closures)} loops)")
     return 0
 
 

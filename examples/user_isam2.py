@@ -14,7 +14,7 @@ contributes only
 
 Run on the demo world (rendered keyframes with exact ground truth)::
 
-    python examples/user_isam2.py            # SuperPoint weights from $SLAM_LCD_SUPERPOINT_WEIGHTS
+    python examples/user_isam2.py [--weights superpoint_v1.pth]   # default: $SLAM_LCD_SUPERPOINT_WEIGHTS
 """
 from __future__ import annotations
 
@@ -120,15 +120,23 @@ def run(frames, extractor=None, seed: int = 0, backend: BackendConfig | None = N
     return run_
 
 
-def main() -> int:
+def main(argv=None) -> int:
+    import argparse
     import os
 
+    from slam_lcd.errors import SlamLcdError
     from slam_lcd.features import FeaturesConfig, load_extractor
     from slam_lcd.sim.keyframes import demo_keyframes
 
-    ex = load_extractor(FeaturesConfig(kind="superpoint"), weights=os.environ.get("SLAM_LCD_SUPERPOINT_WEIGHTS"),
-                        device="cpu")
-    r = run(demo_keyframes(ex), extractor=ex)
+    ap = argparse.ArgumentParser(description="slam-lcd loops in a user's own iSAM2 (demo world)")
+    ap.add_argument("--weights", default=os.environ.get("SLAM_LCD_SUPERPOINT_WEIGHTS"), help="SuperPoint weights")
+    args = ap.parse_args(argv)
+    try:
+        ex = load_extractor(FeaturesConfig(kind="superpoint"), weights=args.weights, device="cpu")
+        r = run(demo_keyframes(ex), extractor=ex)
+    except SlamLcdError as e:
+        print(f"user_isam2: {e}", file=sys.stderr)
+        return 2
     acc = sum(rec.verdict == "accepted" for rec in r.graph.loop_records)
     print(f"keyframes {len(r.keys)}, loops offered {len(r.closures)}, accepted {acc}, false accepted {r.false_accepted}")
     print(f"ATE odometry {ate(r.gt, r.odometry):.3f} m -> user's graph with our loops {ate(r.gt, r.estimate()):.3f} m")
