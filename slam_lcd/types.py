@@ -120,3 +120,15 @@ class LoopClosure:
     evidence: dict[str, Any] = field(default_factory=dict)
     query_stamp: Stamp | None = None
     match_stamp: Stamp | None = None
+
+    def between_factor(self, key_match: int, key_query: int, *, kernel=None, kernel_width: float = 3.0):
+        """This loop as ``gtsam.BetweenFactorPose3(key_match, key_query, Pose3(T_match_query))``.
+
+        Noise: Gaussian from ``information`` (right perturbation of ``T_match_query``, tangent
+        order ``[rx ry rz tx ty tz]``, body frames), wrapped in a robust kernel when ``kernel``
+        names one ('huber', 'cauchy', 'dcs', 'geman_mcclure') or is a GTSAM mEstimator.
+        See :func:`slam_lcd.backend.loop_factors.between_factor` (GTSAM is imported there).
+        """
+        from .backend.loop_factors import between_factor
+
+        return between_factor(self, key_match, key_query, kernel=kernel, kernel_width=kernel_width)

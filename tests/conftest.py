@@ -79,3 +79,20 @@ def offline_demo(tmp_path_factory):
                           env=env, capture_output=True, text=True, timeout=1200)
     logs = sorted((cache / "demo").glob("*.mcap")) if (cache / "demo").is_dir() else []
     return proc, out, (logs[0] if logs else None), env
+
+
+# --------------------------------------------------------------------------- plugin (issue #17)
+@pytest.fixture(scope="session")
+def superpoint_cpu(superpoint_weights):
+    """One SuperPoint extractor on the CPU for the plugin tests (feature cache on)."""
+    from slam_lcd.features import FeaturesConfig, load_extractor
+
+    return load_extractor(FeaturesConfig(kind="superpoint"), weights=superpoint_weights, device="cpu")
+
+
+@pytest.fixture(scope="session")
+def demo_keyframes_rgbd(superpoint_cpu):
+    """2 laps of demo-world RGB-D keyframes at 1 Hz, 320x240, with features and exact ground truth."""
+    from slam_lcd.sim.keyframes import demo_keyframes
+
+    return demo_keyframes(superpoint_cpu, sensor="rgbd")

@@ -16,8 +16,15 @@ import importlib
 
 _EXPORTS = {
     "PoseGraph": ".pose_graph",
-    "LoopRecord": ".pose_graph",
-    "robust_kernel": ".pose_graph",
+    "LoopRecord": ".records",
+    "robust_kernel": ".loop_factors",
+    "between_factor": ".loop_factors",
+    "between_factors": ".loop_factors",
+    "PcmGate": ".gate",
+    "Chi2Gate": ".gate",
+    "AcceptAllGate": ".gate",
+    "GateLoop": ".gate",
+    "MarginalRelatives": ".relatives",
     "correct_full_rate": ".full_rate",
     "read_g2o": ".g2o",
     "write_g2o": ".g2o",

@@ -1,160 +1,87 @@
-"""Incremental pose graph: GTSAM iSAM2 with robust, explained loop-closure handling.
+"""Incremental pose graph: iSAM2 bookkeeping for keyframes and loops, on our graph or a user's.
 
-One ``Pose3`` per keyframe (key = insertion index), a prior on the first, odometry
-``BetweenFactorPose3`` between consecutive keyframes and loop ``BetweenFactorPose3`` with a
-configurable robust kernel. Each new loop goes through
+This module keeps iSAM2 and the Python-side lists in step; the decisions live in modules
+usable without a ``PoseGraph``: :mod:`.gate`: accept/reject one new loop (chi-square against the estimate, PCM pairwise
+  tests), behind the small :class:`~slam_lcd.backend.gate.LoopGate` protocol; :mod:`.gnc`:
+  the batch GNC (TLS) re-check of the loop factors; :mod:`.loop_factors`: loop closures as ``BetweenFactorPose3`` with robust kernels.
 
-1. a chi-square test of its innovation against the current estimate, weighted by the loop
-   covariance plus the covariance of the odometry chain between its two keyframes (an upper
-   bound on the real relative uncertainty: it ignores the loops);
-2. PCM-style pairwise tests against earlier loops near it (cycle loop-odometry-loop-odometry,
-   whose covariance is small when the two loops are close, so false loops stand out): a
-   loop that contradicts most nearby accepted loops is rejected, and a loop that failed (1)
-   is accepted, with its supporters, when enough nearby loops agree with it (drift larger
-   than the declared odometry covariance then cannot lock out a true revisit);
-3. if accepted, an iSAM2 update with it.
+Two ways to run:
 
-A batch GNC (``GncLMOptimizer``, truncated least squares) re-check over all candidate
-loops runs every ``gnc_every_n_loops`` loops and in :meth:`PoseGraph.finalize`; loops it
-finds to be outliers are removed from iSAM2 with ``removeFactorIndices`` and loops it
-finds to be inliers (that the pairwise test had turned away) are added back. Every loop
-keeps a :class:`LoopRecord` with its verdict, the reason and the test statistics.
+- **own graph** (default): one ``Pose3`` per keyframe, key = insertion index (or ``key(kf_id)``),
+  a prior on the first, odometry ``BetweenFactorPose3`` between consecutive keyframes; the
+  gate's relative covariances come from the odometry chain (:class:`.gate.ChainRelatives`).
+- **a user's graph**: ``PoseGraph(isam=their_isam2, key=lambda kf_id: X(kf_id),
+  add_odometry=False)``. The user adds their own values and factors (IMU, GPS, odometry ...)
+  to their iSAM2; :meth:`add_keyframe` only registers a keyframe id; loops go through the
+  gate with relative covariances from iSAM2's marginals (:class:`.relatives.MarginalRelatives`)
+  and the GNC re-check weighs, removes and restores only the loop factors added here.
 
-Interrupts (Ctrl-C, or an error raised inside a step): the Python-side bookkeeping follows
-iSAM2, never runs ahead of it. A keyframe is added to the lists in the same Ctrl-C-free
-step as its iSAM2 update; a loop that never reached iSAM2 is dropped as if it had not been
-offered, and a loop's record says 'accepted' exactly when its factor is in iSAM2.
-
-Chain covariances are O(1) per query: with ``W_k = Ad(O_k) S_k Ad(O_k)^T`` (the covariance
-of step k moved to the world frame) and prefix sums ``P_k``, the covariance of
-``O_a^-1 O_b`` in frame b is ``Ad(O_b^-1) (P_max(a,b) - P_min(a,b)) Ad(O_b^-1)^T``.
+Interrupts (Ctrl-C, or an error inside a step): the bookkeeping follows iSAM2, never runs
+ahead of it; a loop that never reached iSAM2 is dropped as if it had not been offered, and a
+record says 'accepted' exactly when its factor is in iSAM2.
 """
 from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
-from pathlib import Path
+from typing import Callable
 
 import numpy as np
-from scipy.special import chdtri  # chi-square quantile without importing scipy.stats (~0.5 s)
 
 import gtsam
 
-from ..errors import InputError, InvalidPoseError
+from ..errors import InputError
+from ..geometry import inv
 from ..interrupts import defer_sigint
-from ..geometry import adjoint, inv, project_to_se3
-from ..types import LoopClosure, Trajectory
+from ..types import LoopClosure
 from .config import BackendConfig
-from .g2o import G2oEdge, write_g2o
-from .lie import log
+from .g2o import G2oEdge
+from .gate import ChainRelatives, GateLoop, LoopGate, default_gate
+from .gnc import gnc_loop_weights
+from .loop_factors import robust_kernel, valid_information
+from .graph_outputs import GraphOutputs
+from .poses import check_pose, isam2_params, values_to_array
+from .records import ACCEPTED, REJECTED, LoopEntry, LoopRecord
+from .relatives import MarginalRelatives
+
+__all__ = ["ACCEPTED", "REJECTED", "LoopRecord", "PoseGraph", "isam2_params", "robust_kernel", "values_to_array"]
 
 log_ = logging.getLogger(__name__)
 
-ACCEPTED = "accepted"
-REJECTED = "rejected"
 
+class PoseGraph(GraphOutputs):
+    """Keyframe pose graph kept optimised by iSAM2 (see module docstring).
 
-@dataclass
-class LoopRecord:
-    """What happened to one loop closure, and why."""
+    ``isam``: a user's ``gtsam.ISAM2`` to put loops into (None: our own). ``key``: keyframe
+    id -> GTSAM key (None: insertion index). ``add_odometry``: add the prior and odometry
+    factors and the initial values ourselves (default True without ``isam``, False with it).
+    ``gate``: a :class:`~slam_lcd.backend.gate.LoopGate` (default from ``conf.outlier_rejection``).
+    """
 
-    query_id: int
-    match_id: int
-    verdict: str  # 'accepted' | 'rejected'
-    reason: str
-    chi2_gate: float | None = None  # gate test: innovation vs the current estimate (6 dof)
-    chi2_threshold: float | None = None
-    pairwise_checked: int = 0  # earlier loops it was tested against (PCM)
-    pairwise_inconsistent: int = 0
-    chi2_residual: float | None = None  # whitened squared residual at the current estimate
-    gnc_weight: float | None = None  # last GNC weight (1 inlier, 0 outlier)
-    stage: str = "gate"  # which check gave the verdict: 'gate' | 'pairwise' | 'gnc' | 'none'
-    history: list[str] = field(default_factory=list)
-
-
-@dataclass
-class _Loop:
-    a: int  # match keyframe index
-    b: int  # query keyframe index
-    Z: np.ndarray  # T_match_query
-    cov: np.ndarray  # 6x6 covariance (GTSAM order, frame of b)
-    gaussian: gtsam.noiseModel.Base
-    record: LoopRecord
-    passed_gate: bool = False  # passed the consistency gate at some point (GNC candidate)
-    isam_index: int | None = None  # factor slot in iSAM2 while the loop is in it
-
-    def factor(self, noise) -> gtsam.BetweenFactorPose3:
-        return gtsam.BetweenFactorPose3(self.a, self.b, gtsam.Pose3(self.Z), noise)
-
-
-def robust_kernel(kind: str, width: float):
-    """The mEstimator for ``BackendConfig.loop_kernel`` (None for 'none')."""
-    M = gtsam.noiseModel.mEstimator
-    if kind == "none":
-        return None
-    if kind == "huber":
-        return M.Huber.Create(width)
-    if kind == "cauchy":
-        return M.Cauchy.Create(width)
-    if kind == "dcs":
-        return M.DCS.Create(width)
-    if kind == "geman_mcclure":
-        return M.GemanMcClure.Create(width)
-    raise InputError(f"unknown robust kernel {kind!r} (none, huber, cauchy, dcs, geman_mcclure)")
-
-
-def _valid_spd(M) -> bool:
-    if M is None:
-        return False
-    M = np.asarray(M, dtype=np.float64)
-    if M.shape != (6, 6) or not np.all(np.isfinite(M)) or not np.allclose(M, M.T, rtol=1e-6, atol=1e-9):
-        return False
-    try:
-        np.linalg.cholesky(M)
-    except np.linalg.LinAlgError:
-        return False
-    return True
-
-
-def _check_pose(T, what: str) -> np.ndarray:
-    T = np.asarray(T, dtype=np.float64)
-    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
-        raise InvalidPoseError(f"{what}: expected a finite 4x4 pose, got shape {T.shape}")
-    R = T[:3, :3]
-    if np.abs(R @ R.T - np.eye(3)).max() > 1e-3 or np.linalg.det(R) < 0:
-        raise InvalidPoseError(f"{what}: rotation block is not a proper rotation")
-    return project_to_se3(T)  # remove round-off so GTSAM gets an exact rotation
-
-
-def isam2_params(conf: BackendConfig) -> gtsam.ISAM2Params:
-    p = gtsam.ISAM2Params()
-    p.setRelinearizeThreshold(conf.isam2_relinearize_threshold)
-    p.relinearizeSkip = int(conf.isam2_relinearize_skip)
-    p.setFactorization("QR" if conf.isam2_factorization == "qr" else "CHOLESKY")
-    return p
-
-
-class PoseGraph:
-    """Keyframe pose graph kept optimised by iSAM2 (see module docstring)."""
-
-    def __init__(self, conf: BackendConfig | None = None):
+    def __init__(self, conf: BackendConfig | None = None, *, isam: gtsam.ISAM2 | None = None,
+                 key: Callable[[int], int] | None = None, add_odometry: bool | None = None,
+                 gate: LoopGate | None = None):
         self.conf = conf or BackendConfig()
         c = self.conf
+        self.add_odometry = (isam is None) if add_odometry is None else bool(add_odometry)
+        self._user_graph = not self.add_odometry
+        self._key_fn = key
+        self.gate = gate if gate is not None else default_gate(c)
         self._kernel = robust_kernel(c.loop_kernel, c.loop_kernel_width)
-        self._isam = gtsam.ISAM2(isam2_params(c))
+        self._isam = isam if isam is not None else gtsam.ISAM2(isam2_params(c))
         self._ids: list[int] = []
+        self._keys: list[int] = []  # GTSAM key per insertion position
         self._index: dict[int, int] = {}
         self._stamps: list[int] = []
-        self._odom: list[np.ndarray] = []
-        self._prefix: list[np.ndarray] = []  # P_k, world-frame chain covariance sums
-        self._base = gtsam.NonlinearFactorGraph()  # prior + odometry (Gaussian)
+        self._chain = ChainRelatives(lambda k: self._isam.calculateEstimatePose3(self._keys[k]).matrix())
+        self._relatives = (MarginalRelatives(lambda k: self._keys[k], isam=self._isam) if self._user_graph
+                           else self._chain)
+        self._base = gtsam.NonlinearFactorGraph()  # prior + odometry we added (Gaussian)
         self._base_edges: list[G2oEdge] = []
-        self._loops: list[_Loop] = []
+        self._loops: list[LoopEntry] = []
         self._loops_since_gnc = 0
         self._default_odom_cov = np.diag(np.r_[[c.odom_sigma_rot**2] * 3, [c.odom_sigma_trans**2] * 3])
         self._default_loop_cov = np.diag(np.r_[[c.loop_sigma_rot**2] * 3, [c.loop_sigma_trans**2] * 3])
-        self._chi2_gate = float(chdtri(6, 1.0 - c.gate_chi2_probability))
         self.update_times: list[float] = []  # seconds per add_keyframe iSAM2 update
         self.loop_times: list[float] = []  # seconds per add_loop (gate + iSAM2)
         self.gnc_times: list[float] = []  # seconds per GNC re-check
@@ -169,53 +96,67 @@ class PoseGraph:
     def keyframe_ids(self) -> list[int]:
         return list(self._ids)
 
-    def add_keyframe(self, kf_id: int, stamp_ns: int, T_world_body_odom, cov_since_last=None) -> None:
-        """Add a keyframe with its odometry pose; the step from the previous one becomes a factor."""
+    @property
+    def isam(self) -> gtsam.ISAM2:
+        return self._isam
+
+    def key(self, kf_id: int) -> int:
+        """GTSAM key of a keyframe that was added."""
+        return self._keys[self._index[int(kf_id)]]
+
+    def add_keyframe(self, kf_id: int, stamp_ns: int, T_world_body_odom=None, cov_since_last=None) -> None:
+        """Add a keyframe with its odometry pose; the step from the previous one becomes a factor.
+
+        On a user's graph (``add_odometry=False``) this only registers the id (and the pose,
+        when given, for :meth:`odometry_array`); the user's iSAM2 must hold its key before a
+        loop uses it.
+        """
         kf_id = int(kf_id)
         if kf_id in self._index:
             raise InputError(f"keyframe id {kf_id} added twice")
-        T = _check_pose(T_world_body_odom, f"keyframe {kf_id}")
         k = len(self._ids)
+        key = int(self._key_fn(kf_id)) if self._key_fn is not None else k
+        if self._user_graph:
+            T = check_pose(T_world_body_odom, f"keyframe {kf_id}") if T_world_body_odom is not None else np.eye(4)
+            with defer_sigint():
+                self._register(kf_id, key, stamp_ns, T, np.zeros((6, 6)))
+            return
+        if T_world_body_odom is None:
+            raise InputError(f"keyframe {kf_id}: an odometry pose is needed when the pose graph adds odometry")
+        T = check_pose(T_world_body_odom, f"keyframe {kf_id}")
         graph = gtsam.NonlinearFactorGraph()
         values = gtsam.Values()
         c = self.conf
         self._final_values = None
+        cov = None
         if k == 0:
             sig = np.r_[[c.prior_sigma_rot] * 3, [c.prior_sigma_trans] * 3]
-            graph.add(gtsam.PriorFactorPose3(0, gtsam.Pose3(T), gtsam.noiseModel.Diagonal.Sigmas(sig)))
-            values.insert(0, gtsam.Pose3(T))
+            graph.add(gtsam.PriorFactorPose3(key, gtsam.Pose3(T), gtsam.noiseModel.Diagonal.Sigmas(sig)))
+            values.insert(key, gtsam.Pose3(T))
         else:
-            prev = self._odom[-1]
-            step = inv(prev) @ T
-            cov = cov_since_last if (c.use_odometry_covariance and _valid_spd(cov_since_last)) else self._default_odom_cov
-            cov = np.asarray(cov, dtype=np.float64)
-            graph.add(gtsam.BetweenFactorPose3(k - 1, k, gtsam.Pose3(step), gtsam.noiseModel.Gaussian.Covariance(cov)))
+            step = inv(self._chain.pose(k - 1)) @ T
+            ok = c.use_odometry_covariance and valid_information(cov_since_last)  # SPD test fits covariances too
+            cov = np.asarray(cov_since_last if ok else self._default_odom_cov, dtype=np.float64)
+            graph.add(gtsam.BetweenFactorPose3(self._keys[-1], key, gtsam.Pose3(step),
+                                               gtsam.noiseModel.Gaussian.Covariance(cov)))
             # Chain the new pose from the corrected estimate of the previous keyframe.
-            values.insert(k, self._isam.calculateEstimatePose3(k - 1).compose(gtsam.Pose3(step)))
-            A = adjoint(T)
-        prefix = self._prefix[-1] + A @ cov @ A.T if k else np.zeros((6, 6))
+            values.insert(key, self._isam.calculateEstimatePose3(self._keys[-1]).compose(gtsam.Pose3(step)))
+        prefix = self._chain.next_prefix(T, cov)
         t0 = time.perf_counter()
         with defer_sigint():  # iSAM2 and the lists change together
             self._isam.update(graph, values)
             self._base.push_back(graph)
             if k:
                 self._base_edges.append(G2oEdge(k - 1, k, step, np.linalg.inv(cov)))
-            self._prefix.append(prefix)
-            self._ids.append(kf_id)
-            self._index[kf_id] = k
-            self._stamps.append(int(stamp_ns))
-            self._odom.append(T)
+            self._register(kf_id, key, stamp_ns, T, prefix)
         self.update_times.append(time.perf_counter() - t0)
 
-    # ------------------------------------------------------------------ covariances
-    def _chain_cov(self, a: int, b: int) -> np.ndarray:
-        """Covariance of odometry ``O_a^-1 O_b`` in frame b (upper bound: ignores loops)."""
-        lo, hi = (a, b) if a <= b else (b, a)
-        Ai = adjoint(inv(self._odom[b]))
-        return Ai @ (self._prefix[hi] - self._prefix[lo]) @ Ai.T
-
-    def _odom_rel(self, a: int, b: int) -> np.ndarray:
-        return inv(self._odom[a]) @ self._odom[b]
+    def _register(self, kf_id: int, key: int, stamp_ns: int, T: np.ndarray, prefix: np.ndarray) -> None:
+        self._chain.append(T, prefix)
+        self._ids.append(kf_id)
+        self._keys.append(key)
+        self._index[kf_id] = len(self._ids) - 1
+        self._stamps.append(int(stamp_ns))
 
     # ------------------------------------------------------------------ loops
     @property
@@ -227,19 +168,28 @@ class PoseGraph:
         """Loops offered so far (accepted or not)."""
         return len(self._loops)
 
+    def loop_factor_indices(self) -> list[int]:
+        """iSAM2 factor slots of the loops this graph holds now (everything else is not ours to touch)."""
+        return [lp.isam_index for lp in self._loops if lp.isam_index is not None]
+
     def add_loop(self, closure: LoopClosure) -> LoopRecord:
-        """Test a verified loop for consistency and, if it passes, add it to iSAM2."""
+        """Test a verified loop with the gate and, if it passes, add it to iSAM2."""
         t0 = time.perf_counter()
         self._final_values = None
+        what = f"loop {closure.match_id}->{closure.query_id}"
         for kid in (closure.query_id, closure.match_id):
             if int(kid) not in self._index:
-                raise InputError(f"loop {closure.match_id}->{closure.query_id}: keyframe {kid} was never added")
+                raise InputError(f"{what}: keyframe {kid} was never added")
         a, b = self._index[int(closure.match_id)], self._index[int(closure.query_id)]
         if a == b:
-            raise InputError(f"loop {closure.match_id}->{closure.query_id}: a keyframe cannot close a loop with itself")
-        Z = _check_pose(closure.T_match_query, f"loop {closure.match_id}->{closure.query_id}")
+            raise InputError(f"{what}: a keyframe cannot close a loop with itself")
+        if self._user_graph:
+            for k in (a, b):
+                if not self._isam.valueExists(self._keys[k]):
+                    raise InputError(f"{what}: the user's iSAM2 holds no value for keyframe {self._ids[k]}")
+        Z = check_pose(closure.T_match_query, what)
         rec = LoopRecord(int(closure.query_id), int(closure.match_id), REJECTED, "pending")
-        if _valid_spd(closure.information):
+        if valid_information(closure.information):
             info = np.asarray(closure.information, dtype=np.float64)
             info = 0.5 * (info + info.T)
             cov = np.linalg.inv(info)
@@ -247,22 +197,25 @@ class PoseGraph:
             cov = self._default_loop_cov
             info = np.linalg.inv(cov)
             rec.history.append("information missing or not positive definite: config loop sigmas used")
-        lp = _Loop(a, b, Z, cov, gtsam.noiseModel.Gaussian.Information(info), rec)
+        lp = LoopEntry(GateLoop(a, b, Z, cov), self._keys[a], self._keys[b],
+                       gtsam.noiseModel.Gaussian.Information(info), rec)
         self._loops.append(lp)
         mode = self.conf.outlier_rejection
 
-        group: list[_Loop] = []
+        group: list[LoopEntry] = []
         ok = False
         done = False
         try:
-            if mode in ("gate", "gate+gnc"):
-                ok, group = self._gate(lp)
-            else:
-                lp.passed_gate = True
-                ok = True
-                rec.stage = "none" if mode == "none" else "gnc"
-                rec.reason = "accepted without a consistency check" if mode == "none" else "accepted pending GNC re-check"
+            d = self.gate.check(lp.gate, self._relatives, [o.gate for o in self._loops[:-1]])
+            lp.gate.chi2 = d.chi2
+            rec.chi2_gate, rec.chi2_threshold = d.chi2, d.threshold
+            rec.pairwise_checked, rec.pairwise_inconsistent = d.pairwise_checked, d.pairwise_inconsistent
+            rec.stage, rec.reason = d.stage, d.reason
+            ok = d.accept
             if ok:
+                lp.passed_gate = True
+                by_gate = {id(g) for g in d.also_accept}
+                group = [o for o in self._loops[:-1] if id(o.gate) in by_gate]
                 self._isam_apply(add=[lp, *group], remove=[])
                 self._commit_accept(lp, group)
             done = True
@@ -285,108 +238,23 @@ class PoseGraph:
                 self.gnc_recheck()
         return rec
 
-    def _gate(self, lp: _Loop) -> tuple[bool, list[_Loop]]:
-        """Chi-square test against the current estimate, then PCM-style pairwise tests.
-
-        Returns (accept, earlier rejected loops to accept with it). A loop that fails the
-        first test is still accepted when at least ``gate_min_support`` nearby earlier loops
-        are pairwise consistent with it (they are accepted with it): mutually consistent
-        loops beat odometry drift that is larger than its declared covariance.
-        """
-        rec = lp.record
-        Xa = self._isam.calculateEstimatePose3(lp.a).matrix()
-        Xb = self._isam.calculateEstimatePose3(lp.b).matrix()
-        e = log(inv(lp.Z) @ inv(Xa) @ Xb)
-        S = lp.cov + self._chain_cov(lp.a, lp.b)
-        c2 = float(e @ np.linalg.solve(S, e))
-        rec.chi2_gate, rec.chi2_threshold = c2, self._chi2_gate
-        unary_ok = c2 <= self._chi2_gate
-        rescue_max = self.conf.gate_rescue_max_factor * self._chi2_gate
-        consistent: list[_Loop] = []
-        n_acc = n_acc_bad = 0
-        W = self.conf.gate_pairwise_window
-        if W > 0:
-            for other in self._loops[:-1]:
-                if other.record.stage == "gnc" and other.record.verdict == REJECTED:
-                    continue
-                if abs(other.a - lp.a) > W or abs(other.b - lp.b) > W:
-                    continue
-                ok = self._pair_chi2(lp, other) <= self._chi2_gate
-                if ok and (other.record.chi2_gate is None or other.record.chi2_gate <= rescue_max):
-                    consistent.append(other)
-                if other.record.verdict == ACCEPTED:
-                    n_acc += 1
-                    n_acc_bad += not ok
-        rec.pairwise_checked, rec.pairwise_inconsistent = n_acc, n_acc_bad
-        support = len(consistent)
-        if unary_ok:
-            # a veto needs a majority of the nearby accepted loops AND at least gate_min_support of
-            # them: one earlier loop (itself possibly false) must not lock out a loop that agrees
-            # with the estimate; conflicts it leaves are settled by the GNC re-check
-            if (n_acc_bad >= max(1, self.conf.gate_min_support)
-                    and n_acc_bad > self.conf.gate_pairwise_max_inconsistent * n_acc):
-                rec.stage = "pairwise"
-                rec.reason = f"inconsistent with {n_acc_bad} of {n_acc} nearby accepted loops (PCM)"
-                return False, []
-            lp.passed_gate = True
-            rec.stage = "gate"
-            rec.reason = (
-                f"consistent with the estimate (chi2 {c2:.1f} <= {self._chi2_gate:.1f})"
-                f" and with {n_acc - n_acc_bad} of {n_acc} nearby accepted loops"
-            )
-            return True, []
-        if self.conf.gate_min_support > 0 and support >= self.conf.gate_min_support and c2 <= rescue_max:
-            lp.passed_gate = True
-            rec.stage = "pairwise"
-            rec.reason = (
-                f"pairwise consistent with {support} nearby loops (PCM support) although chi2 vs the estimate"
-                f" is {c2:.1f} > {self._chi2_gate:.1f}"
-            )
-            # earlier loops accepted with it: their records change in _commit_accept, with iSAM2
-            group = [o for o in consistent if o.record.verdict == REJECTED]
-            return True, group
-        rec.stage = "gate"
-        rec.reason = (
-            f"inconsistent with the estimate: chi2 {c2:.1f} > {self._chi2_gate:.1f},"
-            + (f" pairwise support {support} < {self.conf.gate_min_support}" if c2 <= rescue_max
-               else f" above the rescue bound {rescue_max:.1f} ({self.conf.gate_rescue_max_factor:g}x)")
-        )
-        return False, []
-
-    def _commit_accept(self, lp: _Loop, group: list[_Loop]) -> None:
+    def _commit_accept(self, lp: LoopEntry, group: list[LoopEntry]) -> None:
         """Records of a loop (and the earlier loops accepted with it) once iSAM2 holds them."""
-        if lp.record.verdict != ACCEPTED:
-            lp.record.verdict = ACCEPTED
+        lp.set_verdict(ACCEPTED)
         for o in group:
             if o.record.verdict == ACCEPTED:
                 continue
             o.passed_gate = True
-            o.record.verdict, o.record.stage = ACCEPTED, "pairwise"
-            o.record.reason = f"accepted by later PCM support (loop {lp.record.match_id}->{lp.record.query_id})"
+            o.set_verdict(ACCEPTED, "pairwise",
+                          f"accepted by later PCM support (loop {lp.record.match_id}->{lp.record.query_id})")
             o.record.history.append(f"{ACCEPTED}: {o.record.reason}")
 
-    def _pair_chi2(self, l1: _Loop, l2: _Loop) -> float:
-        """Cycle l1 vs odometry(a1->a2) * l2 * odometry(b2->b1): squared Mahalanobis norm."""
-        A = self._odom_rel(l1.a, l2.a)
-        C = self._odom_rel(l2.b, l1.b)
-        X = A @ l2.Z @ C
-        e = log(inv(l1.Z) @ X)
-        T1 = adjoint(inv(l2.Z @ C))
-        T2 = adjoint(inv(C))
-        S = (
-            l1.cov
-            + T1 @ self._chain_cov(l1.a, l2.a) @ T1.T
-            + T2 @ l2.cov @ T2.T
-            + self._chain_cov(l2.b, l1.b)
-        )
-        return float(e @ np.linalg.solve(S, e))
-
-    def _loop_noise(self, lp: _Loop):
+    def _loop_noise(self, lp: LoopEntry):
         if self._kernel is None:
             return lp.gaussian
         return gtsam.noiseModel.Robust.Create(self._kernel, lp.gaussian)
 
-    def _isam_apply(self, add: list[_Loop], remove: list[_Loop]) -> None:
+    def _isam_apply(self, add: list[LoopEntry], remove: list[LoopEntry]) -> None:
         """Add and/or remove loop factors in iSAM2, then iterate a few times to converge."""
         graph = gtsam.NonlinearFactorGraph()
         for lp in add:
@@ -401,68 +269,71 @@ class PoseGraph:
         for _ in range(self.conf.isam2_extra_updates_per_loop):
             self._isam.update()
 
-    def _residual_chi2(self, lp: _Loop, values: gtsam.Values | None = None) -> float:
+    def _residual_chi2(self, lp: LoopEntry, values: gtsam.Values | None = None) -> float:
         if values is None:
             values = gtsam.Values()
-            for k in (lp.a, lp.b):
+            for k in (lp.key_match, lp.key_query):
                 values.insert(k, self._isam.calculateEstimatePose3(k))
         return 2.0 * lp.factor(lp.gaussian).error(values)
 
     # ------------------------------------------------------------------ batch re-check
-    def batch_graph(self, loops: str = "accepted", robust: bool = False) -> tuple[gtsam.NonlinearFactorGraph, list[_Loop]]:
-        """Prior + odometry + loops ('accepted', 'candidates' (accepted or turned away by the pairwise test) or 'all')."""
+    def known_factors(self) -> gtsam.NonlinearFactorGraph:
+        """Every factor that is not one of our loops: our prior + odometry, or all of the user's iSAM2 factors."""
+        if not self._user_graph:
+            return gtsam.NonlinearFactorGraph(self._base)
+        ours = set(self.loop_factor_indices())
+        fs = self._isam.getFactorsUnsafe()
         g = gtsam.NonlinearFactorGraph()
-        g.push_back(self._base)
-        chosen = []
-        for lp in self._loops:
-            if (
-                loops == "all"
-                or (loops == "accepted" and lp.record.verdict == ACCEPTED)
-                or (loops == "candidates" and (lp.passed_gate or lp.record.stage == "pairwise"))
-            ):
-                chosen.append(lp)
-                g.add(lp.factor(self._loop_noise(lp) if robust else lp.gaussian))
+        for i in range(fs.size()):
+            f = fs.at(i)
+            if i not in ours and f is not None:
+                g.push_back(f)
+        return g
+
+    def batch_graph(self, loops: str = "accepted", robust: bool = False) -> tuple[gtsam.NonlinearFactorGraph, list[LoopEntry]]:
+        """Known factors + loops ('accepted', 'candidates' (accepted or turned away by the pairwise test) or 'all')."""
+        g, chosen = self.known_factors(), [lp for lp in self._loops if self._selected(lp, loops)]
+        for lp in chosen:
+            g.add(lp.factor(self._loop_noise(lp) if robust else lp.gaussian))
         return g, chosen
+
+    @staticmethod
+    def _selected(lp: LoopEntry, loops: str) -> bool:
+        return (loops == "all" or (loops == "accepted" and lp.record.verdict == ACCEPTED)
+                or (loops == "candidates" and (lp.passed_gate or lp.record.stage == "pairwise")))
 
     def current_values(self) -> gtsam.Values:
         return self._values()
 
     def odometry_values(self) -> gtsam.Values:
         v = gtsam.Values()
-        for k, T in enumerate(self._odom):
-            v.insert(k, gtsam.Pose3(T))
+        for k, key in enumerate(self._keys):
+            v.insert(key, gtsam.Pose3(self._chain.pose(k)))
         return v
 
     def gnc_recheck(self) -> list[LoopRecord]:
-        """Batch GNC (TLS) over odometry + candidate loops; sync iSAM2 with its verdicts.
+        """Batch GNC (TLS) over the known factors + candidate loops; sync iSAM2 with its verdicts.
 
-        Returns the records whose verdict changed.
+        Only loop factors added by this graph are weighted, removed or restored. Returns the
+        records whose verdict changed.
         """
         self._loops_since_gnc = 0
         if not self._loops:
             return []
         t0 = time.perf_counter()
         which = "candidates" if self.conf.gnc_includes_gated else "accepted"
-        graph, cands = self.batch_graph(which)
+        cands = [lp for lp in self._loops if self._selected(lp, which)]
         if not cands:
             return []
-        n_base = self._base.size()
-        params = gtsam.GncLMParams()
-        params.setLossType(gtsam.GncLossType.TLS)
-        params.setKnownInliers(list(range(n_base)))
-        if self.conf.gnc_max_iterations != 100:  # GTSAM prints a warning when it is changed
-            params.setMaxIterations(self.conf.gnc_max_iterations)
-        gnc = gtsam.GncLMOptimizer(graph, self._isam.calculateEstimate(), params)
-        gnc.setInlierCostThresholdsAtProbability(self.conf.gnc_inlier_probability)
-        result = gnc.optimize()
-        w = np.asarray(gnc.getWeights())
+        loops = [lp.factor(lp.gaussian) for lp in cands]
+        res = gnc_loop_weights(self.known_factors(), loops, self._isam.calculateEstimate(),
+                               inlier_probability=self.conf.gnc_inlier_probability,
+                               max_iterations=self.conf.gnc_max_iterations)
         # decide first, then change iSAM2 and the records together (an interrupt in between
         # leaves the records as iSAM2 is)
         stats, add, remove = [], [], []
-        for i, lp in enumerate(cands):
-            wi = float(w[n_base + i])
-            chi2 = self._residual_chi2(lp, result)
-            stats.append((lp, wi, chi2))
+        for lp, wi, chi2 in zip(cands, res.weights, res.residual_chi2):
+            stats.append((lp, float(wi), float(chi2)))
             inlier = wi >= self.conf.gnc_outlier_weight
             if inlier and lp.record.verdict == REJECTED:
                 add.append(lp)
@@ -478,17 +349,15 @@ class PoseGraph:
                 rec = lp.record
                 rec.gnc_weight, rec.chi2_residual = wi, chi2
                 if id(lp) in add_ids and lp.isam_index is not None:
-                    rec.verdict, rec.stage = ACCEPTED, "gnc"
-                    rec.reason = f"restored by GNC re-check (weight {wi:.2f}, residual chi2 {chi2:.1f})"
+                    lp.set_verdict(ACCEPTED, "gnc", f"restored by GNC re-check (weight {wi:.2f}, residual chi2 {chi2:.1f})")
                 elif id(lp) in remove_ids and lp.isam_index is None:
-                    rec.verdict, rec.stage = REJECTED, "gnc"
-                    rec.reason = f"GNC (TLS) outlier: weight {wi:.2f}, residual chi2 {chi2:.1f}"
+                    lp.set_verdict(REJECTED, "gnc", f"GNC (TLS) outlier: weight {wi:.2f}, residual chi2 {chi2:.1f}")
                 else:
                     continue
                 rec.history.append(f"{rec.verdict}: {rec.reason}")
                 changed.append(rec)
         self.gnc_times.append(time.perf_counter() - t0)
-        self._last_gnc_values = result
+        self._last_gnc_values = res.values
         return changed
 
     def finalize(self) -> list[LoopRecord]:
@@ -499,14 +368,16 @@ class PoseGraph:
         odometry and accepted loops, all Gaussian): measured on the demo, graph error 451 at
         iSAM2's values against 25.7 after Levenberg-Marquardt. With ``final_solver='lm'`` a batch
         LM solve of exactly that graph, started from iSAM2's estimate, gives the values every
-        output uses. Returns the records whose verdict changed.
+        output uses. On a user's graph the estimate stays iSAM2's (the graph is theirs).
+        Returns the records whose verdict changed.
         """
         changed = []
         if self.conf.outlier_rejection in ("gate+gnc", "gnc"):
             changed = self.gnc_recheck()
         for _ in range(3):
             self._isam.update()
-        self._final_values = self.solve_written_graph() if self.conf.final_solver == "lm" and self._ids else None
+        lm = self.conf.final_solver == "lm" and self._ids and not self._user_graph
+        self._final_values = self.solve_written_graph() if lm else None
         for lp in self._loops:
             if lp.record.verdict == ACCEPTED:
                 lp.record.chi2_residual = self._residual_chi2(lp, self._final_values)
@@ -526,44 +397,3 @@ class PoseGraph:
 
     def _values(self) -> gtsam.Values:
         return self._final_values if self._final_values is not None else self._isam.calculateEstimate()
-
-    # ------------------------------------------------------------------ outputs
-    def estimate(self) -> dict[int, np.ndarray]:
-        """Current iSAM2 estimate: keyframe id -> corrected ``T_world_body`` (4x4)."""
-        if not self._ids:
-            return {}
-        poses = values_to_array(self._values(), len(self._ids))
-        return {kid: poses[k] for k, kid in enumerate(self._ids)}
-
-    def estimate_array(self) -> np.ndarray:
-        """(N, 4, 4) corrected poses in keyframe insertion order."""
-        return values_to_array(self._values(), len(self._ids))
-
-    def odometry_array(self) -> np.ndarray:
-        return np.array(self._odom)
-
-    def keyframe_trajectory(self) -> Trajectory:
-        poses = self.estimate_array()
-        stamps = np.asarray(self._stamps, dtype=np.int64)
-        order = np.argsort(stamps, kind="stable")
-        return Trajectory(stamps[order], poses[order])
-
-    def write_g2o(self, path: str | Path, include_rejected: bool = False) -> None:
-        """Current estimate + odometry + (accepted) loops as g2o; vertex ids are keyframe ids."""
-        est = self.estimate()
-        ids = self._ids
-        edges = [G2oEdge(ids[e.i], ids[e.j], e.T_i_j, e.information) for e in self._base_edges]
-        for lp in self._loops:
-            if include_rejected or lp.record.verdict == ACCEPTED:
-                edges.append(G2oEdge(ids[lp.a], ids[lp.b], lp.Z, np.linalg.inv(lp.cov)))
-        write_g2o(path, est, edges)
-
-
-def values_to_array(values: gtsam.Values, n: int) -> np.ndarray:
-    """Pose3 values with keys 0..n-1 -> (n, 4, 4)."""
-    flat = np.asarray(gtsam.utilities.extractPose3(values))
-    keys = np.asarray(list(values.keys()), dtype=np.int64)
-    out = np.tile(np.eye(4), (n, 1, 1))
-    out[keys, :3, :3] = flat[:, :9].reshape(-1, 3, 3)
-    out[keys, :3, 3] = flat[:, 9:12]
-    return out

@@ -26,6 +26,7 @@ from .budget import select_matches
 from .graph import GraphVerdict, verify_graph
 from .store import DESCRIPTOR_DTYPES, DescriptorStore, compact_descriptors
 from .temporal import TemporalConsistency
+from .user_keyframe import check_user_keyframe
 
 log = logging.getLogger(__name__)
 
@@ -230,6 +231,7 @@ class LoopDetector:
         """Query the database with ``kf``, verify its candidates, then insert it; returns accepted loops."""
         if kf.id in self._entries:
             raise InputError(f"keyframe id {kf.id} was already added to the loop detector")
+        check_user_keyframe(kf)
         clock = PartClock()
         feats = self._features(kf)
         clock.lap("features")

@@ -17,6 +17,7 @@ import numpy as np
 from ..geometry import adjoint, inv, se3_exp
 from ..types import CameraModel, Keyframe
 from .config import LcdConfig
+from .information import loop_information
 
 
 # ----------------------------------------------------------------------------- cameras
@@ -242,6 +243,8 @@ def estimate_loop_pose(
     T_cq_cm[:3, :3] = R
     T_cq_cm[:3, 3] = tvec.reshape(3)
     T_cm_cq, info_cam, rms, keep = refine_pose(inv(T_cq_cm), X[idx], xn, f, inl, conf)
+    info_cam = loop_information(T_cm_cq, X[idx][keep], xn[keep], f, source, kf_m.camera, kf_q.camera,
+                                min_pixel_sigma=conf.pixel_sigma_px)  # per-point noise: lcd/information.py
     n_inl = int(keep.sum())
     mask = np.zeros(len(matches), bool)
     mask[idx[keep]] = True
