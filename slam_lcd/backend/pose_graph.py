@@ -15,7 +15,8 @@ configurable robust kernel. Each new loop goes through
 3. if accepted, an iSAM2 update with it.
 
 A batch GNC (``GncLMOptimizer``, truncated least squares) re-check over all candidate
-loops runs every ``gnc_every_n_loops`` loops and in :meth:`PoseGraph.finalize`; loops it
+loops runs every ``gnc_every_n_loops`` loops (and at least ``gnc_every_fraction`` of the loops
+held so far, so that its O(graph) cost per keyframe stays constant on long runs) and in :meth:`PoseGraph.finalize`; loops it
 finds to be outliers are removed from iSAM2 with ``removeFactorIndices`` and loops it
 finds to be inliers (that the pairwise test had turned away) are added back. Every loop
 keeps a :class:`LoopRecord` with its verdict, the reason and the test statistics.
@@ -45,7 +46,7 @@ from ..errors import InputError, InvalidPoseError
 from ..interrupts import defer_sigint
 from ..geometry import adjoint, inv, project_to_se3
 from ..types import LoopClosure, Trajectory
-from .config import BackendConfig
+from .config import BackendConfig, gnc_due
 from .g2o import G2oEdge, write_g2o
 from .lie import log
 
@@ -280,8 +281,7 @@ class PoseGraph:
 
         if mode in ("gate+gnc", "gnc") and lp.passed_gate:
             self._loops_since_gnc += 1
-            n = self.conf.gnc_every_n_loops
-            if n > 0 and self._loops_since_gnc >= n:
+            if gnc_due(self._loops_since_gnc, self.n_loops, self.conf):
                 self.gnc_recheck()
         return rec
 
