@@ -139,6 +139,7 @@ RANGES: dict[str, str] = {
     "backend.gate_rescue_max_factor": "[1, inf)",
     "backend.gate_pairwise_max_inconsistent": "[0, 1]",
     "backend.gnc_every_n_loops": "[0, inf)",
+    "backend.gnc_every_fraction": "[0, inf)",
     "backend.gnc_inlier_probability": "(0, 1)",
     "backend.gnc_max_iterations": "[1, inf)",
     "backend.gnc_outlier_weight": "[0, 1]",
@@ -151,6 +152,7 @@ RANGES: dict[str, str] = {
     "run.t_max_diff": "[0, inf)",
     "run.loop_true_max_distance": "(0, inf)",
     "run.extract_ahead": "[0, 64]",
+    "run.lcd_threads": "[0, 64]",
     # batch
     "batch.cpus_per_task": "(0, inf)",
     "batch.gpus_per_task": "[0, inf)",

@@ -43,6 +43,7 @@ from .errors import InvalidPoseError, UnsortedStampsError
 from .frontend import KeyframeSelector
 from .geometry import interpolate_poses
 from .lcd import LoopDetector
+from .thread_limits import limited_threads
 from .types import CameraModel, Keyframe, LoopClosure, Trajectory
 
 log = logging.getLogger(__name__)
@@ -141,6 +142,8 @@ class Pipeline:
         # keyframes handed in, and those still waiting for features / loop detection (in order)
         self._n_submitted = 0
         self._ahead = max(0, int(self.config.run.extract_ahead))
+        # with extraction in the background, loop detection leaves the other core to it
+        self._lcd_threads = int(self.config.run.lcd_threads) if self._ahead else 0
         self._inflight: deque[tuple[Keyframe, Future | None]] = deque()
         self._executor: ThreadPoolExecutor | None = None
         # per keyframe: seconds of loop detection (and of each of its parts), of the back end, and
@@ -292,7 +295,7 @@ class Pipeline:
         n_records, n_closures = len(det.records), len(det.closures)
         done = False
         try:
-            with self.timer("loop_detection"):
+            with self.timer("loop_detection"), limited_threads(self._lcd_threads):
                 closures = det.add(kf)
             done = True
             return closures

@@ -128,3 +128,24 @@ def test_written_estimate_is_at_the_optimum_of_the_written_graph(kitti, tmp_path
         assert res.ate < 0.25 * res.ate_odometry
     else:
         assert at_written > 1.01 * optimum  # the reason final_solver exists
+
+
+def test_gnc_recheck_spacing_grows_with_the_loops():
+    """gnc_every_fraction: re-checks every max(n, fraction x loops) loops, so their number grows
+    like log(loops) and their O(graph) cost per keyframe stays bounded on long runs."""
+    from slam_lcd.backend.config import BackendConfig, gnc_due
+
+    conf = BackendConfig(gnc_every_n_loops=50, gnc_every_fraction=0.25)
+    held, since, at = 0, 0, []
+    for _ in range(6000):
+        held += 1
+        since += 1
+        if gnc_due(since, held, conf):
+            at.append(held)
+            since = 0
+    assert at[:4] == [50, 100, 150, 200]  # short runs (the demo's 87 loops) as before
+    gaps = np.diff(at)
+    assert gaps[-1] >= 0.2 * at[-2] and len(at) < 30  # 6000 loops: ~20 re-checks instead of 120
+    assert not gnc_due(10**6, 10**6, BackendConfig(gnc_every_n_loops=0))
+    flat = BackendConfig(gnc_every_n_loops=50, gnc_every_fraction=0.0)
+    assert gnc_due(50, 5000, flat) and not gnc_due(49, 5000, flat)

@@ -6,6 +6,7 @@ covariance/information matrix of the back end is in GTSAM Pose3 tangent order
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Literal
 
@@ -59,6 +60,10 @@ class BackendConfig:
     gate_pairwise_max_inconsistent: float = 0.5
     # Batch GNC (TLS) re-check after every this many new loops (0: only in finalize()).
     gnc_every_n_loops: int = 50
+    # ... and at least this fraction of the loops offered so far (0: every gnc_every_n_loops). A
+    # re-check costs O(keyframes + loops); spacing re-checks in proportion to the loops keeps
+    # its cost per keyframe constant on hour-long runs (docs/backend.md).
+    gnc_every_fraction: float = 0.25
     # GNC also reconsiders loops the pairwise test rejected (may restore them as inliers).
     gnc_includes_gated: bool = False
     # GNC inlier threshold as a chi-square probability per loop factor (6 dof).
@@ -71,3 +76,11 @@ class BackendConfig:
     # batch Levenberg-Marquardt from iSAM2's estimate, so every output sits at its optimum;
     # 'none' keeps iSAM2's last estimate.
     final_solver: Literal["lm", "none"] = "lm"
+
+
+def gnc_due(loops_since: int, loops_held: int, conf: "BackendConfig") -> bool:
+    """Whether the batch GNC re-check is due after ``loops_since`` new gated loops (``loops_held`` offered in all)."""
+    n = conf.gnc_every_n_loops
+    if n <= 0:
+        return False
+    return loops_since >= max(n, math.ceil(conf.gnc_every_fraction * (loops_held - loops_since)))

@@ -16,6 +16,9 @@ Two ways to run:
   gate with relative covariances from iSAM2's marginals (:class:`.relatives.MarginalRelatives`)
   and the GNC re-check weighs, removes and restores only the loop factors added here.
 
+GNC re-checks: every ``gnc_every_n_loops`` gated loops, at most every ``gnc_every_fraction`` x
+the loops so far (constant cost per keyframe on long runs: docs/backend.md), and in ``finalize``.
+
 Interrupts (Ctrl-C, or an error inside a step): the bookkeeping follows iSAM2, never runs
 ahead of it; a loop that never reached iSAM2 is dropped as if it had not been offered, and a
 record says 'accepted' exactly when its factor is in iSAM2.
@@ -34,7 +37,7 @@ from ..errors import InputError
 from ..geometry import inv
 from ..interrupts import defer_sigint
 from ..types import LoopClosure
-from .config import BackendConfig
+from .config import BackendConfig, gnc_due
 from .g2o import G2oEdge
 from .gate import ChainRelatives, GateLoop, LoopGate, default_gate
 from .gnc import gnc_loop_weights
@@ -233,8 +236,7 @@ class PoseGraph(GraphOutputs):
 
         if mode in ("gate+gnc", "gnc") and lp.passed_gate:
             self._loops_since_gnc += 1
-            n = self.conf.gnc_every_n_loops
-            if n > 0 and self._loops_since_gnc >= n:
+            if gnc_due(self._loops_since_gnc, self.n_loops, self.conf):
                 self.gnc_recheck()
         return rec
 
