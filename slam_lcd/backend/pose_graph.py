@@ -6,7 +6,6 @@ usable without a ``PoseGraph``: :mod:`.gate`: accept/reject one new loop (chi-sq
   the batch GNC (TLS) re-check of the loop factors; :mod:`.loop_factors`: loop closures as ``BetweenFactorPose3`` with robust kernels.
 
 Two ways to run:
-
 - **own graph** (default): one ``Pose3`` per keyframe, key = insertion index (or ``key(kf_id)``),
   a prior on the first, odometry ``BetweenFactorPose3`` between consecutive keyframes; the
   gate's relative covariances come from the odometry chain (:class:`.gate.ChainRelatives`).
