@@ -97,6 +97,9 @@ class Pipeline:
     Or skip our front end and call :meth:`add_keyframe` directly.
 
     ``on_loop(closure, record)`` is called for every loop the back end accepts.
+    ``feature_source(stamp, image) -> Features`` replaces the extractor's own call (e.g. an
+    on-disk cache); ``expect_depth``: the source carries depth, so a frame waits for its
+    depth image (or for the next frame) before it is processed.
     """
 
     def __init__(
@@ -108,6 +111,8 @@ class Pipeline:
         extractor=None,
         vocab=None,
         on_loop: Callable[[LoopClosure, object], None] | None = None,
+        feature_source: Callable[[int, np.ndarray], object] | None = None,
+        expect_depth: bool = False,
     ):
         self.config = config or Config()
         self.camera = camera
@@ -122,7 +127,7 @@ class Pipeline:
         self.graph = PoseGraph(self.config.backend)
         self.on_loop = on_loop
         # optional (stamp, image) -> Features, e.g. an on-disk cache keyed by log/topic/stamp
-        self.feature_source: Callable[[int, np.ndarray], object] | None = None
+        self.feature_source = feature_source
         self.timer = StageTimer()
         self.keyframes: list[Keyframe] = []
         self.closures: list[LoopClosure] = []
@@ -132,7 +137,7 @@ class Pipeline:
         self._pending: list[_Frame] = []
         # when the log carries depth, a frame waits for its depth image (or for the next frame):
         # message order at equal stamps differs between log formats, the result must not
-        self.expect_depth = False
+        self.expect_depth = bool(expect_depth)
         self._early_depth: dict[int, np.ndarray] = {}  # depth that arrived before its image
         self._segment_from: int | None = None  # stamp of an odometry break not yet handed to a keyframe
         self._finalized = False

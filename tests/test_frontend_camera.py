@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from slam_lcd.errors import ConfigError, MessageEncodingError
-from slam_lcd.frontend import FrontendConfig, camera_from_camera_info, camera_mounting, undistort_points
+from slam_lcd.frontend import FrontendConfig, camera_mounting, undistort_points
+from slam_lcd.sensors.messages import camera_from_camera_info
 from slam_lcd.frontend.camera import pose_from_list
 from slam_lcd.types import CameraModel
 

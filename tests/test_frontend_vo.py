@@ -85,7 +85,7 @@ def test_vo_accuracy_on_demo_world(demo, mode):
 
 def test_vo_from_log_matches_direct_run(demo_log, demo):
     """visual_odometry_from_log reads camera, mounting and frames itself and gives the same poses."""
-    from slam_lcd.frontend.log_vo import visual_odometry_from_log
+    from slam_lcd.sensors.log_vo import visual_odometry_from_log
 
     gt, cam, T_bc, frames = demo
     out = visual_odometry_from_log(demo_log, depth_topic="/camera/depth", max_frames=20)

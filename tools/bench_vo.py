@@ -2,7 +2,7 @@
 
 Writes a seeded demo-world MCAP with depth and stereo (slam_lcd.sim.make_demo_log, ~2
 laps), runs RgbdOdometry and StereoOdometry on it through
-slam_lcd.frontend.log_vo.visual_odometry_from_log, and prints ATE (SE(3)-aligned RMSE,
+slam_lcd.sensors.log_vo.visual_odometry_from_log, and prints ATE (SE(3)-aligned RMSE,
 also as % of path length), the relative-pose error per metre, tracking statistics,
 covariance consistency (NEES) and the time per frame. ``--direct`` renders in memory
 instead (no image noise, no log). Usage:
@@ -77,7 +77,7 @@ def run_on_log(args) -> int:
     import tempfile
     from pathlib import Path
 
-    from slam_lcd.frontend.log_vo import visual_odometry_from_log
+    from slam_lcd.sensors.log_vo import visual_odometry_from_log
     from slam_lcd.io import read_trajectory_from_log
     from slam_lcd.sim.demo_log import make_demo_log
 

@@ -76,7 +76,7 @@ def iter_source_images(source: Path, topic: str | None, every: int = 1, max_imag
     count = 0
     if source.is_dir() and not (source / "metadata.yaml").exists():
         from ..io.image_folder import read_frame
-        from ..lcd.sources import folder_frames
+        from ..sensors.frames import folder_frames
 
         names, stamps, _ = folder_frames(source)  # the listing and stamps eval-lcd uses (images read below)
         for n in range(0, len(names), every):

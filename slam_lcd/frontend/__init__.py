@@ -2,15 +2,14 @@
 
 - :class:`KeyframeSelector` / :func:`select_keyframes`: keyframes from odometry thresholds
   and image overlap, with the odometry covariance accumulated between keyframes.
-- :func:`camera_from_camera_info`, :func:`undistort_points`, :func:`camera_mounting`.
+- :func:`normalise_camera`, :func:`undistort_points`, :func:`camera_mounting`.
 - :class:`RgbdOdometry`, :class:`StereoOdometry`: frame-to-keyframe PnP odometry with
   covariances and explicit tracking-loss segments.
 - :func:`two_view_geometry`: relative rotation/translation direction of two frames.
 - :func:`triangulate_landmarks`: metric 3-D points for a monocular keyframe;
   :func:`landmarks_from_sensor` for RGB-D / stereo keyframes.
-- :func:`slam_lcd.frontend.log_vo.visual_odometry_from_log`: VO straight from a log.
 """
-from .camera import camera_from_camera_info, camera_mounting, distort_points, undistort_points
+from .camera import camera_mounting, distort_points, normalise_camera, undistort_points
 from .config import FrontendConfig
 from .depth_points import landmarks_from_sensor, points_from_depth, points_from_stereo
 from .keyframes import KeyframeSelector, keyframes_from_trajectory, select_keyframes
@@ -26,10 +25,10 @@ __all__ = [
     "TwoViewResult",
     "VoFrame",
     "VoResult",
-    "camera_from_camera_info",
     "camera_mounting",
     "distort_points",
     "keyframes_from_trajectory",
+    "normalise_camera",
     "landmarks_from_sensor",
     "points_from_depth",
     "points_from_stereo",

@@ -1,4 +1,6 @@
-"""Camera model from ``sensor_msgs/CameraInfo``, keypoint undistortion, camera mounting.
+"""Camera model checks, keypoint undistortion, camera mounting.
+
+(Decoding ``sensor_msgs/CameraInfo`` lives in :mod:`slam_lcd.sensors.messages`.)
 
 Supported distortion models are the ones ROS drivers publish: ``plumb_bob`` (5 radtan
 coefficients), ``rational_polynomial`` (8 coefficients, OpenCV's rational model) and
@@ -20,40 +22,6 @@ log = logging.getLogger(__name__)
 
 RADTAN_MODELS = ("plumb_bob", "rational_polynomial", "radtan")
 FISHEYE_MODELS = ("equidistant", "fisheye", "kannala_brandt")
-
-
-def _field(msg, *names):
-    for n in names:
-        if hasattr(msg, n):
-            return getattr(msg, n)
-    raise MessageEncodingError(f"CameraInfo message has none of the fields {names}")
-
-
-def camera_from_camera_info(msg) -> CameraModel:
-    """A :class:`CameraModel` from a ROS1/ROS2 CameraInfo message (rosbags object).
-
-    Uses :func:`slam_lcd.io.decode.decode_camera_info` when available (one decoder for the
-    whole project) and falls back to reading the fields directly. The stereo baseline is
-    taken from the projection matrix (``P[0,3] = -fx * baseline`` for a right camera).
-    """
-    try:
-        from ..io.decode import decode_camera_info  # type: ignore
-    except ImportError:
-        decode_camera_info = None
-    if decode_camera_info is not None:
-        cam = decode_camera_info(msg)
-        return normalise_camera(cam)
-    K = np.asarray(_field(msg, "k", "K"), dtype=np.float64).reshape(3, 3)
-    D = np.asarray(_field(msg, "d", "D"), dtype=np.float64).reshape(-1)
-    P = np.asarray(_field(msg, "p", "P"), dtype=np.float64).reshape(3, 4)
-    model = str(_field(msg, "distortion_model") or "").strip().lower()
-    baseline = None
-    if P[0, 0] > 0 and abs(P[0, 3]) > 1e-9:
-        baseline = float(-P[0, 3] / P[0, 0])
-    cam = CameraModel(width=int(_field(msg, "width")), height=int(_field(msg, "height")),
-                      fx=float(K[0, 0]), fy=float(K[1, 1]), cx=float(K[0, 2]), cy=float(K[1, 2]),
-                      distortion_model=model or "none", D=D, baseline=baseline)
-    return normalise_camera(cam)
 
 
 def normalise_camera(cam: CameraModel) -> CameraModel:
@@ -139,8 +107,8 @@ def camera_mounting(conf, tf_buffer=None, camera_frame: str | None = None, stamp
     """``T_body_camera``: from the config when set, else from ``/tf_static``, else identity.
 
     The one camera-mounting rule of slam-lcd (the visual-odometry pass and the main pass
-    both use it). ``tf_buffer`` is a :class:`slam_lcd.io.tf.TfBuffer` (anything with
-    ``lookup(parent, child, stamp_ns)``); the body frame is ``body_frame`` (the odometry's
+    both use it). ``tf_buffer`` is anything with
+    ``lookup(parent, child, stamp_ns)`` (a :mod:`slam_lcd.io.tf` buffer); the body frame is ``body_frame`` (the odometry's
     child frame, when there is an odometry topic), else ``conf.body_frame``; the camera
     frame is ``conf.camera_frame``, else ``camera_frame`` (the CameraInfo header's).
     """

@@ -7,12 +7,8 @@ and the trajectory-file functions of :mod:`.trajectory_files`.
 from .reader import LogMessage, LogReader, RawMessage, TopicInfo, open_log
 from .log_trajectory import read_trajectory_from_log
 
-__all__ = ["open_log", "LogReader", "LogMessage", "RawMessage", "TopicInfo", "read_trajectory_from_log"]
+from . import trajectory_files as _tf_files
+from .trajectory_files import *  # noqa: F401,F403
 
-try:  # trajectory file formats live in their own module (written separately)
-    from . import trajectory_files as _tf_files
-    from .trajectory_files import *  # noqa: F401,F403
-
-    __all__ += [n for n in getattr(_tf_files, "__all__", []) if n not in __all__]
-except ImportError:  # pragma: no cover - only while that module does not exist yet
-    pass
+__all__ = ["open_log", "LogReader", "LogMessage", "RawMessage", "TopicInfo", "read_trajectory_from_log",
+           *_tf_files.__all__]
