@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from slam_lcd.frontend import FrontendConfig, KeyframeSelector, RgbdOdometry, StereoOdometry, triangulate_landmarks
-from slam_lcd.frontend.se3 import inv
+from slam_lcd.geometry import inv
 from slam_lcd.types import Keyframe, Trajectory
 
 W, H = 320, 240

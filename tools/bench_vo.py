@@ -18,7 +18,7 @@ import time
 import numpy as np
 
 from slam_lcd.frontend import FrontendConfig, RgbdOdometry, StereoOdometry
-from slam_lcd.frontend.se3 import inv, rotation_angle, se3_log
+from slam_lcd.geometry import inv, rotation_angle, se3_log
 from slam_lcd.sim.render import render
 from slam_lcd.sim.rig import STEREO_BASELINE, T_body_camera, T_left_right, demo_camera
 from slam_lcd.sim.trajectory import make_trajectory
@@ -65,7 +65,7 @@ def nees(vo_traj, gt: dict, T_bc) -> float:
         j = i + step
         T_ij = inv(P[i]) @ P[j]
         G_ij = inv(gt[S[i]]) @ gt[S[j]]
-        from slam_lcd.frontend.se3 import relative_covariance
+        from slam_lcd.geometry import relative_covariance
         c = relative_covariance(P[i], C[i], P[j], C[j], floor=np.full(6, 1e-10))
         e = se3_log(inv(G_ij) @ T_ij)
         vals.append(float(e @ np.linalg.solve(c, e)))

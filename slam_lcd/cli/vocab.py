@@ -97,7 +97,7 @@ def iter_source_images(source: Path, topic: str | None, every: int = 1, max_imag
     if not topic:
         raise InputError("SOURCE is a log: give the image topic with --image-topic", source)
     from ..io import open_log
-    from ..io.decode import decode_compressed_image, decode_image, image_to_gray
+    from ..sensors.messages import decode_gray
 
     with open_log(source) as reader:
         (name,) = reader.resolve_topics([topic])
@@ -108,8 +108,7 @@ def iter_source_images(source: Path, topic: str | None, every: int = 1, max_imag
             if n % every:
                 continue
             try:
-                img = decode_compressed_image(m.msg) if "Compressed" in m.msgtype else decode_image(m.msg)
-                gray = image_to_gray(img)
+                gray = decode_gray(m)
             except SlamLcdError as e:
                 err = in_context(e, f"topic {m.topic}, stamp {stamp_text(m.stamp)}", source)
                 if skipped is None or not isinstance(e, DamagedImageError):

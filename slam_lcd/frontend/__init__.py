@@ -2,14 +2,12 @@
 
 - :class:`KeyframeSelector` / :func:`select_keyframes`: keyframes from odometry thresholds
   and image overlap, with the odometry covariance accumulated between keyframes.
-- :func:`normalise_camera`, :func:`undistort_points`, :func:`camera_mounting`.
 - :class:`RgbdOdometry`, :class:`StereoOdometry`: frame-to-keyframe PnP odometry with
   covariances and explicit tracking-loss segments.
 - :func:`two_view_geometry`: relative rotation/translation direction of two frames.
 - :func:`triangulate_landmarks`: metric 3-D points for a monocular keyframe;
   :func:`landmarks_from_sensor` for RGB-D / stereo keyframes.
 """
-from .camera import camera_mounting, distort_points, normalise_camera, undistort_points
 from .config import FrontendConfig
 from .depth_points import landmarks_from_sensor, points_from_depth, points_from_stereo
 from .keyframes import KeyframeSelector, keyframes_from_trajectory, select_keyframes
@@ -25,10 +23,7 @@ __all__ = [
     "TwoViewResult",
     "VoFrame",
     "VoResult",
-    "camera_mounting",
-    "distort_points",
     "keyframes_from_trajectory",
-    "normalise_camera",
     "landmarks_from_sensor",
     "points_from_depth",
     "points_from_stereo",
@@ -37,5 +32,4 @@ __all__ = [
     "select_keyframes",
     "triangulate_landmarks",
     "two_view_geometry",
-    "undistort_points",
 ]

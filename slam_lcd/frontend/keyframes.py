@@ -13,11 +13,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError, UnsortedStampsError
+from ..geometry import compose_covariance, inv, relative_covariance, rotation_angle
 from ..types import CameraModel, Features, Keyframe, Trajectory
 from .config import FrontendConfig
 from .matching import DEFAULT_MAX_DISTANCE, geometric_inliers, match_descriptors
-from ..geometry import inv, rotation_angle
-from .se3 import compose_covariance, relative_covariance
 
 
 @dataclass

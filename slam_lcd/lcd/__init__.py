@@ -6,12 +6,12 @@ Public API (docs/CONTRACTS.md): :func:`verify_graph` -> :class:`GraphVerdict`,
 """
 from .config import LcdConfig
 from .detector import VERIFY_MODES, CandidateRecord, LoopDetector
-from .geometry import EpipolarVerdict, PoseVerdict, default_camera, estimate_loop_pose, keyframe_points3d, verify_epipolar
+from .geometry import EpipolarVerdict, PoseVerdict, estimate_loop_pose, keyframe_points3d, verify_epipolar
 from .graph import GraphVerdict, planar_graph, verify_graph
 from .temporal import TemporalConsistency
 
 __all__ = [
     "LcdConfig", "VERIFY_MODES", "CandidateRecord", "LoopDetector", "EpipolarVerdict", "PoseVerdict",
-    "default_camera", "estimate_loop_pose", "keyframe_points3d", "verify_epipolar", "GraphVerdict",
+    "estimate_loop_pose", "keyframe_points3d", "verify_epipolar", "GraphVerdict",
     "planar_graph", "verify_graph", "TemporalConsistency",
 ]

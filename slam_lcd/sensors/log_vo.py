@@ -14,13 +14,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import PipelineError, TopicNotFoundError
-from ..frontend.camera import camera_mounting
 from ..frontend.config import FrontendConfig
 from ..frontend.vo import RgbdOdometry, StereoOdometry, VoResult
 from ..io import open_log
 from ..io.tf import TfBuffer
 from ..types import CameraModel
 from .messages import at_message, camera_from_camera_info, decode_any_image, decode_gray
+from .mounting import camera_mounting
 
 log = logging.getLogger(__name__)
 

@@ -1,7 +1,7 @@
 """One decode dispatch for the messages a run reads, with errors that say where they happened.
 
 Images (raw or compressed) become arrays, grey images uint8 through one conversion
-(:func:`slam_lcd.io.decode.image_to_gray`), depth images float32 metres (16-bit images are
+(:func:`slam_lcd.vision.gray.image_to_gray`), depth images float32 metres (16-bit images are
 millimetres, the ROS convention; 32FC1 is metres), poses 4x4 matrices with covariances,
 CameraInfo a :class:`~slam_lcd.types.CameraModel`. :func:`at_message` names the log, topic
 and stamp of a message whose decoding (or use) fails.
@@ -13,9 +13,10 @@ import contextlib
 import numpy as np
 
 from ..errors import DamagedImageError, MessageEncodingError, PipelineError, SlamLcdError, in_context, stamp_text
-from ..frontend.camera import normalise_camera
-from ..io.decode import decode_camera_info, decode_compressed_image, decode_image, decode_pose, image_to_gray
+from ..vision.camera import normalise_camera
+from ..io.decode import decode_camera_info, decode_compressed_image, decode_image, decode_pose
 from ..types import CameraModel
+from ..vision.gray import image_to_gray
 
 DEPTH_ENCODINGS = ("16UC1", "mono16", "32FC1")
 
@@ -80,7 +81,7 @@ def decode_camera_of(m) -> CameraModel:
 def camera_from_camera_info(msg) -> CameraModel:
     """A checked :class:`CameraModel` from a ROS1/ROS2 CameraInfo message: the decoded model
     with its distortion name and coefficient count normalised
-    (:func:`slam_lcd.frontend.camera.normalise_camera`). The stereo baseline is taken from
+    (:func:`slam_lcd.vision.camera.normalise_camera`). The stereo baseline is taken from
     the projection matrix (``P[0,3] = -fx * baseline`` for a right camera)."""
     return normalise_camera(decode_camera_info(msg))
 

@@ -1,18 +1,65 @@
 """Where the camera sits on the body: one rule for the visual-odometry pass and the main pass.
 
-``T_body_camera`` comes from the config when set, else from the log's static transforms
-(read first, so the answer does not depend on message order), else identity; the rule
-itself is :func:`slam_lcd.frontend.camera.camera_mounting`. The body frame is the
-odometry's child frame when the log has an odometry topic.
+``T_body_camera`` comes from the config (``frontend.T_body_camera``) when set, else from the
+log's static transforms (read first, so the answer does not depend on message order),
+else identity (:func:`camera_mounting`). The body frame is the odometry's child frame
+when the log has an odometry topic.
 """
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
-from ..frontend.camera import camera_mounting
+from ..errors import ConfigError, SlamLcdError
+from ..geometry import quat_to_rot
 from ..io.tf import TfBuffer
 from .messages import at_message
 from .topics import static_tf_topics
+
+log = logging.getLogger(__name__)
+
+
+def pose_from_list(values, where: str = "frontend.T_body_camera") -> np.ndarray:
+    """A 4x4 pose from 16 row-major numbers or 7 numbers ``x y z qx qy qz qw``."""
+    v = np.asarray(values, dtype=np.float64).reshape(-1)
+    if v.size == 16:
+        T = v.reshape(4, 4)
+        if not np.allclose(T[3], [0, 0, 0, 1]) or not np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3), atol=1e-6):
+            raise ConfigError(f"{where}: 16 numbers must form a rigid transform (row-major 4x4)")
+        return T
+    if v.size == 7:
+        q = v[3:]
+        if np.linalg.norm(q) < 1e-9:
+            raise ConfigError(f"{where}: zero quaternion")
+        T = np.eye(4)
+        T[:3, :3] = quat_to_rot(q)
+        T[:3, 3] = v[:3]
+        return T
+    raise ConfigError(f"{where}: expected 16 numbers (4x4 row-major) or 7 (x y z qx qy qz qw), got {v.size}")
+
+
+def camera_mounting(conf, tf_buffer=None, camera_frame: str | None = None, stamp_ns: int = 0,
+                    body_frame: str | None = None) -> np.ndarray:
+    """``T_body_camera``: from the config when set, else from ``/tf_static``, else identity.
+
+    The one camera-mounting rule of slam-lcd (the visual-odometry pass and the main pass
+    both use it). ``tf_buffer`` is a :class:`~slam_lcd.io.tf.TfBuffer` (anything with
+    ``lookup(parent, child, stamp_ns)``); the body frame is ``body_frame`` (the odometry's
+    child frame, when there is an odometry topic), else ``conf.body_frame``; the camera
+    frame is ``conf.camera_frame``, else ``camera_frame`` (the CameraInfo header's).
+    """
+    if conf.T_body_camera is not None:
+        return pose_from_list(conf.T_body_camera)
+    body = body_frame or conf.body_frame
+    frame = conf.camera_frame or camera_frame
+    if tf_buffer is not None and frame:
+        try:
+            return np.asarray(tf_buffer.lookup(body, frame, stamp_ns), dtype=np.float64)
+        except (SlamLcdError, LookupError, ValueError) as e:  # no such frame: identity is the documented fallback
+            log.warning("no transform %s -> %s in /tf_static (%s); using identity camera mounting",
+                        body, frame, e)
+    return np.eye(4)
 
 
 def static_transforms(reader, log_path) -> TfBuffer:
