@@ -5,11 +5,9 @@ camera frames (or ready-made keyframes) and gets loop closures through a callbac
 corrected trajectory at any time. :func:`slam_lcd.runner.run_log` drives it from a recorded
 log and writes every output file.
 
-Stages and who does them:
-  keyframe selection (:mod:`slam_lcd.frontend`) → SuperPoint / ORB features
-  (:mod:`slam_lcd.features`) → Bag of SuperPoints candidates + graph verification + metric
-  pose (:mod:`slam_lcd.lcd`, :mod:`slam_lcd.vocab`) → GTSAM iSAM2 pose graph with robust loop
-  handling (:mod:`slam_lcd.backend`) → full-rate correction.
+Stages: keyframe selection (:mod:`slam_lcd.frontend`) → features (:mod:`slam_lcd.features`)
+→ BoW candidates, graph verification, metric pose (:mod:`slam_lcd.lcd`, :mod:`slam_lcd.vocab`)
+→ iSAM2 pose graph with robust loop handling (:mod:`slam_lcd.backend`) → full-rate correction.
 
 Interrupts: every step leaves the pipeline consistent whatever instant a Ctrl-C (or an
 error inside a stage) stops it. A keyframe is in the pose graph exactly when it is in
@@ -27,37 +25,25 @@ from __future__ import annotations
 
 import bisect
 import logging
-import os
 import time
-from collections import defaultdict, deque
+from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
-from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
 
 from .backend import PoseGraph, correct_full_rate
+from .backend.pose_graph import ACCEPTED
 from .config import Config
 from .errors import InvalidPoseError, UnsortedStampsError
 from .frontend import KeyframeSelector
 from .geometry import interpolate_poses
 from .lcd import LoopDetector
+from .stage_timer import StageTimer, resident_kb
 from .types import CameraModel, Keyframe, LoopClosure, Trajectory
 
 log = logging.getLogger(__name__)
-
-
-def resident_kb() -> int:
-    """Resident set size of this process in kB (0 where /proc is not available)."""
-    try:
-        with open("/proc/self/statm", "rb") as f:
-            return int(f.read().split()[1]) * (_PAGE_SIZE // 1024)
-    except (OSError, ValueError, IndexError):
-        return 0
-
-
-_PAGE_SIZE = os.sysconf("SC_PAGE_SIZE") if hasattr(os, "sysconf") else 4096
 
 
 @dataclass
@@ -68,26 +54,6 @@ class _Frame:
     right_image: np.ndarray | None = None
 
 
-@dataclass
-class StageTimer:
-    """Wall time and call count per named stage (for reports and tools/bench_pipeline.py)."""
-
-    seconds: dict = field(default_factory=lambda: defaultdict(float))
-    calls: dict = field(default_factory=lambda: defaultdict(int))
-
-    @contextmanager
-    def __call__(self, stage: str):
-        t0 = time.perf_counter()
-        try:
-            yield
-        finally:
-            self.seconds[stage] += time.perf_counter() - t0
-            self.calls[stage] += 1
-
-    def as_dict(self) -> dict:
-        return {k: {"seconds": round(v, 4), "calls": self.calls[k]} for k, v in self.seconds.items()}
-
-
 class Pipeline:
     """Incremental loop-closing back end.
 
@@ -96,10 +62,9 @@ class Pipeline:
     selector decides, loop detection runs on each keyframe and verified loops go to iSAM2.
     Or skip our front end and call :meth:`add_keyframe` directly.
 
-    ``on_loop(closure, record)`` is called for every loop the back end accepts.
+    ``on_loop(closure, record)`` is called for every loop the back end accepts;
     ``feature_source(stamp, image) -> Features`` replaces the extractor's own call (e.g. an
-    on-disk cache); ``expect_depth``: the source carries depth, so a frame waits for its
-    depth image (or for the next frame) before it is processed.
+    on-disk cache keyed by log, topic and stamp); ``expect_depth``: see :meth:`_release`.
     """
 
     def __init__(
@@ -126,7 +91,6 @@ class Pipeline:
         self.detector = LoopDetector(self.config.lcd, vocab=vocab, extractor=extractor, vocab_conf=self.config.vocab)
         self.graph = PoseGraph(self.config.backend)
         self.on_loop = on_loop
-        # optional (stamp, image) -> Features, e.g. an on-disk cache keyed by log/topic/stamp
         self.feature_source = feature_source
         self.timer = StageTimer()
         self.keyframes: list[Keyframe] = []
@@ -269,13 +233,12 @@ class Pipeline:
                 finally:
                     if self.graph.n_loops > n_loops:
                         self.closures.append(c)
-                if getattr(rec, "verdict", "") == "accepted":
+                if getattr(rec, "verdict", "") == ACCEPTED:
                     accepted.append(c)
                     if self.on_loop is not None:
                         self.on_loop(c, rec)
         finally:
-            # keep memory bounded: the detector stores what it needs of past keyframes (in its
-            # own, compact form); the pipeline's list keeps poses, stamps and covariances only
+            # memory stays bounded: the detector keeps what it needs of past keyframes (compactly), this list poses only
             kf.image = None
             kf.right_image = None
             kf.depth = None
@@ -335,6 +298,7 @@ class Pipeline:
         return T, self._odom_covs[j]
 
     def _release(self, final: bool) -> list[LoopClosure]:
+        """Process the frames odometry covers (all with ``final``); with ``expect_depth`` the newest waits for its depth."""
         out: list[LoopClosure] = []
         if not self._odom_stamps:
             if final:
@@ -377,8 +341,7 @@ class Pipeline:
         # the selector compares frames with its newest keyframe only: older ones need no features
         if self._n_submitted:
             self.selector.keyframes[self._n_submitted - 1].features = None
-        # usually one new keyframe; two on an odometry break (the frame before it is promoted)
-        # (a keyframe an interrupt kept from the queue is handed over with the next one)
+        # one new keyframe, two on an odometry break (the frame before it is promoted), more after an interrupt
         for i in range(self._n_submitted, len(self.selector.keyframes)):
             kf = self.selector.keyframes[i]
             light = Keyframe(id=kf.id, stamp=kf.stamp, T_world_body=kf.T_world_body, features=kf.features,

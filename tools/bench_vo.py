@@ -18,6 +18,7 @@ import time
 import numpy as np
 
 from slam_lcd.frontend import FrontendConfig, RgbdOdometry, StereoOdometry
+from slam_lcd.eval.align import umeyama
 from slam_lcd.geometry import inv, rotation_angle, se3_log
 from slam_lcd.sim.render import render
 from slam_lcd.sim.rig import STEREO_BASELINE, T_body_camera, T_left_right, demo_camera
@@ -25,18 +26,8 @@ from slam_lcd.sim.trajectory import make_trajectory
 from slam_lcd.sim.world import build_world
 
 
-def align_se3(P_est: np.ndarray, P_ref: np.ndarray):
-    """Least-squares rigid alignment (Umeyama without scale) of est positions onto ref."""
-    me, mr = P_est.mean(0), P_ref.mean(0)
-    U, _, Vt = np.linalg.svd((P_ref - mr).T @ (P_est - me))
-    S = np.eye(3)
-    S[2, 2] = np.sign(np.linalg.det(U @ Vt))
-    R = U @ S @ Vt
-    return R, mr - R @ me
-
-
 def ate_rmse(est: np.ndarray, ref: np.ndarray) -> float:
-    R, t = align_se3(est[:, :3, 3], ref[:, :3, 3])
+    R, t, _ = umeyama(est[:, :3, 3], ref[:, :3, 3], with_scale=False)
     e = (est[:, :3, 3] @ R.T + t) - ref[:, :3, 3]
     return float(np.sqrt(np.mean(np.sum(e * e, 1))))
 
