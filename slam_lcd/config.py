@@ -222,7 +222,7 @@ def validate_config(cfg: Config, path: str | Path | None = None) -> Config:
         if data[s1][k1] >= data[s2][k2]:
             raise ConfigError(f"{small} = {data[s1][k1]!r} must be below {large} = {data[s2][k2]!r}", path)
     if cfg.frontend.T_body_camera is not None:
-        from .sensors.mounting import pose_from_list
+        from .geometry import pose_from_list
 
         try:
             pose_from_list(cfg.frontend.T_body_camera)

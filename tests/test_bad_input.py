@@ -434,7 +434,7 @@ def test_real_ctrl_c_waits_for_a_critical_step(tmp_path, monkeypatch):
 def test_T_body_camera_from_config_one_rule_for_vo_and_main_pass(demo, tmp_path, capfd, monkeypatch):
     """Item 4: frontend.T_body_camera runs (no ImportError) and the VO pass and the main pass
     mount the camera by the same rule (config, else /tf_static, else identity)."""
-    from slam_lcd.sensors.mounting import pose_from_list
+    from slam_lcd.geometry import pose_from_list
     from slam_lcd.pipeline import Pipeline
 
     seen = []

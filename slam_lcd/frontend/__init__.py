@@ -1,4 +1,5 @@
-"""slam_lcd.frontend: keyframes, camera model, built-in visual odometry, monocular landmarks.
+"""slam_lcd.frontend: keyframe selection, the built-in RGB-D / stereo visual odometry, monocular landmarks.
+May import: vision, features and the base modules; never io or sensors (frames come in as arrays).
 
 - :class:`KeyframeSelector` / :func:`select_keyframes`: keyframes from odometry thresholds
   and image overlap, with the odometry covariance accumulated between keyframes.

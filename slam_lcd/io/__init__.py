@@ -1,4 +1,5 @@
-"""slam_lcd.io: read ROS1 bags, rosbag2 directories and MCAP files; decode messages; write new logs.
+"""slam_lcd.io: read ROS1 bags, rosbag2 directories and MCAP files; decode messages; trajectory files; write new logs.
+May import: rosbags, mcap and the base modules (types, errors, geometry, atomic); never a stage, sensors or outputs.
 
 See docs/io.md. Public API: :func:`open_log`, :class:`LogMessage`, :class:`TopicInfo`,
 :func:`read_trajectory_from_log`, :mod:`.decode`, :mod:`.tf`, :mod:`.messages`, :mod:`.writers`,

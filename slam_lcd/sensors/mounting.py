@@ -11,32 +11,13 @@ import logging
 
 import numpy as np
 
-from ..errors import ConfigError, SlamLcdError
-from ..geometry import quat_to_rot
+from ..errors import SlamLcdError
+from ..geometry import pose_from_list
 from ..io.tf import TfBuffer
 from .messages import at_message
 from .topics import static_tf_topics
 
 log = logging.getLogger(__name__)
-
-
-def pose_from_list(values, where: str = "frontend.T_body_camera") -> np.ndarray:
-    """A 4x4 pose from 16 row-major numbers or 7 numbers ``x y z qx qy qz qw``."""
-    v = np.asarray(values, dtype=np.float64).reshape(-1)
-    if v.size == 16:
-        T = v.reshape(4, 4)
-        if not np.allclose(T[3], [0, 0, 0, 1]) or not np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3), atol=1e-6):
-            raise ConfigError(f"{where}: 16 numbers must form a rigid transform (row-major 4x4)")
-        return T
-    if v.size == 7:
-        q = v[3:]
-        if np.linalg.norm(q) < 1e-9:
-            raise ConfigError(f"{where}: zero quaternion")
-        T = np.eye(4)
-        T[:3, :3] = quat_to_rot(q)
-        T[:3, 3] = v[:3]
-        return T
-    raise ConfigError(f"{where}: expected 16 numbers (4x4 row-major) or 7 (x y z qx qy qz qw), got {v.size}")
 
 
 def camera_mounting(conf, tf_buffer=None, camera_frame: str | None = None, stamp_ns: int = 0,
