@@ -92,7 +92,7 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
     ``skipped`` (a list) means a partial result: outputs that have nothing to hold yet
     (no odometry, no keyframe) are left out and said so in ``skipped`` instead of failing.
     """
-    from ..eval import ate as compute_ate
+    from ..eval import ate_with_config
     from ..io.trajectory_files import write_tum
 
     cfg = pipe.config
@@ -129,16 +129,15 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
     # ---- evaluation against ground truth
     ate_before = ate_after = None
     if gt is not None and len(gt) > 1 and len(odom) > 1:
-        ec = cfg.run
         try:
-            ate_before = compute_ate(gt, odom, align=ec.align, t_max_diff=ec.t_max_diff)
-            ate_after = compute_ate(gt, corrected, align=ec.align, t_max_diff=ec.t_max_diff)
+            ate_before = ate_with_config(gt, odom, cfg.eval)
+            ate_after = ate_with_config(gt, corrected, cfg.eval)
         except SlamLcdError as e:  # the trajectories are still worth having
             ate_before = ate_after = None
             log.warning("ATE against the ground truth not computed: %s", e.problem)
     if ate_before is not None:
         result.ate_before, result.ate_after = ate_before.rmse, ate_after.rmse
-        result.alignment = ec.align
+        result.alignment = cfg.eval.align
         result.false_loops_accepted = count_false_accepted(rows, cfg.run.loop_true_max_distance)
 
     # ---- corrected MCAP (input topics + corrected trajectory)
