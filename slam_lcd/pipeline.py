@@ -87,7 +87,8 @@ class Pipeline:
 
             extractor = load_extractor(self.config.features)
         self.extractor = extractor
-        self.selector = KeyframeSelector(self.config.frontend, camera=camera, T_body_camera=self.T_body_camera)
+        self.selector = KeyframeSelector(self.config.frontend, camera=camera, T_body_camera=self.T_body_camera,
+                                         keep_images=False)
         self.detector = LoopDetector(self.config.lcd, vocab=vocab, extractor=extractor, vocab_conf=self.config.vocab)
         self.graph = PoseGraph(self.config.backend)
         self.on_loop = on_loop
@@ -107,8 +108,10 @@ class Pipeline:
         self._finalized = False
         self._detector_stale = False  # an interrupt inside the loop detector: no more detection
         self._stale_warned = False
-        # keyframes handed in, and those still waiting for features / loop detection (in order)
+        # keyframes handed in, those the selector made but not yet handed in, and those still
+        # waiting for features / loop detection (in order)
         self._n_submitted = 0
+        self._unsubmitted: list[Keyframe] = []
         self._ahead = max(0, int(self.config.run.extract_ahead))
         self._inflight: deque[tuple[Keyframe, Future | None]] = deque()
         self._executor: ThreadPoolExecutor | None = None
@@ -333,22 +336,19 @@ class Pipeline:
         if brk:
             self._segment_from = None
         with self.timer("keyframe_selection"):
-            is_kf = self.selector.push(f.stamp, T, cov, image=f.image, features=features,
-                                       depth=f.depth, right_image=f.right_image, segment_start=brk)
-        if not is_kf:
+            made = self.selector.push(f.stamp, T, cov, image=f.image, features=features,
+                                      depth=f.depth, right_image=f.right_image, segment_start=brk)
+        if not made:
             return []
+        # one new keyframe, two on an odometry break (the frame before it is promoted), and one an
+        # interrupt kept from the queue (its selector id is not below the count handed in)
+        self._unsubmitted += made
         out: list[LoopClosure] = []
-        # the selector compares frames with its newest keyframe only: older ones need no features
-        if self._n_submitted:
-            self.selector.keyframes[self._n_submitted - 1].features = None
-        # one new keyframe, two on an odometry break (the frame before it is promoted), more after an interrupt
-        for i in range(self._n_submitted, len(self.selector.keyframes)):
-            kf = self.selector.keyframes[i]
-            light = Keyframe(id=kf.id, stamp=kf.stamp, T_world_body=kf.T_world_body, features=kf.features,
-                             covariance_since_last=kf.covariance_since_last)
-            out += self.add_keyframe(kf)
-            # the selector's list is only for its own bookkeeping: drop heavy fields there
-            self.selector.keyframes[i] = light
+        while self._unsubmitted:
+            if self._unsubmitted[0].id < self._n_submitted:
+                self._unsubmitted.pop(0)
+                continue
+            out += self.add_keyframe(self._unsubmitted[0])
         return out
 
     # ------------------------------------------------------------------ results

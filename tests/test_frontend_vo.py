@@ -185,7 +185,7 @@ def test_keyframes_from_image_overlap(demo):
             was = sel.push(int(s), T, None, None, f)
             if len(sel.keyframes) > 1:
                 # the decision agrees with the overlap measured against the keyframe before it
-                assert was == (sel.last_overlap < thr)
+                assert bool(was) == (sel.last_overlap < thr)
         assert set(sel.reasons[1:]) <= {"overlap"}
         counts[thr] = len(sel.keyframes)
     assert 2 <= counts[0.1] < counts[0.2] < len(frames) // 2, counts
