@@ -98,11 +98,12 @@ def iter_source_images(source: Path, topic: str | None, every: int = 1, max_imag
         raise InputError("SOURCE is a log: give the image topic with --image-topic", source)
     from ..io import open_log
     from ..sensors.messages import decode_gray
+    from ..sensors.topics import IMAGE_TYPES
 
     with open_log(source) as reader:
         (name,) = reader.resolve_topics([topic])
         msgtype = reader.topics[name].msgtype
-        if msgtype not in ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage"):
+        if msgtype not in IMAGE_TYPES:
             raise InputError(f"--image-topic {name} carries {msgtype}, not a camera image", source)
         for n, m in enumerate(reader.messages([name])):
             if n % every:
