@@ -14,7 +14,7 @@ import typing
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import yaml
 
@@ -58,12 +58,8 @@ def preset_text(name: str) -> str:
 
 @dataclass
 class RunConfig:
-    """Section `run`: what ``slam-lcd run`` evaluates and writes."""
+    """Section `run`: what ``slam-lcd run`` writes (how it evaluates against ground truth: section `eval`)."""
 
-    # alignment of odometry/corrected to ground truth for the before/after ATE
-    align: Literal["none", "se3", "sim3"] = "se3"
-    # time association tolerance (s) between ground truth and estimates
-    t_max_diff: float = 0.02
     # a loop is counted false when its keyframes' ground-truth positions are further apart than this (m)
     loop_true_max_distance: float = 3.0
     # write trajectory.png and ate_over_time.png
@@ -157,11 +153,18 @@ def _from_dict(cls, data: dict, where: str = ""):
     names = {f.name for f in dataclasses.fields(cls)}
     unknown = set(data) - names
     if unknown:
+        moved = [f"{where}.{u} moved to {MOVED_KEYS[f'{where}.{u}']}" for u in sorted(unknown) if f"{where}.{u}" in MOVED_KEYS]
+        if moved:
+            raise ConfigError(f"unknown key(s) {sorted(unknown)} in section {where}: {'; '.join(moved)}")
         hints = [f"{u!r} -> {near[0]!r}" for u in sorted(unknown) if (near := difflib.get_close_matches(u, names, n=1))]
         hint = f"; did you mean {', '.join(hints)}?" if hints else ""
         raise ConfigError(f"unknown key(s) {sorted(unknown)} in section {where or 'top'}{hint} (known: {sorted(names)})")
     kwargs = {k: _coerce(v, hints[k], f"{where}.{k}".lstrip(".")) for k, v in data.items()}
     return cls(**kwargs)
+
+
+# keys that moved to another section: a config naming the old place gets an error that says where
+MOVED_KEYS = {"run.align": "eval.align", "run.t_max_diff": "eval.t_max_diff"}
 
 
 def config_to_dict(cfg) -> dict:
@@ -227,7 +230,7 @@ def validate_config(cfg: Config, path: str | Path | None = None) -> Config:
         if data[s1][k1] >= data[s2][k2]:
             raise ConfigError(f"{small} = {data[s1][k1]!r} must be below {large} = {data[s2][k2]!r}", path)
     if cfg.frontend.T_body_camera is not None:
-        from .frontend.camera import pose_from_list
+        from .geometry import pose_from_list
 
         try:
             pose_from_list(cfg.frontend.T_body_camera)

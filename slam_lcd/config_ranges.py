@@ -149,7 +149,6 @@ RANGES: dict[str, str] = {
     "eval.n_to_align": "[3, inf)",  # Umeyama needs three points
     "eval.rpe_delta": "(0, inf)",
     # run
-    "run.t_max_diff": "[0, inf)",
     "run.loop_true_max_distance": "(0, inf)",
     "run.extract_ahead": "[0, 64]",
     "run.lcd_threads": "[0, 64]",

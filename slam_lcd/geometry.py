@@ -6,7 +6,12 @@ Conventions (the same everywhere in slam-lcd):
 * quaternions are ``(x, y, z, w)`` (ROS / scipy order);
 * tangent vectors are ``[omega, v]`` (rotation first), exactly like ``gtsam.Pose3``, with
   perturbations on the right: ``T = T_hat @ Exp(xi)``; the adjoint is
-  ``Ad(T) = [[R, 0], [skew(t) R, R]]`` so that ``T Exp(xi) T^-1 = Exp(Ad(T) xi)``.
+  ``Ad(T) = [[R, 0], [skew(t) R, R]]`` so that ``T Exp(xi) T^-1 = Exp(Ad(T) xi)``;
+  covariances therefore live in the body frame of the pose they belong to, and relative
+  motions compose with the adjoint (:func:`compose_covariance`, :func:`relative_covariance`,
+  :func:`transform_covariance`).
+
+(:mod:`slam_lcd.backend.lie` keeps the SE(3) log/exp on GTSAM for the back end only.)
 """
 from __future__ import annotations
 
@@ -14,6 +19,8 @@ import math
 
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
+
+from .errors import ConfigError
 
 # ----------------------------------------------------------------------------- rigid transforms
 
@@ -227,6 +234,25 @@ def quat_slerp(q0: np.ndarray, q1: np.ndarray, a: float) -> np.ndarray:
     return (math.sin((1 - a) * th) / s) * q0 + (math.sin(a * th) / s) * q1
 
 
+def pose_from_list(values, where: str = "frontend.T_body_camera") -> np.ndarray:
+    """A 4x4 pose from 16 row-major numbers or 7 numbers ``x y z qx qy qz qw``."""
+    v = np.asarray(values, dtype=np.float64).reshape(-1)
+    if v.size == 16:
+        T = v.reshape(4, 4)
+        if not np.allclose(T[3], [0, 0, 0, 1]) or not np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3), atol=1e-6):
+            raise ConfigError(f"{where}: 16 numbers must form a rigid transform (row-major 4x4)")
+        return T
+    if v.size == 7:
+        q = v[3:]
+        if np.linalg.norm(q) < 1e-9:
+            raise ConfigError(f"{where}: zero quaternion")
+        T = np.eye(4)
+        T[:3, :3] = quat_to_rot(q)
+        T[:3, 3] = v[:3]
+        return T
+    raise ConfigError(f"{where}: expected 16 numbers (4x4 row-major) or 7 (x y z qx qy qz qw), got {v.size}")
+
+
 # ----------------------------------------------------------------------------- trajectories
 
 
@@ -292,3 +318,42 @@ def ros_covariance_to_gtsam(cov, T_world_body, frame: str = "parent") -> np.ndar
     J[:3, :3] = R.T
     J[3:, 3:] = R.T
     return J @ c @ J.T
+
+
+def compose_covariance(cov_ab: np.ndarray, T_bc: np.ndarray, cov_bc: np.ndarray) -> np.ndarray:
+    """Covariance of ``T_ac = T_ab T_bc`` for independent right-perturbation noises.
+
+    ``T_ab Exp(x) T_bc Exp(y) = T_ac Exp(Ad(T_bc^-1) x) Exp(y)``, so the first covariance
+    is carried into the frame c by the adjoint of ``T_bc^-1`` and the second adds.
+    """
+    A = adjoint(inv(T_bc))
+    out = A @ cov_ab @ A.T + cov_bc
+    return 0.5 * (out + out.T)
+
+
+def relative_covariance(T_wi: np.ndarray, cov_i: np.ndarray, T_wj: np.ndarray, cov_j: np.ndarray,
+                        floor: np.ndarray | None = None) -> np.ndarray:
+    """Covariance of the motion ``T_ij`` from two absolute (growing) pose covariances.
+
+    Under the odometry model ``T_wj = T_wi T_ij`` with independent increments,
+    ``cov_j = Ad(T_ij^-1) cov_i Ad(T_ij^-1)^T + cov_ij``; the difference is projected onto
+    the positive semi-definite cone and a floor (a diagonal of variances) is added.
+    """
+    T_ij = inv(T_wi) @ T_wj
+    A = adjoint(inv(T_ij))
+    d = cov_j - A @ cov_i @ A.T
+    d = 0.5 * (d + d.T)
+    w, V = np.linalg.eigh(d)
+    d = (V * np.maximum(w, 0.0)) @ V.T
+    if floor is not None:
+        d = d + np.diag(floor)
+    return d
+
+
+def transform_covariance(cov_c: np.ndarray, T_b_c: np.ndarray) -> np.ndarray:
+    """Covariance of a motion of frame c re-expressed for frame b rigidly attached by ``T_b_c``.
+
+    ``T_b_c A Exp(xi) T_c_b = (T_b_c A T_c_b) Exp(Ad(T_b_c) xi)``.
+    """
+    A = adjoint(T_b_c)
+    return A @ cov_c @ A.T

@@ -14,6 +14,9 @@ import numpy as np
 from .errors import DamagedImageError, InputError
 from .quiet import native_stderr, one_line, quiet_opencv
 
+# file endings read as images (frames of an image folder, ground-truth loop images)
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".pgm", ".ppm", ".tif", ".tiff")
+
 
 def read_image(path: str | Path, flags: int | None = None) -> np.ndarray:
     """``cv2.imread(path, flags)``; InputError if unreadable, DamagedImageError if decoded from damaged bytes."""

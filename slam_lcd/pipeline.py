@@ -5,11 +5,9 @@ camera frames (or ready-made keyframes) and gets loop closures through a callbac
 corrected trajectory at any time. :func:`slam_lcd.runner.run_log` drives it from a recorded
 log and writes every output file.
 
-Stages and who does them:
-  keyframe selection (:mod:`slam_lcd.frontend`) → SuperPoint / ORB features
-  (:mod:`slam_lcd.features`) → Bag of SuperPoints candidates + graph verification + metric
-  pose (:mod:`slam_lcd.lcd`, :mod:`slam_lcd.vocab`) → GTSAM iSAM2 pose graph with robust loop
-  handling (:mod:`slam_lcd.backend`) → full-rate correction.
+Stages: keyframe selection (:mod:`slam_lcd.frontend`) → features (:mod:`slam_lcd.features`)
+→ BoW candidates, graph verification, metric pose (:mod:`slam_lcd.lcd`, :mod:`slam_lcd.vocab`)
+→ iSAM2 pose graph with robust loop handling (:mod:`slam_lcd.backend`) → full-rate correction.
 
 Interrupts: every step leaves the pipeline consistent whatever instant a Ctrl-C (or an
 error inside a stage) stops it. A keyframe is in the pose graph exactly when it is in
@@ -19,46 +17,34 @@ yet processed stay queued. An interrupt inside the loop detector itself may leav
 database half-updated: its candidates for that keyframe are dropped and later keyframes
 go to the back end without loop detection (one warning says so).
 
-Background extraction (``run.extract_ahead``): a keyframe's features are computed in a
-worker thread while earlier keyframes go through loop detection; keyframes reach the graph
-in order, and one interrupted while waiting for its features stays queued.
+Background extraction (``run.extract_ahead``): a keyframe's features are computed in a worker
+thread while earlier keyframes go through loop detection (with ``run.lcd_threads`` BLAS/faiss
+threads); keyframes reach the graph in order; one interrupted waiting for features stays queued.
 """
 from __future__ import annotations
 
 import bisect
 import logging
-import os
 import time
-from collections import defaultdict, deque
+from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
-from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
 
 from .backend import PoseGraph, correct_full_rate
+from .backend.pose_graph import ACCEPTED
 from .config import Config
 from .errors import InvalidPoseError, UnsortedStampsError
 from .frontend import KeyframeSelector
 from .geometry import interpolate_poses
 from .lcd import LoopDetector
+from .stage_timer import StageTimer, resident_kb
 from .thread_limits import limited_threads
 from .types import CameraModel, Keyframe, LoopClosure, Trajectory
 
 log = logging.getLogger(__name__)
-
-
-def resident_kb() -> int:
-    """Resident set size of this process in kB (0 where /proc is not available)."""
-    try:
-        with open("/proc/self/statm", "rb") as f:
-            return int(f.read().split()[1]) * (_PAGE_SIZE // 1024)
-    except (OSError, ValueError, IndexError):
-        return 0
-
-
-_PAGE_SIZE = os.sysconf("SC_PAGE_SIZE") if hasattr(os, "sysconf") else 4096
 
 
 @dataclass
@@ -69,26 +55,6 @@ class _Frame:
     right_image: np.ndarray | None = None
 
 
-@dataclass
-class StageTimer:
-    """Wall time and call count per named stage (for reports and tools/bench_pipeline.py)."""
-
-    seconds: dict = field(default_factory=lambda: defaultdict(float))
-    calls: dict = field(default_factory=lambda: defaultdict(int))
-
-    @contextmanager
-    def __call__(self, stage: str):
-        t0 = time.perf_counter()
-        try:
-            yield
-        finally:
-            self.seconds[stage] += time.perf_counter() - t0
-            self.calls[stage] += 1
-
-    def as_dict(self) -> dict:
-        return {k: {"seconds": round(v, 4), "calls": self.calls[k]} for k, v in self.seconds.items()}
-
-
 class Pipeline:
     """Incremental loop-closing back end.
 
@@ -97,7 +63,9 @@ class Pipeline:
     selector decides, loop detection runs on each keyframe and verified loops go to iSAM2.
     Or skip our front end and call :meth:`add_keyframe` directly.
 
-    ``on_loop(closure, record)`` is called for every loop the back end accepts.
+    ``on_loop(closure, record)`` is called for every loop the back end accepts;
+    ``feature_source(stamp, image) -> Features`` replaces the extractor's own call (e.g. an
+    on-disk cache keyed by log, topic and stamp); ``expect_depth``: see :meth:`_release`.
     """
 
     def __init__(
@@ -109,6 +77,8 @@ class Pipeline:
         extractor=None,
         vocab=None,
         on_loop: Callable[[LoopClosure, object], None] | None = None,
+        feature_source: Callable[[int, np.ndarray], object] | None = None,
+        expect_depth: bool = False,
     ):
         self.config = config or Config()
         self.camera = camera
@@ -118,12 +88,12 @@ class Pipeline:
 
             extractor = load_extractor(self.config.features)
         self.extractor = extractor
-        self.selector = KeyframeSelector(self.config.frontend, camera=camera, T_body_camera=self.T_body_camera)
+        self.selector = KeyframeSelector(self.config.frontend, camera=camera, T_body_camera=self.T_body_camera,
+                                         keep_images=False)
         self.detector = LoopDetector(self.config.lcd, vocab=vocab, extractor=extractor, vocab_conf=self.config.vocab)
         self.graph = PoseGraph(self.config.backend)
         self.on_loop = on_loop
-        # optional (stamp, image) -> Features, e.g. an on-disk cache keyed by log/topic/stamp
-        self.feature_source: Callable[[int, np.ndarray], object] | None = None
+        self.feature_source = feature_source
         self.timer = StageTimer()
         self.keyframes: list[Keyframe] = []
         self.closures: list[LoopClosure] = []
@@ -133,21 +103,20 @@ class Pipeline:
         self._pending: list[_Frame] = []
         # when the log carries depth, a frame waits for its depth image (or for the next frame):
         # message order at equal stamps differs between log formats, the result must not
-        self.expect_depth = False
+        self.expect_depth = bool(expect_depth)
         self._early_depth: dict[int, np.ndarray] = {}  # depth that arrived before its image
         self._segment_from: int | None = None  # stamp of an odometry break not yet handed to a keyframe
         self._finalized = False
         self._detector_stale = False  # an interrupt inside the loop detector: no more detection
         self._stale_warned = False
-        # keyframes handed in, and those still waiting for features / loop detection (in order)
+        # keyframes handed in, made by the selector but not handed in, waiting for features / loops
         self._n_submitted = 0
+        self._unsubmitted: list[Keyframe] = []
         self._ahead = max(0, int(self.config.run.extract_ahead))
-        # with extraction in the background, loop detection leaves the other core to it
-        self._lcd_threads = int(self.config.run.lcd_threads) if self._ahead else 0
+        self._lcd_threads = int(self.config.run.lcd_threads) if self._ahead else 0  # leave a core to extraction
         self._inflight: deque[tuple[Keyframe, Future | None]] = deque()
         self._executor: ThreadPoolExecutor | None = None
-        # per keyframe: seconds of loop detection (and of each of its parts), of the back end, and
-        # the resident memory after it (kB), for benchmarks and reports
+        # per keyframe: seconds of loop detection (and its parts), of the back end, resident kB after it
         self.keyframe_seconds: list[dict[str, float]] = []
 
     # ------------------------------------------------------------------ inputs
@@ -267,13 +236,12 @@ class Pipeline:
                 finally:
                     if self.graph.n_loops > n_loops:
                         self.closures.append(c)
-                if getattr(rec, "verdict", "") == "accepted":
+                if getattr(rec, "verdict", "") == ACCEPTED:
                     accepted.append(c)
                     if self.on_loop is not None:
                         self.on_loop(c, rec)
         finally:
-            # keep memory bounded: the detector stores what it needs of past keyframes (in its
-            # own, compact form); the pipeline's list keeps poses, stamps and covariances only
+            # memory stays bounded: the detector keeps what it needs of past keyframes (compactly), this list poses only
             kf.image = None
             kf.right_image = None
             kf.depth = None
@@ -333,6 +301,7 @@ class Pipeline:
         return T, self._odom_covs[j]
 
     def _release(self, final: bool) -> list[LoopClosure]:
+        """Process the frames odometry covers (all with ``final``); with ``expect_depth`` the newest waits for its depth."""
         out: list[LoopClosure] = []
         if not self._odom_stamps:
             if final:
@@ -367,23 +336,19 @@ class Pipeline:
         if brk:
             self._segment_from = None
         with self.timer("keyframe_selection"):
-            is_kf = self.selector.push(f.stamp, T, cov, image=f.image, features=features,
-                                       depth=f.depth, right_image=f.right_image, segment_start=brk)
-        if not is_kf:
+            made = self.selector.push(f.stamp, T, cov, image=f.image, features=features,
+                                      depth=f.depth, right_image=f.right_image, segment_start=brk)
+        if not made:
             return []
+        # one new keyframe, two on an odometry break (the frame before it is promoted), and one an
+        # interrupt kept from the queue (its selector id is not below the count handed in)
+        self._unsubmitted += made
         out: list[LoopClosure] = []
-        # the selector compares frames with its newest keyframe only: older ones need no features
-        if self._n_submitted:
-            self.selector.keyframes[self._n_submitted - 1].features = None
-        # usually one new keyframe; two on an odometry break (the frame before it is promoted)
-        # (a keyframe an interrupt kept from the queue is handed over with the next one)
-        for i in range(self._n_submitted, len(self.selector.keyframes)):
-            kf = self.selector.keyframes[i]
-            light = Keyframe(id=kf.id, stamp=kf.stamp, T_world_body=kf.T_world_body, features=kf.features,
-                             covariance_since_last=kf.covariance_since_last)
-            out += self.add_keyframe(kf)
-            # the selector's list is only for its own bookkeeping: drop heavy fields there
-            self.selector.keyframes[i] = light
+        while self._unsubmitted:
+            if self._unsubmitted[0].id < self._n_submitted:
+                self._unsubmitted.pop(0)
+                continue
+            out += self.add_keyframe(self._unsubmitted[0])
         return out
 
     # ------------------------------------------------------------------ results

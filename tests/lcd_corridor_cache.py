@@ -14,7 +14,7 @@ from pathlib import Path
 def corridor_features(folder: str, kind: str, weights: str | None) -> tuple:
     """Features of frames 1..84, read exactly as ``slam-lcd eval-lcd`` reads them (same cache entries)."""
     from slam_lcd.features import FeatureCache, FeaturesConfig, load_extractor
-    from slam_lcd.lcd.sources import folder_frames
+    from slam_lcd.sensors.frames import folder_frames
 
     ex = load_extractor(FeaturesConfig(kind=kind), weights=weights, device="cpu")
     cache = FeatureCache(ex)

@@ -6,7 +6,7 @@ import pytest
 
 from slam_lcd.backend import correct_full_rate
 from slam_lcd.backend.config import BackendConfig
-from slam_lcd.backend.scenario import ScenarioConfig, ate_rmse, make_scenario, run_scenario
+from support.scenario import ScenarioConfig, ate_rmse, make_scenario, run_scenario
 from slam_lcd.errors import InputError, UnsortedStampsError
 from slam_lcd.types import Trajectory
 

@@ -11,8 +11,8 @@ import pytest
 
 from slam_lcd.backend.config import BackendConfig
 from slam_lcd.backend.pose_graph import values_to_array
-from slam_lcd.backend.scenario import ScenarioConfig, ate_rmse, make_scenario, run_scenario
-from slam_lcd.backend.solve import solve_lm
+from support.scenario import ScenarioConfig, ate_rmse, make_scenario, run_scenario
+from support.solve import solve_lm
 
 STRIDE = 4
 

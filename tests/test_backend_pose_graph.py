@@ -9,7 +9,7 @@ from slam_lcd.backend import PoseGraph
 from slam_lcd.backend.config import BackendConfig
 from slam_lcd.backend.g2o import read_g2o
 from slam_lcd.backend.pose_graph import robust_kernel
-from slam_lcd.backend.scenario import ScenarioConfig, ate_rmse, make_scenario, run_scenario
+from support.scenario import ScenarioConfig, ate_rmse, make_scenario, run_scenario
 from slam_lcd.errors import InputError, InvalidPoseError
 from slam_lcd.types import LoopClosure
 

@@ -26,7 +26,7 @@ LOOPY = [*ORB, "--set", "frontend.kf_min_translation=0.05", "--set", "lcd.exclud
 
 
 def run_names():
-    from slam_lcd.runner import RUN_OUTPUTS
+    from slam_lcd.outputs.write import RUN_OUTPUTS
 
     return RUN_OUTPUTS
 
@@ -307,13 +307,14 @@ def test_pipeline_stays_consistent_when_interrupted_inside_the_back_end(demo, mo
     from slam_lcd.io import open_log
     from slam_lcd.pipeline import Pipeline
     from slam_lcd.io.decode import decode_camera_info
-    from slam_lcd.runner import _decode_depth, _decode_gray, decode_pose_of
+    from slam_lcd.sensors.messages import decode_depth as _decode_depth
+    from slam_lcd.sensors.messages import decode_gray as _decode_gray
+    from slam_lcd.sensors.messages import decode_pose_of
 
     cfg = load_config("default", ["features.kind=orb", "features.feature_cache=false",
                                   "frontend.kf_min_translation=0.05", "lcd.exclude_recent_n=1", "lcd.top_k=1",
                                   "lcd.pnp_min_inliers=12", "backend.gnc_every_n_loops=2"])
-    pipe = Pipeline(cfg)
-    pipe.expect_depth = True
+    pipe = Pipeline(cfg, expect_depth=True)
     _inject(monkeypatch, PoseGraph, "add_keyframe", 4, "after")
     _inject(monkeypatch, PoseGraph, "add_loop", 2, "before")
     _inject(monkeypatch, PoseGraph, "_isam_apply", 3, "after")
@@ -399,7 +400,7 @@ def test_real_ctrl_c_waits_for_a_critical_step(tmp_path, monkeypatch):
     import signal
 
     from slam_lcd.interrupts import defer_sigint
-    from slam_lcd.output_set import OutputSet
+    from slam_lcd.outputs.output_set import OutputSet
 
     with pytest.raises(KeyboardInterrupt):
         with defer_sigint():
@@ -433,7 +434,7 @@ def test_real_ctrl_c_waits_for_a_critical_step(tmp_path, monkeypatch):
 def test_T_body_camera_from_config_one_rule_for_vo_and_main_pass(demo, tmp_path, capfd, monkeypatch):
     """Item 4: frontend.T_body_camera runs (no ImportError) and the VO pass and the main pass
     mount the camera by the same rule (config, else /tf_static, else identity)."""
-    from slam_lcd.frontend.camera import pose_from_list
+    from slam_lcd.geometry import pose_from_list
     from slam_lcd.pipeline import Pipeline
 
     seen = []

@@ -205,7 +205,7 @@ def test_corridor_gt_is_never_a_frame(shared_data, tmp_path, capsys):
     if not (corridor / "samples_GT.bmp").is_file():
         pytest.skip("corridor folder not found")
     from slam_lcd.cli.vocab import source_image_count
-    from slam_lcd.lcd.evaluation import list_images
+    from slam_lcd.io.image_folder import list_image_files as list_images
 
     assert source_image_count(corridor, None) == 84
     assert len(list_images(corridor)) == 84 and all("GT" not in p.name for p in list_images(corridor))

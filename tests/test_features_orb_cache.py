@@ -106,16 +106,3 @@ def test_fingerprint_ignores_device_but_not_settings(kind):
         b = random_superpoint(descriptor_sampling="bicubic")
     assert a.fingerprint != b.fingerprint
     assert a.fingerprint == (load_extractor(FeaturesConfig(kind="orb")) if kind == "orb" else random_superpoint()).fingerprint
-
-
-def test_cli_arguments_override_config():
-    import argparse
-
-    from slam_lcd.features.cli_args import add_feature_arguments, apply_feature_arguments
-
-    p = argparse.ArgumentParser()
-    add_feature_arguments(p)
-    conf = FeaturesConfig(device="cpu")
-    assert apply_feature_arguments(conf, p.parse_args([])) == conf
-    c = apply_feature_arguments(conf, p.parse_args(["--weights", "w.pth", "--device", "cuda", "--features", "orb"]))
-    assert (c.weights, c.device, c.kind) == ("w.pth", "cuda", "orb")

@@ -5,8 +5,11 @@ import numpy as np
 import pytest
 
 from slam_lcd.errors import ConfigError, MessageEncodingError
-from slam_lcd.frontend import FrontendConfig, camera_from_camera_info, camera_mounting, undistort_points
-from slam_lcd.frontend.camera import pose_from_list
+from slam_lcd.frontend import FrontendConfig
+from slam_lcd.sensors.messages import camera_from_camera_info
+from slam_lcd.geometry import pose_from_list
+from slam_lcd.sensors.mounting import camera_mounting
+from slam_lcd.vision.camera import undistort_points
 from slam_lcd.types import CameraModel
 
 
@@ -28,7 +31,7 @@ def test_camera_from_camera_info_models(model, D):
     assert cam.distortion_model == model
     assert np.allclose(cam.D, D)
     # a distorted corner is moved by the model, and undistortion inverts the projection
-    from slam_lcd.frontend import distort_points
+    from slam_lcd.vision.camera import distort_points
 
     n = undistort_points(cam, [[5.0, 5.0]], normalized=True)
     assert np.abs(distort_points(cam, n) - [[5.0, 5.0]]).max() < 1e-5

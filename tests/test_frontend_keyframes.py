@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from slam_lcd.frontend import FrontendConfig, KeyframeSelector, select_keyframes
-from slam_lcd.frontend.se3 import compose_covariance, inv, rotation_angle, se3_exp, se3_log
+from slam_lcd.geometry import compose_covariance, inv, rotation_angle, se3_exp, se3_log
 from slam_lcd.types import Trajectory
 
 

@@ -4,8 +4,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from slam_lcd.frontend import two_view_geometry, undistort_points
-from slam_lcd.frontend.se3 import inv, rotation_angle, se3_exp, se3_log
+from slam_lcd.frontend import two_view_geometry
+from slam_lcd.vision.camera import undistort_points
+from slam_lcd.geometry import inv, rotation_angle, se3_exp, se3_log
 from slam_lcd.types import CameraModel
 
 TUM_FR2 = CameraModel(640, 480, 520.9, 521.0, 325.1, 249.7, "plumb_bob",
@@ -76,7 +77,7 @@ def test_distortion_matters_on_real_frames(tum):
 
 
 def test_undistort_round_trip():
-    from slam_lcd.frontend import distort_points
+    from slam_lcd.vision.camera import distort_points
 
     pts = np.array([[0.0, 0.0], [639.0, 479.0], [320.0, 240.0], [15.0, 400.0]])
     n = undistort_points(TUM_FR2, pts, normalized=True)

@@ -13,11 +13,11 @@ from slam_lcd.io.decode import (
     decode_compressed_image,
     decode_image,
     decode_pose,
-    image_to_gray,
 )
 from slam_lcd.io.tf import TfBuffer
 from slam_lcd.io.transforms import gtsam_cov_to_ros, ros_cov_to_gtsam
 from slam_lcd.types import CameraModel
+from slam_lcd.vision.gray import image_to_gray
 
 RNG = np.random.default_rng(3)
 GRAY = RNG.integers(0, 256, (5, 7), dtype=np.uint8)

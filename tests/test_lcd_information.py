@@ -6,7 +6,7 @@ import pytest
 
 from slam_lcd.geometry import inv, se3_exp, se3_log
 from slam_lcd.lcd.config import LcdConfig
-from slam_lcd.lcd.geometry import refine_pose
+from slam_lcd.vision.pnp import refine_pose_reprojection
 from slam_lcd.lcd.information import InformationModel, coverage, loop_information
 from slam_lcd.types import CameraModel
 
@@ -35,7 +35,7 @@ def _trial(rng, n=150, sigma_kp=0.7, box=(1.0, 1.0), source="rgbd"):
     P = X @ T_qm[:3, :3].T + T_qm[:3, 3]
     xq = P[:, :2] / P[:, 2:3] + rng.normal(0, sigma_kp / CAM.fx, (n, 2))
     T0 = T_true @ se3_exp(rng.normal(0, 1e-3, 6))
-    T, _, _, keep = refine_pose(T0, Xm, xq, CAM.fx, np.arange(n), LcdConfig(pnp_threshold_px=10.0))
+    T, _, _, keep = refine_pose_reprojection(T0, Xm, xq, CAM.fx, np.arange(n), 10.0, LcdConfig().pixel_sigma_px)
     return T_true, T, Xm[keep], xq[keep]
 
 

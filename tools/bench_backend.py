@@ -19,10 +19,11 @@ import numpy as np
 
 from slam_lcd.backend.config import BackendConfig
 from slam_lcd.backend.pose_graph import values_to_array
-from slam_lcd.backend.scenario import ScenarioConfig, ate_rmse, make_scenario, run_scenario
-from slam_lcd.backend.solve import solve_gnc, solve_lm
 
 REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO / "tests"))  # the KITTI scenario and the batch solvers are test harnesses (tests/support)
+from support.scenario import ScenarioConfig, ate_rmse, make_scenario, run_scenario  # noqa: E402
+from support.solve import solve_gnc, solve_lm  # noqa: E402
 
 
 def shared_data() -> Path:
@@ -66,7 +67,7 @@ def bench_kitti(data: Path, false_fraction: float, stride: int, seed: int) -> No
 
 def bench_sphere(data: Path) -> None:
     from slam_lcd.backend.g2o import chain_initial_estimate, read_g2o
-    from slam_lcd.backend.solve import batch_graph, from_values, isam2_edge_by_edge, to_values, translation_rmse
+    from support.solve import batch_graph, from_values, isam2_edge_by_edge, to_values, translation_rmse
 
     d = data / "posegraphs"
     _, edges = read_g2o(d / "sphere2500.txt", edge3_matrix="sqrt_information")

@@ -316,9 +316,9 @@ def _bare_forward_seconds(log: Path, stamps: np.ndarray, weights, sample: int) -
     import torch
 
     from slam_lcd.features import FeaturesConfig, load_extractor
-    from slam_lcd.features.extract import to_gray_float
+    from slam_lcd.vision.gray import image_to_gray, to_gray_float
     from slam_lcd.io import open_log
-    from slam_lcd.io.decode import decode_image, image_to_gray
+    from slam_lcd.io.decode import decode_image
 
     ex = load_extractor(FeaturesConfig(kind="superpoint", feature_cache=False), weights=weights, device="cpu")
     pick = set(stamps[np.linspace(0, len(stamps) - 1, min(sample, len(stamps))).astype(int)].tolist())

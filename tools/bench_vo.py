@@ -2,7 +2,7 @@
 
 Writes a seeded demo-world MCAP with depth and stereo (slam_lcd.sim.make_demo_log, ~2
 laps), runs RgbdOdometry and StereoOdometry on it through
-slam_lcd.frontend.log_vo.visual_odometry_from_log, and prints ATE (SE(3)-aligned RMSE,
+slam_lcd.sensors.log_vo.visual_odometry_from_log, and prints ATE (SE(3)-aligned RMSE,
 also as % of path length), the relative-pose error per metre, tracking statistics,
 covariance consistency (NEES) and the time per frame. ``--direct`` renders in memory
 instead (no image noise, no log). Usage:
@@ -18,25 +18,16 @@ import time
 import numpy as np
 
 from slam_lcd.frontend import FrontendConfig, RgbdOdometry, StereoOdometry
-from slam_lcd.frontend.se3 import inv, rotation_angle, se3_log
+from slam_lcd.eval.align import umeyama
+from slam_lcd.geometry import inv, rotation_angle, se3_log
 from slam_lcd.sim.render import render
 from slam_lcd.sim.rig import STEREO_BASELINE, T_body_camera, T_left_right, demo_camera
 from slam_lcd.sim.trajectory import make_trajectory
 from slam_lcd.sim.world import build_world
 
 
-def align_se3(P_est: np.ndarray, P_ref: np.ndarray):
-    """Least-squares rigid alignment (Umeyama without scale) of est positions onto ref."""
-    me, mr = P_est.mean(0), P_ref.mean(0)
-    U, _, Vt = np.linalg.svd((P_ref - mr).T @ (P_est - me))
-    S = np.eye(3)
-    S[2, 2] = np.sign(np.linalg.det(U @ Vt))
-    R = U @ S @ Vt
-    return R, mr - R @ me
-
-
 def ate_rmse(est: np.ndarray, ref: np.ndarray) -> float:
-    R, t = align_se3(est[:, :3, 3], ref[:, :3, 3])
+    R, t, _ = umeyama(est[:, :3, 3], ref[:, :3, 3], with_scale=False)
     e = (est[:, :3, 3] @ R.T + t) - ref[:, :3, 3]
     return float(np.sqrt(np.mean(np.sum(e * e, 1))))
 
@@ -65,7 +56,7 @@ def nees(vo_traj, gt: dict, T_bc) -> float:
         j = i + step
         T_ij = inv(P[i]) @ P[j]
         G_ij = inv(gt[S[i]]) @ gt[S[j]]
-        from slam_lcd.frontend.se3 import relative_covariance
+        from slam_lcd.geometry import relative_covariance
         c = relative_covariance(P[i], C[i], P[j], C[j], floor=np.full(6, 1e-10))
         e = se3_log(inv(G_ij) @ T_ij)
         vals.append(float(e @ np.linalg.solve(c, e)))
@@ -77,7 +68,7 @@ def run_on_log(args) -> int:
     import tempfile
     from pathlib import Path
 
-    from slam_lcd.frontend.log_vo import visual_odometry_from_log
+    from slam_lcd.sensors.log_vo import visual_odometry_from_log
     from slam_lcd.io import read_trajectory_from_log
     from slam_lcd.sim.demo_log import make_demo_log
 

@@ -18,6 +18,7 @@ from slam_lcd.sim import (T_body_camera, build_world, demo_camera, gt_loop_pairs
                           render, simulate_odometry)
 from slam_lcd.sim.trajectory import START_NS
 from slam_lcd.sim.world import BLOCKS, OUTER
+from slam_lcd.vision.gray import to_gray_uint8
 
 
 def label(img, text):
@@ -58,7 +59,7 @@ def main() -> int:
         t = (gt.stamps[i] - START_NS) * 1e-9
         lap = float(path.laps_at(t))
         img, dep = render(world, cam, gt.poses[i] @ Tbc, epoch=lap, color=True)
-        tiles.append(label(img if args.color else cv2.cvtColor(cv2.cvtColor(img, cv2.COLOR_RGB2GRAY), cv2.COLOR_GRAY2RGB),
+        tiles.append(label(img if args.color else cv2.cvtColor(to_gray_uint8(img), cv2.COLOR_GRAY2RGB),
                            f"frame {i}  lap {lap:.2f}"))
         depths.append(dep)
     small = lambda im: cv2.resize(im, (320, 240), interpolation=cv2.INTER_AREA)

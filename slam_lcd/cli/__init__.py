@@ -1,1 +1,3 @@
-"""The ``slam-lcd`` command line: one module per subcommand, each with ``register(subparsers)``."""
+"""The ``slam-lcd`` command line: one module per subcommand, each with ``register(subparsers)``.
+May import: everything; nothing imports it but ``slam_lcd.__main__``.
+"""

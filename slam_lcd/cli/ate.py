@@ -145,7 +145,7 @@ def _short(spec: str) -> str:
 def run(args) -> int:
     from ..eval import align_mode_from_flags
     from ..eval.relations import ape, rpe
-    from ..eval.sources import load_trajectory_source
+    from ..sensors.trajectories import load_trajectory_source
 
     _check_args(args)
     # KITTI matrices as written (evo's reading), so the figures equal evo's to the last digits
@@ -181,7 +181,7 @@ def run(args) -> int:
             write_text(args.json, json.dumps(report, indent=2) + "\n")
         print(f"wrote {args.json}")
     if args.save_results:
-        from ..eval.results_zip import write_evo_results
+        from ..io.results_zip import write_evo_results
 
         with write_guard(args.save_results):
             write_evo_results(args.save_results, res, ref_name=ref_name, est_name=est_name)

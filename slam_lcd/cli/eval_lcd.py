@@ -63,8 +63,8 @@ def run(args) -> int:
     from ..config import validate_config
     from ..lcd import LoopDetector
     from ..lcd.evaluation import format_table, load_loop_matrix, precision_recall
-    from ..output_set import OutputSet
-    from ..lcd.sources import folder_frames, frame_to_keyframe, log_frames
+    from ..outputs.output_set import OutputSet
+    from ..sensors.frames import folder_frames, frame_to_keyframe, log_frames
     from ..progress import progress_bar
 
     cfg = config_from_args(args)

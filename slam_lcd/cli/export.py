@@ -7,7 +7,7 @@ The output is written atomically and never onto the input.
 """
 from __future__ import annotations
 
-from ..errors import InputError, NotBuiltError
+from ..errors import InputError
 from .run import add_alias
 from .util import check_output_path, write_guard
 from ..io.trajectory_files import FORMATS
@@ -44,8 +44,8 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ..eval.sources import load_trajectory_source
     from ..io.trajectory_files import write_trajectory
+    from ..sensors.trajectories import load_trajectory_source
 
     if args.out and args.out_opt and args.out != args.out_opt:
         raise InputError(f"two output paths given ({args.out} and --out {args.out_opt}); give one")
@@ -63,15 +63,8 @@ def run(args) -> int:
             raise InputError(f"{flag} only applies to --to mcap")
     traj = load_trajectory_source(args.traj, args.in_format, args.times)
     if args.to == "mcap":
-        from .. import io as slam_io
+        from ..io.writers import write_trajectory_log
 
-        try:
-            from ..io.writers import write_trajectory_log
-        except ImportError:
-            write_trajectory_log = None
-        if write_trajectory_log is None:
-            raise NotBuiltError("writing a trajectory to MCAP is not built yet (slam_lcd.io.writers)", args.out)
-        del slam_io
         frame = args.frame_id or (traj.frame_id if traj.frame_id != "world" else "map")
         child = args.child_frame_id or (traj.child_frame_id if traj.child_frame_id != "body" else "base_link")
         if not args.topic.startswith("/"):

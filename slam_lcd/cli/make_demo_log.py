@@ -1,4 +1,4 @@
-"""`slam-lcd make-demo-log`: render the built-in demo world into a log file (issue #3)."""
+"""`slam-lcd make-demo-log`: render the built-in demo world into a log file."""
 from __future__ import annotations
 
 from pathlib import Path

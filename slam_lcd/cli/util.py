@@ -84,7 +84,7 @@ def check_output_path(out: str | None, *inputs) -> None:
         return
     if Path(out).is_dir():
         raise InputError("output path is a folder; give a file name", out)
-    from ..eval.sources import split_log_topic
+    from ..sensors.trajectories import split_log_topic
 
     paths = []
     for inp in inputs:  # LOG:TOPIC names the log as the input

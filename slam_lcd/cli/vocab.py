@@ -76,7 +76,7 @@ def iter_source_images(source: Path, topic: str | None, every: int = 1, max_imag
     count = 0
     if source.is_dir() and not (source / "metadata.yaml").exists():
         from ..io.image_folder import read_frame
-        from ..lcd.sources import folder_frames
+        from ..sensors.frames import folder_frames
 
         names, stamps, _ = folder_frames(source)  # the listing and stamps eval-lcd uses (images read below)
         for n in range(0, len(names), every):
@@ -97,19 +97,19 @@ def iter_source_images(source: Path, topic: str | None, every: int = 1, max_imag
     if not topic:
         raise InputError("SOURCE is a log: give the image topic with --image-topic", source)
     from ..io import open_log
-    from ..io.decode import decode_compressed_image, decode_image, image_to_gray
+    from ..sensors.messages import decode_gray
+    from ..sensors.topics import IMAGE_TYPES
 
     with open_log(source) as reader:
         (name,) = reader.resolve_topics([topic])
         msgtype = reader.topics[name].msgtype
-        if msgtype not in ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage"):
+        if msgtype not in IMAGE_TYPES:
             raise InputError(f"--image-topic {name} carries {msgtype}, not a camera image", source)
         for n, m in enumerate(reader.messages([name])):
             if n % every:
                 continue
             try:
-                img = decode_compressed_image(m.msg) if "Compressed" in m.msgtype else decode_image(m.msg)
-                gray = image_to_gray(img)
+                gray = decode_gray(m)
             except SlamLcdError as e:
                 err = in_context(e, f"topic {m.topic}, stamp {stamp_text(m.stamp)}", source)
                 if skipped is None or not isinstance(e, DamagedImageError):

@@ -1,4 +1,5 @@
-"""slam_lcd.eval: trajectory evaluation (association, Umeyama alignment, ATE, RPE, plots).
+"""slam_lcd.eval: trajectory evaluation: association, alignment (the one Umeyama), ATE, RPE, plots.
+May import: numpy, matplotlib (plots, on demand) and the base modules; never io (files are read by io and sensors).
 
 A pure library: functions take :class:`slam_lcd.types.Trajectory` objects and return
 result dataclasses; reading files lives in :mod:`slam_lcd.io.trajectory_files`, figures in

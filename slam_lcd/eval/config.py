@@ -1,4 +1,7 @@
-"""Configuration section `eval` (owned by :mod:`slam_lcd.eval`)."""
+"""Configuration section `eval` (owned by :mod:`slam_lcd.eval`): how ``slam-lcd run`` measures ATE against ground truth.
+
+(``slam-lcd ate`` takes evo's flags instead, with evo's defaults.)
+"""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -7,8 +10,8 @@ from typing import Literal
 
 @dataclass
 class EvalConfig:
-    # max |t_ref - t_est| (s) for two poses to be associated (evo's --t_max_diff)
-    t_max_diff: float = 0.01
+    # max |t_ref - t_est| (s) for two poses to be associated (evo's --t_max_diff; evo's default is 0.01)
+    t_max_diff: float = 0.02
     # constant offset (s) added to the estimate's stamps before association (evo's --t_offset)
     t_offset: float = 0.0
     # alignment before ATE: none, SE(3) or Sim(3) Umeyama (sim3 for monocular/scale-free estimates), scale only

@@ -109,18 +109,8 @@ def plot_error_over_time(
     return fig
 
 
-def plot_ate(
-    ref: Trajectory,
-    result: AteResult,
-    *,
-    est_name: str = "estimate",
-    ref_name: str = "reference",
-    plane: str = "auto",
-    out: str | Path | None = None,
-) -> Figure:
-    """Two panels: top view of reference and aligned estimate, and the error over time."""
-    fig = _new_figure((13.0, 5.5))
-    ax1 = fig.add_subplot(1, 2, 1)
+def _top_view_panel(ax1, ref: Trajectory, result, est_name: str, ref_name: str, plane: str) -> None:
+    """Left panel of :func:`plot_ate` / :func:`plot_pose_error`: reference and aligned estimate from above."""
     p_ref = ref.positions
     a, b = _PLANES[auto_plane(p_ref) if plane == "auto" else plane]
     ax1.plot(p_ref[:, a], p_ref[:, b], "-", color="0.4", linewidth=1.0, label=f"{ref_name} ({len(ref)})")
@@ -133,6 +123,20 @@ def plot_ate(
     ax1.grid(True, alpha=0.3)
     ax1.legend(loc="best", fontsize=8)
     ax1.set_title(f"top view ({result.alignment.label})")
+
+
+def plot_ate(
+    ref: Trajectory,
+    result: AteResult,
+    *,
+    est_name: str = "estimate",
+    ref_name: str = "reference",
+    plane: str = "auto",
+    out: str | Path | None = None,
+) -> Figure:
+    """Two panels: top view of reference and aligned estimate, and the error over time."""
+    fig = _new_figure((13.0, 5.5))
+    _top_view_panel(fig.add_subplot(1, 2, 1), ref, result, est_name, ref_name, plane)
     ax2 = fig.add_subplot(1, 2, 2)
     t = (result.stamps - result.stamps[0]) * 1e-9
     ax2.plot(t, result.errors, color="tab:blue", linewidth=1.0)
@@ -159,19 +163,7 @@ def plot_pose_error(
     """Top view and error over time of a :class:`slam_lcd.eval.relations.PoseErrorResult` (APE or RPE,
     any pose relation); the title is the result's evo-style title (metric, relation, alignment)."""
     fig = _new_figure((13.0, 5.5))
-    ax1 = fig.add_subplot(1, 2, 1)
-    p_ref = ref.positions
-    a, b = _PLANES[auto_plane(p_ref) if plane == "auto" else plane]
-    ax1.plot(p_ref[:, a], p_ref[:, b], "-", color="0.4", linewidth=1.0, label=f"{ref_name} ({len(ref)})")
-    if result.est_aligned is not None:
-        p = result.est_aligned.positions
-        ax1.plot(p[:, a], p[:, b], "-", color="tab:blue", linewidth=1.0, label=f"{est_name}, aligned ({len(p)})")
-    ax1.set_xlabel(f"{'xyz'[a]} [m]")
-    ax1.set_ylabel(f"{'xyz'[b]} [m]")
-    ax1.set_aspect("equal", adjustable="datalim")
-    ax1.grid(True, alpha=0.3)
-    ax1.legend(loc="best", fontsize=8)
-    ax1.set_title(f"top view ({result.alignment.label})")
+    _top_view_panel(fig.add_subplot(1, 2, 1), ref, result, est_name, ref_name, plane)
     ax2 = fig.add_subplot(1, 2, 2)
     t = (result.stamps - result.stamps[0]) * 1e-9 if len(result.stamps) else result.stamps
     unit = f" [{result.unit}]" if result.unit else ""

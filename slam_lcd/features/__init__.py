@@ -1,4 +1,5 @@
-"""slam_lcd.features: SuperPoint (and an ORB baseline) behind one extractor interface.
+"""slam_lcd.features: SuperPoint (and an ORB baseline) behind one extractor interface, weights, the feature cache, matching.
+May import: torch, cv2, vision.gray and the base modules; never io or another stage.
 
 ``load_extractor(conf, weights=..., device=...)`` returns an :class:`Extractor` whose
 ``extract(image)`` gives a :class:`slam_lcd.types.Features` record.

@@ -19,41 +19,11 @@ import torch
 
 from ..errors import ConfigError, InputError
 from ..types import Features
+from ..vision.gray import to_gray_float, to_gray_uint8
 from .allocator import retain_freed_memory
 from .config import FeaturesConfig
 from .superpoint import SuperPoint
 from .weights import load_state_dict_checked, resolve_weights, sha256_of
-
-
-def to_gray_float(image: np.ndarray) -> np.ndarray:
-    """uint8/uint16 gray or RGB, or float gray in [0, 1] -> float32 H x W in [0, 1]."""
-    img = np.asarray(image)
-    if img.ndim == 3 and img.shape[2] == 1:
-        img = img[:, :, 0]
-    if img.ndim == 3 and img.shape[2] in (3, 4):
-        if img.dtype == np.uint8:
-            img = cv2.cvtColor(img[:, :, :3], cv2.COLOR_RGB2GRAY)
-        else:
-            img = img[:, :, :3].astype(np.float32) @ np.array([0.299, 0.587, 0.114], np.float32)
-    if img.ndim != 2:
-        raise InputError(f"expected a grayscale or RGB image, got an array of shape {img.shape}")
-    if img.dtype == np.uint8:
-        return img.astype(np.float32) * (1.0 / 255.0)
-    if img.dtype == np.uint16:
-        return img.astype(np.float32) * (1.0 / 65535.0)
-    if np.issubdtype(img.dtype, np.floating):
-        return np.ascontiguousarray(img, dtype=np.float32)
-    raise InputError(f"unsupported image dtype {img.dtype}")
-
-
-def to_gray_uint8(image: np.ndarray) -> np.ndarray:
-    img = np.asarray(image)
-    if img.dtype == np.uint8 and img.ndim == 2:
-        return img
-    if img.dtype == np.uint8 and img.ndim == 3 and img.shape[2] == 1:
-        return img[:, :, 0]
-    g = to_gray_float(img)
-    return np.clip(g * 255.0 + 0.5, 0, 255).astype(np.uint8)
 
 
 def resolve_device(device: str) -> torch.device:

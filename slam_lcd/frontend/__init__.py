@@ -1,16 +1,14 @@
-"""slam_lcd.frontend: keyframes, camera model, built-in visual odometry, monocular landmarks.
+"""slam_lcd.frontend: keyframe selection, the built-in RGB-D / stereo visual odometry, monocular landmarks.
+May import: vision, features and the base modules; never io or sensors (frames come in as arrays).
 
 - :class:`KeyframeSelector` / :func:`select_keyframes`: keyframes from odometry thresholds
   and image overlap, with the odometry covariance accumulated between keyframes.
-- :func:`camera_from_camera_info`, :func:`undistort_points`, :func:`camera_mounting`.
 - :class:`RgbdOdometry`, :class:`StereoOdometry`: frame-to-keyframe PnP odometry with
   covariances and explicit tracking-loss segments.
 - :func:`two_view_geometry`: relative rotation/translation direction of two frames.
 - :func:`triangulate_landmarks`: metric 3-D points for a monocular keyframe;
   :func:`landmarks_from_sensor` for RGB-D / stereo keyframes.
-- :func:`slam_lcd.frontend.log_vo.visual_odometry_from_log`: VO straight from a log.
 """
-from .camera import camera_from_camera_info, camera_mounting, distort_points, undistort_points
 from .config import FrontendConfig
 from .depth_points import landmarks_from_sensor, points_from_depth, points_from_stereo
 from .keyframes import KeyframeSelector, keyframes_from_trajectory, select_keyframes
@@ -26,9 +24,6 @@ __all__ = [
     "TwoViewResult",
     "VoFrame",
     "VoResult",
-    "camera_from_camera_info",
-    "camera_mounting",
-    "distort_points",
     "keyframes_from_trajectory",
     "landmarks_from_sensor",
     "points_from_depth",
@@ -38,5 +33,4 @@ __all__ = [
     "select_keyframes",
     "triangulate_landmarks",
     "two_view_geometry",
-    "undistort_points",
 ]

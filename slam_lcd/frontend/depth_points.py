@@ -11,7 +11,8 @@ import cv2
 import numpy as np
 
 from ..types import CameraModel, Features, Keyframe
-from .camera import undistort_points
+from ..vision.gray import to_gray_uint8
+from ..vision.points import backproject, nearest_pixels, unit_rays
 from .config import FrontendConfig
 
 
@@ -42,19 +43,16 @@ def points_from_depth(camera: CameraModel, feats: Features, depth: np.ndarray,
     pts = np.full((n, 3), np.nan)
     if n == 0:
         return pts, np.zeros((0, 3, 3))
-    h, w = d.shape[:2]
     kp = feats.keypoints
-    u = np.clip(np.round(kp[:, 0]).astype(int), 0, w - 1)
-    v = np.clip(np.round(kp[:, 1]).astype(int), 0, h - 1)
+    u, v = nearest_pixels(d.shape, kp)
     z = d[v, u].astype(np.float64)
     zmin = cv2.erode(d, np.ones((3, 3), np.uint8))[v, u]
     zmax = cv2.dilate(d, np.ones((3, 3), np.uint8))[v, u]
     with np.errstate(invalid="ignore"):
         sz = c.vo_depth_sigma_per_m2 * z**2 + 1e-3
         ok = np.isfinite(z) & (z > c.vo_min_depth) & (z < c.vo_max_depth) & ((zmax - zmin) < 3 * sz + 0.01 * z)
-    rays = np.column_stack([undistort_points(camera, kp, normalized=True), np.ones(n)])
-    pts[ok] = rays[ok] * z[ok, None]
-    return pts, _covariances(camera, rays, z, sz, ok, c)
+    rays = unit_rays(camera, kp)
+    return backproject(rays, z, ok), _covariances(camera, rays, z, sz, ok, c)
 
 
 def points_from_stereo(camera: CameraModel, baseline: float, feats: Features, left: np.ndarray,
@@ -74,9 +72,8 @@ def points_from_stereo(camera: CameraModel, baseline: float, feats: Features, le
         z = fx * baseline / disp
         ok = np.isfinite(z) & (z > c.vo_min_depth) & (z < c.vo_max_depth)
         sz = z**2 / (fx * baseline) * c.vo_disparity_sigma_px
-    rays = np.column_stack([undistort_points(camera, feats.keypoints, normalized=True), np.ones(n)])
-    pts[ok] = rays[ok] * z[ok, None]
-    return pts, _covariances(camera, rays, z, sz, ok, c)
+    rays = unit_rays(camera, feats.keypoints)
+    return backproject(rays, z, ok), _covariances(camera, rays, z, sz, ok, c)
 
 
 def landmarks_from_sensor(kf: Keyframe, conf: FrontendConfig | None = None, extractor=None) -> np.ndarray:
@@ -96,10 +93,8 @@ def landmarks_from_sensor(kf: Keyframe, conf: FrontendConfig | None = None, extr
             from .vo import default_extractor
 
             extractor = default_extractor(conf or FrontendConfig())
-        from .vo import _gray
-
-        pts, _ = points_from_stereo(kf.camera, kf.camera.baseline, kf.features, _gray(kf.image),
-                                    _gray(kf.right_image), extractor, conf)
+        pts, _ = points_from_stereo(kf.camera, kf.camera.baseline, kf.features, to_gray_uint8(kf.image),
+                                    to_gray_uint8(kf.right_image), extractor, conf)
     else:
         raise ValueError("keyframe has neither a depth image nor a right image")
     kf.landmarks = pts

@@ -13,11 +13,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError, UnsortedStampsError
+from ..geometry import compose_covariance, inv, relative_covariance, rotation_angle
 from ..types import CameraModel, Features, Keyframe, Trajectory
 from .config import FrontendConfig
 from .matching import DEFAULT_MAX_DISTANCE, geometric_inliers, match_descriptors
-from ..geometry import inv, rotation_angle
-from .se3 import compose_covariance, relative_covariance
 
 
 @dataclass
@@ -63,8 +62,9 @@ def _usable(cov) -> np.ndarray | None:
 class KeyframeSelector:
     """Feed it every odometry sample (and, optionally, the frame's image/features).
 
-    ``push`` returns True when that frame became a keyframe; the keyframes are in
-    ``self.keyframes`` (``slam_lcd.types.Keyframe``), each with
+    ``push`` returns the keyframes that frame made (none, itself, or on an odometry break
+    also the frame before it); the keyframes are in ``self.keyframes``
+    (``slam_lcd.types.Keyframe``), each with
     ``covariance_since_last`` (6x6, GTSAM ``[rx ry rz tx ty tz]``, body frame of the keyframe),
     and ``self.reasons[i]`` says why keyframe i was taken.
 
@@ -73,14 +73,19 @@ class KeyframeSelector:
     difference to the last keyframe's), ``relative`` (covariance of the motion since the
     previous push) or ``model`` (ignored; the motion model is used). Missing or all-zero
     covariances fall back to the motion model.
+
+    ``keep_images=False`` (a consumer such as the pipeline takes the keyframes ``push``
+    returns): ``self.keyframes`` holds light copies (stamp, pose, covariance, and the newest
+    one's features, all the overlap test needs), so images do not pile up here.
     """
 
     def __init__(self, conf: FrontendConfig | None = None, camera: CameraModel | None = None,
-                 T_body_camera: np.ndarray | None = None):
+                 T_body_camera: np.ndarray | None = None, *, keep_images: bool = True):
         self.conf = conf or FrontendConfig()
         self.camera = camera
         self.T_body_camera = np.eye(4) if T_body_camera is None else np.asarray(T_body_camera, np.float64)
         self.keyframes: list[Keyframe] = []
+        self.keep_images = keep_images
         self.reasons: list[str] = []
         self._last: _Pending | None = None
         self._kf_abs_cov: np.ndarray | None = None  # absolute covariance at the last keyframe (absolute mode)
@@ -114,7 +119,13 @@ class KeyframeSelector:
         kf = Keyframe(id=len(self.keyframes), stamp=int(p.stamp), T_world_body=p.T.copy(), image=p.image,
                       camera=self.camera, T_body_camera=self.T_body_camera.copy(), depth=p.depth,
                       right_image=p.right_image, covariance_since_last=cov_since, features=p.features)
-        self.keyframes.append(kf)
+        if self.keep_images:
+            self.keyframes.append(kf)
+        else:  # only the newest keyframe is compared with: older ones need no features
+            if self.keyframes:
+                self.keyframes[-1].features = None
+            self.keyframes.append(Keyframe(id=kf.id, stamp=kf.stamp, T_world_body=kf.T_world_body, features=kf.features,
+                                           covariance_since_last=kf.covariance_since_last))
         self.reasons.append(reason)
         p.is_keyframe = True
         return kf
@@ -123,8 +134,8 @@ class KeyframeSelector:
     def push(self, stamp_ns: int, T_world_body: np.ndarray, cov: np.ndarray | None = None,
              image: np.ndarray | None = None, features: Features | None = None, *,
              depth: np.ndarray | None = None, right_image: np.ndarray | None = None,
-             segment_start: bool = False, segment_cov: np.ndarray | None = None) -> bool:
-        """Offer one frame; True if it became a keyframe.
+             segment_start: bool = False, segment_cov: np.ndarray | None = None) -> list[Keyframe]:
+        """Offer one frame; the keyframes it made (empty when it made none).
 
         ``segment_start=True`` marks a break in the odometry (visual tracking lost): the
         previous frame is promoted to a keyframe if it was not one, and this frame becomes a
@@ -144,9 +155,9 @@ class KeyframeSelector:
             p = _Pending(stamp_ns, T, np.zeros((6, 6)), image, features, depth, right_image, False)
             self._last = p
             self._kf_abs_cov = given if conf.odom_covariance == "absolute" else None
-            self._make_keyframe(p, None, "first")
+            made = [self._make_keyframe(p, None, "first")]
             self._model_since_kf = np.zeros((6, 6))
-            return True
+            return made
         if stamp_ns < prev.stamp:
             raise UnsortedStampsError(f"stamp {stamp_ns} is earlier than the previous one ({prev.stamp})")
 
@@ -167,21 +178,20 @@ class KeyframeSelector:
         cur = _Pending(stamp_ns, T, cov_since, image, features, depth, right_image, False)
 
         if segment_start:
-            if not prev.is_keyframe:
-                self._make_keyframe(prev, prev.cov_since_kf, "before-break")
+            made = [self._make_keyframe(prev, prev.cov_since_kf, "before-break")] if not prev.is_keyframe else []
             if segment_cov is None:
                 s_t, s_r = conf.vo_lost_sigma_trans, np.radians(conf.vo_lost_sigma_rot_deg)
                 segment_cov = np.diag([s_r**2] * 3 + [s_t**2] * 3)
             self._last = cur
-            self._make_keyframe(cur, np.asarray(segment_cov, np.float64), "segment-break")
+            made.append(self._make_keyframe(cur, np.asarray(segment_cov, np.float64), "segment-break"))
             self._kf_abs_cov = given if conf.odom_covariance == "absolute" else None
             self._model_since_kf = np.zeros((6, 6))
-            return True
+            return made
 
         self._last = cur
         dt = (stamp_ns - kf.stamp) * 1e-9
         if dt < conf.kf_min_interval_s:
-            return False
+            return []
         reason = None
         if np.linalg.norm(T_kf_cur[:3, 3]) >= conf.kf_min_translation:
             reason = "translation"
@@ -195,11 +205,11 @@ class KeyframeSelector:
             if ov is not None and ov < conf.kf_min_overlap:
                 reason = "overlap"
         if reason is None:
-            return False
-        self._make_keyframe(cur, cov_since, reason)
+            return []
+        made = [self._make_keyframe(cur, cov_since, reason)]
         self._kf_abs_cov = given if conf.odom_covariance == "absolute" else None
         self._model_since_kf = np.zeros((6, 6))
-        return True
+        return made
 
 
 def select_keyframes(trajectory: Trajectory, conf: FrontendConfig | None = None,

@@ -12,11 +12,12 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from ..geometry import inv
 from ..types import Keyframe
-from .camera import undistort_points
+from ..vision.camera import undistort_points
+from ..vision.gray import to_gray_uint8
 from .config import FrontendConfig
 from .matching import match_descriptors
-from ..geometry import inv
 
 
 def _camera_pose(kf: Keyframe) -> np.ndarray:
@@ -45,9 +46,7 @@ def triangulate_pair(kf: Keyframe, other: Keyframe, conf: FrontendConfig | None 
     p2 = other.features.keypoints[m[:, 1]].astype(np.float64)
     if kf.image is not None and other.image is not None:  # sub-pixel correspondences
         from .two_view import refine_matches_klt
-        from .vo import _gray
-
-        p2, _ = refine_matches_klt(_gray(kf.image), _gray(other.image), p1, p2)
+        p2, _ = refine_matches_klt(to_gray_uint8(kf.image), to_gray_uint8(other.image), p1, p2)
     n1 = undistort_points(cam1, p1, normalized=True)
     n2 = undistort_points(cam2, p2, normalized=True)
     P1 = np.hstack([np.eye(3), np.zeros((3, 1))])

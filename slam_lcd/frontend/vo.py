@@ -3,7 +3,7 @@
 Frame-to-keyframe tracking: each frame's features are matched to the current tracking
 keyframe, whose features carry 3-D points (from the depth image or from stereo
 disparity); PnP-RANSAC plus a motion-only refinement give the pose and its covariance
-(:mod:`slam_lcd.frontend.pnp`). The tracking keyframe is replaced when the overlap
+(:mod:`slam_lcd.vision.pnp`). The tracking keyframe is replaced when the overlap
 drops or the camera has moved enough, so drift only grows keyframe to keyframe.
 
 Tracking loss is explicit. A frame that cannot be tracked is reported ``lost`` and gets
@@ -22,14 +22,14 @@ import cv2
 import numpy as np
 
 from ..errors import InputError
+from ..geometry import compose_covariance, inv, rotation_angle, transform_covariance
 from ..types import CameraModel, Features, Trajectory
-from .camera import undistort_points
+from ..vision.camera import undistort_points
+from ..vision.gray import to_gray_uint8
+from ..vision.pnp import solve_pnp
 from .config import FrontendConfig
 from .depth_points import points_from_depth, points_from_stereo
 from .matching import match_descriptors
-from .pnp import solve_pnp
-from ..geometry import inv, rotation_angle
-from .se3 import compose_covariance, transform_covariance
 
 log = logging.getLogger(__name__)
 
@@ -102,15 +102,6 @@ def default_extractor(conf: FrontendConfig):
     return load_extractor(FeaturesConfig(kind="superpoint", max_keypoints=conf.vo_max_features))
 
 
-def _gray(image: np.ndarray) -> np.ndarray:
-    img = np.asarray(image)
-    if img.ndim == 3:
-        img = cv2.cvtColor(img[:, :, :3].astype(np.uint8), cv2.COLOR_RGB2GRAY)
-    if img.dtype != np.uint8:
-        img = np.clip(img.astype(np.float32) * (255.0 if img.max() <= 1.0 else 1.0), 0, 255).astype(np.uint8)
-    return img
-
-
 class _FrameToKeyframeOdometry:
     """Shared tracking logic; subclasses say how a frame's keypoints get 3-D points."""
 
@@ -173,7 +164,7 @@ class _FrameToKeyframeOdometry:
         """Track one frame (``aux``: depth image for RGB-D, right image for stereo)."""
         conf = self.conf
         stamp_ns = int(stamp_ns)
-        gray = _gray(image)
+        gray = to_gray_uint8(image)
         feats = features if features is not None else self.extractor.extract(gray)
 
         if self.ref is None:  # very first frame: the world frame is the first body frame
@@ -269,7 +260,7 @@ class StereoOdometry(_FrameToKeyframeOdometry):
         return super().process(stamp_ns, image, right, features)
 
     def _points(self, feats: Features, left, right) -> tuple[np.ndarray, np.ndarray]:
-        return points_from_stereo(self.camera, self.baseline, feats, left, _gray(right), self.extractor, self.conf)
+        return points_from_stereo(self.camera, self.baseline, feats, left, to_gray_uint8(right), self.extractor, self.conf)
 
 
 def run_rgbd_odometry(camera, frames, conf=None, T_body_camera=None, extractor=None) -> VoResult:

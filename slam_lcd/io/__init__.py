@@ -1,4 +1,5 @@
-"""slam_lcd.io: read ROS1 bags, rosbag2 directories and MCAP files; decode messages; write new logs.
+"""slam_lcd.io: read ROS1 bags, rosbag2 directories and MCAP files; decode messages; trajectory files; write new logs.
+May import: rosbags, mcap and the base modules (types, errors, geometry, atomic); never a stage, sensors or outputs.
 
 See docs/io.md. Public API: :func:`open_log`, :class:`LogMessage`, :class:`TopicInfo`,
 :func:`read_trajectory_from_log`, :mod:`.decode`, :mod:`.tf`, :mod:`.messages`, :mod:`.writers`,
@@ -7,12 +8,8 @@ and the trajectory-file functions of :mod:`.trajectory_files`.
 from .reader import LogMessage, LogReader, RawMessage, TopicInfo, open_log
 from .log_trajectory import read_trajectory_from_log
 
-__all__ = ["open_log", "LogReader", "LogMessage", "RawMessage", "TopicInfo", "read_trajectory_from_log"]
+from . import trajectory_files as _tf_files
+from .trajectory_files import *  # noqa: F401,F403
 
-try:  # trajectory file formats live in their own module (written separately)
-    from . import trajectory_files as _tf_files
-    from .trajectory_files import *  # noqa: F401,F403
-
-    __all__ += [n for n in getattr(_tf_files, "__all__", []) if n not in __all__]
-except ImportError:  # pragma: no cover - only while that module does not exist yet
-    pass
+__all__ = ["open_log", "LogReader", "LogMessage", "RawMessage", "TopicInfo", "read_trajectory_from_log",
+           *_tf_files.__all__]

@@ -123,26 +123,6 @@ def decode_compressed_image(msg) -> np.ndarray:
     return img
 
 
-def image_to_gray(img: np.ndarray) -> np.ndarray:
-    """uint8 HxW gray of an RGB or gray image (uint16 and float images are min-max scaled)."""
-    img = np.asarray(img)
-    if img.ndim == 3:
-        if img.dtype != np.uint8:
-            raise MessageEncodingError(f"colour image of dtype {img.dtype} cannot be made gray")
-        return cv2.cvtColor(img, cv2.COLOR_RGBA2GRAY if img.shape[2] == 4 else cv2.COLOR_RGB2GRAY)
-    if img.dtype == np.uint8:
-        return img
-    f = img.astype(np.float32)
-    finite = np.isfinite(f)
-    if not finite.any():
-        return np.zeros(img.shape, np.uint8)
-    lo, hi = float(f[finite].min()), float(f[finite].max())
-    out = np.zeros(img.shape, np.uint8)
-    if hi > lo:
-        out[finite] = np.clip(np.rint((f[finite] - lo) * (255.0 / (hi - lo))), 0, 255).astype(np.uint8)
-    return out
-
-
 def decode_camera_info(msg) -> CameraModel:
     """sensor_msgs/CameraInfo (ROS1 K/D/P or ROS2 k/d/p fields) -> CameraModel."""
     K = np.asarray(getattr(msg, "k", None) if hasattr(msg, "k") else msg.K, dtype=np.float64).reshape(-1)
@@ -214,7 +194,6 @@ def frame_ids(msg) -> tuple[str, str | None]:
 __all__ = [
     "decode_image",
     "decode_compressed_image",
-    "image_to_gray",
     "decode_camera_info",
     "decode_pose",
     "transform_to_matrix",

@@ -16,8 +16,7 @@ from pathlib import Path
 from typing import Iterable
 
 from ..errors import FileMissingError, InputError
-
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".pgm", ".ppm", ".tif", ".tiff")
+from ..image_files import IMAGE_SUFFIXES, read_image
 
 # a 'GT' word in the stem (samples_GT, gt, loops-gt, GT_matrix), case-insensitive, or
 # 'groundtruth' / 'ground_truth' / 'ground-truth' anywhere
@@ -57,12 +56,10 @@ def list_image_files(folder: str | Path, exclude: Iterable[str | Path | None] = 
 
 
 def read_frame(path: str | Path):
-    """One frame as eval-lcd's folder reader gives it (:func:`slam_lcd.lcd.sources.folder_frames`):
+    """One frame as eval-lcd's folder reader gives it (:func:`slam_lcd.sensors.frames.folder_frames`):
     the file's own channels, colour as RGB. Unreadable → InputError, damaged → DamagedImageError
     (:func:`slam_lcd.image_files.read_image`), each naming the file."""
     import cv2
-
-    from ..image_files import read_image
 
     img = read_image(path, cv2.IMREAD_UNCHANGED)
     if img.ndim == 3:

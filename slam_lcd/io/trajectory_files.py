@@ -50,13 +50,11 @@ __all__ = [
     "FORMATS",
     "detect_format",
     "read_euroc",
-    "read_g2o",
     "read_kitti",
     "read_kitti_times",
     "read_trajectory",
     "read_tum",
     "write_euroc",
-    "write_g2o",
     "write_kitti",
     "write_trajectory",
     "write_tum",
@@ -349,7 +347,7 @@ def detect_format(path: str | Path) -> str:
         return _EXTENSIONS[suffix]
     if suffix == ".g2o":
         raise UnsupportedFormatError(
-            "g2o files hold a pose graph, not a timed trajectory; use slam_lcd.io.trajectory_files.read_g2o",
+            "g2o files hold a pose graph, not a timed trajectory; use slam_lcd.backend.g2o.read_g2o",
             path,
         )
     if suffix in (".bag", ".mcap", ".db3") or (path.is_dir() and (path / "metadata.yaml").is_file()):
@@ -399,20 +397,3 @@ def write_trajectory(
         write_euroc(path, traj)
     else:
         raise UnsupportedFormatError(f"unknown trajectory format {fmt!r}; known: {', '.join(FORMATS)}", path)
-
-
-# ----------------------------------------------------------------------------- g2o (delegated)
-
-
-def read_g2o(path: str | Path, **kwargs):
-    """Read a g2o pose graph; implemented by :mod:`slam_lcd.backend.g2o` (named here per CONTRACTS.md)."""
-    from ..backend.g2o import read_g2o as _read_g2o
-
-    return _read_g2o(path, **kwargs)
-
-
-def write_g2o(path: str | Path, poses, edges) -> None:
-    """Write a g2o pose graph; implemented by :mod:`slam_lcd.backend.g2o` (named here per CONTRACTS.md)."""
-    from ..backend.g2o import write_g2o as _write_g2o
-
-    _write_g2o(path, poses, edges)

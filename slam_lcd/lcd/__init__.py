@@ -1,4 +1,5 @@
-"""slam_lcd.lcd: loop-closure detection and verification (issue #6).
+"""slam_lcd.lcd: loop-closure detection and verification (BoW candidates, graph verification, RANSAC, metric pose) and its evaluation.
+May import: vision, vocab, features and the base modules; never io or sensors (frames come in as arrays).
 
 Public API (docs/CONTRACTS.md): :func:`verify_graph` -> :class:`GraphVerdict`,
 :func:`estimate_loop_pose` -> :class:`PoseVerdict`, :func:`verify_epipolar`,
@@ -6,12 +7,12 @@ Public API (docs/CONTRACTS.md): :func:`verify_graph` -> :class:`GraphVerdict`,
 """
 from .config import LcdConfig
 from .detector import VERIFY_MODES, CandidateRecord, LoopDetector
-from .geometry import EpipolarVerdict, PoseVerdict, default_camera, estimate_loop_pose, keyframe_points3d, verify_epipolar
+from .geometry import EpipolarVerdict, PoseVerdict, estimate_loop_pose, keyframe_points3d, verify_epipolar
 from .graph import GraphVerdict, planar_graph, verify_graph
 from .temporal import TemporalConsistency
 
 __all__ = [
     "LcdConfig", "VERIFY_MODES", "CandidateRecord", "LoopDetector", "EpipolarVerdict", "PoseVerdict",
-    "default_camera", "estimate_loop_pose", "keyframe_points3d", "verify_epipolar", "GraphVerdict",
+    "estimate_loop_pose", "keyframe_points3d", "verify_epipolar", "GraphVerdict",
     "planar_graph", "verify_graph", "TemporalConsistency",
 ]

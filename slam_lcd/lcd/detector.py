@@ -20,8 +20,9 @@ import numpy as np
 from ..errors import InputError
 from ..features.matching import mutual_nn_match_bf
 from ..types import CameraModel, Features, Keyframe, LoopClosure
+from ..vision.camera import default_camera
 from .config import LcdConfig, stops_at_first_accepted
-from .geometry import EpipolarVerdict, PoseVerdict, default_camera, estimate_loop_pose, keyframe_points3d, verify_epipolar
+from .geometry import EpipolarVerdict, PoseVerdict, estimate_loop_pose, keyframe_points3d, verify_epipolar
 from .budget import select_matches
 from .graph import GraphVerdict, verify_graph
 from .store import DESCRIPTOR_DTYPES, DescriptorStore, compact_descriptors

@@ -23,15 +23,8 @@ import numpy as np
 
 from ..atomic import atomic_path, write_text
 from ..errors import FileMissingError, InputError, UnsupportedFormatError
+from ..image_files import IMAGE_SUFFIXES
 from .detector import CandidateRecord
-
-from ..io.image_folder import IMAGE_SUFFIXES, list_image_files, natural_key  # noqa: F401  (re-exported)
-
-
-def list_images(folder: str | Path, exclude: Iterable[str | Path] = ()) -> list[Path]:
-    """Image files of ``folder`` in natural order, without ``exclude`` and ground-truth files
-    (see :mod:`slam_lcd.io.image_folder`)."""
-    return list_image_files(folder, exclude)
 
 
 # ----------------------------------------------------------------------------- ground truth

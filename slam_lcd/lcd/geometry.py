@@ -5,7 +5,8 @@ camera motion using only pixel coordinates and intrinsics (no scale), which work
 camera. A pose-graph edge needs metric scale, so the relative pose itself comes from 3-D
 points of the match keyframe (depth image, stereo disparity or triangulated landmarks)
 seen by the query's keypoints: PnP-RANSAC, then a Gauss-Newton refinement on the inliers
-whose Jacobian gives the information matrix handed to the back end.
+whose Jacobian gives the information matrix handed to the back end (both in
+:mod:`slam_lcd.vision.pnp`).
 """
 from __future__ import annotations
 
@@ -14,34 +15,14 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from ..geometry import adjoint, inv, se3_exp
+from ..geometry import adjoint, inv
 from ..types import CameraModel, Keyframe
+from ..vision.camera import undistort_points
+from ..vision.epipolar import essential_ransac
+from ..vision.pnp import pnp_ransac, refine_pose_reprojection
+from ..vision.points import backproject, dense_disparity, sample_nearest, unit_rays
 from .config import LcdConfig
 from .information import loop_information
-
-
-# ----------------------------------------------------------------------------- cameras
-
-
-def default_camera(width: int, height: int, focal_factor: float) -> CameraModel:
-    """A plausible pinhole for images that come without intrinsics: f = factor x width, centred."""
-    f = float(focal_factor) * float(width)
-    return CameraModel(width=int(width), height=int(height), fx=f, fy=f, cx=width / 2.0, cy=height / 2.0)
-
-
-def normalized_points(camera: CameraModel, pts: np.ndarray) -> np.ndarray:
-    """Pixel coordinates -> undistorted normalised image coordinates (x/z, y/z)."""
-    pts = np.asarray(pts, dtype=np.float64).reshape(-1, 1, 2)
-    if len(pts) == 0:
-        return np.zeros((0, 2))
-    D = np.asarray(camera.D, dtype=np.float64).reshape(-1)
-    if camera.distortion_model == "equidistant" and D.size >= 4:
-        out = cv2.fisheye.undistortPoints(pts, camera.K, D[:4])
-    elif camera.distortion_model not in ("none", "") and D.size and np.any(D != 0):
-        out = cv2.undistortPoints(pts, camera.K, D)
-    else:
-        out = (pts - [camera.cx, camera.cy]) / [camera.fx, camera.fy]
-    return out.reshape(-1, 2)
 
 
 # ----------------------------------------------------------------------------- essential matrix
@@ -81,15 +62,13 @@ def verify_epipolar(
     n = len(matches)
     if n < max(conf.ransac_min_inliers, 5):
         return EpipolarVerdict(False, 0, n, "too_few_matches", np.zeros(n, bool))
-    xq = normalized_points(cam_q, np.asarray(kpts_q)[matches[:, 0]])
-    xm = normalized_points(cam_m, np.asarray(kpts_m)[matches[:, 1]])
+    xq = undistort_points(cam_q, np.asarray(kpts_q)[matches[:, 0]], normalized=True)
+    xm = undistort_points(cam_m, np.asarray(kpts_m)[matches[:, 1]], normalized=True)
     focal = 0.25 * (cam_q.fx + cam_q.fy + cam_m.fx + cam_m.fy)
     thr = conf.ransac_threshold_px / focal
-    E, mask = cv2.findEssentialMat(xm, xq, np.eye(3), method=cv2.USAC_DEFAULT, prob=conf.ransac_confidence, threshold=thr)
-    if E is None or mask is None or E.shape[0] < 3:
+    E, mask = essential_ransac(xm, xq, thr, conf.ransac_confidence, cv2.USAC_DEFAULT)
+    if E is None:
         return EpipolarVerdict(False, 0, n, "ransac_failed", np.zeros(n, bool))
-    E = E[:3]
-    mask = mask.reshape(-1).astype(bool)
     # recoverPose's cheirality check removes inliers that lie behind a camera
     _, R, _, pose_mask = cv2.recoverPose(E, xm[mask], xq[mask], np.eye(3))
     inl = np.flatnonzero(mask)
@@ -120,12 +99,12 @@ def keyframe_points3d(kf: Keyframe, conf: LcdConfig | None = None) -> tuple[np.n
     kp = np.asarray(feats.keypoints, dtype=np.float64).reshape(-1, 2)
     cam = kf.camera
     if kf.depth is not None:
-        z = _sample_nearest(np.asarray(kf.depth, dtype=np.float64), kp)
+        z = sample_nearest(np.asarray(kf.depth, dtype=np.float64), kp)
         return _backproject(cam, kp, z, conf), "rgbd"
     if kf.right_image is not None and cam.baseline:
-        disp = _disparity(kf.image, kf.right_image)
+        disp = dense_disparity(kf.image, kf.right_image)
         if disp is not None:
-            d = _sample_nearest(disp, kp)
+            d = sample_nearest(disp, kp)
             with np.errstate(divide="ignore", invalid="ignore"):
                 z = np.where(d > 0.5, cam.fx * cam.baseline / d, np.nan)
             return _backproject(cam, kp, z, conf), "stereo"
@@ -136,32 +115,9 @@ def keyframe_points3d(kf: Keyframe, conf: LcdConfig | None = None) -> tuple[np.n
     return None, "none"
 
 
-def _sample_nearest(img: np.ndarray, kp: np.ndarray) -> np.ndarray:
-    h, w = img.shape[:2]
-    u = np.clip(np.round(kp[:, 0]).astype(int), 0, w - 1)
-    v = np.clip(np.round(kp[:, 1]).astype(int), 0, h - 1)
-    return img[v, u].astype(np.float64)
-
-
 def _backproject(cam: CameraModel, kp: np.ndarray, z: np.ndarray, conf: LcdConfig) -> np.ndarray:
-    xn = normalized_points(cam, kp)
     valid = np.isfinite(z) & (z >= conf.min_depth_m) & (z <= conf.max_depth_m)
-    pts = np.full((len(kp), 3), np.nan)
-    pts[valid, 0] = xn[valid, 0] * z[valid]
-    pts[valid, 1] = xn[valid, 1] * z[valid]
-    pts[valid, 2] = z[valid]
-    return pts
-
-
-def _disparity(left, right) -> np.ndarray | None:
-    if left is None or right is None:
-        return None
-    from ..features.extract import to_gray_uint8
-
-    L, R = to_gray_uint8(left), to_gray_uint8(right)
-    sgbm = cv2.StereoSGBM_create(minDisparity=0, numDisparities=128, blockSize=5, P1=8 * 25, P2=32 * 25,
-                                 uniquenessRatio=10, speckleWindowSize=100, speckleRange=2)
-    return sgbm.compute(L, R).astype(np.float64) / 16.0
+    return backproject(unit_rays(cam, kp), z, valid)
 
 
 # ----------------------------------------------------------------------------- metric pose
@@ -227,22 +183,15 @@ def estimate_loop_pose(
     if valid.sum() < max(conf.pnp_min_inliers, 6):
         return PoseVerdict(False, None, None, int(valid.sum()), float("nan"), "too_few_3d_points", source)
     idx = np.flatnonzero(valid)
-    xn = normalized_points(kf_q.camera, uv[idx])  # undistorted: PnP on an ideal pinhole
+    xn = undistort_points(kf_q.camera, uv[idx], normalized=True)  # undistorted: PnP on an ideal pinhole
     f = 0.5 * (kf_q.camera.fx + kf_q.camera.fy)
-    ok, rvec, tvec, inl = cv2.solvePnPRansac(
-        X[idx].reshape(-1, 1, 3), xn.reshape(-1, 1, 2), np.eye(3), None,
-        iterationsCount=500, reprojectionError=conf.pnp_threshold_px / f, confidence=0.999,
-        flags=cv2.SOLVEPNP_EPNP,
-    )
-    if not ok or inl is None or len(inl) < conf.pnp_min_inliers:
+    T_cq_cm, inl = pnp_ransac(X[idx], xn, np.eye(3), threshold=conf.pnp_threshold_px / f, iterations=500,
+                              flags=cv2.SOLVEPNP_EPNP)
+    if T_cq_cm is None or len(inl) < conf.pnp_min_inliers:
         n_inl = 0 if inl is None else len(inl)
         return PoseVerdict(False, None, None, n_inl, float("nan"), "pnp_failed", source)
-    inl = inl.reshape(-1)
-    R, _ = cv2.Rodrigues(rvec)
-    T_cq_cm = np.eye(4)
-    T_cq_cm[:3, :3] = R
-    T_cq_cm[:3, 3] = tvec.reshape(3)
-    T_cm_cq, info_cam, rms, keep = refine_pose(inv(T_cq_cm), X[idx], xn, f, inl, conf)
+    T_cm_cq, info_cam, rms, keep = refine_pose_reprojection(inv(T_cq_cm), X[idx], xn, f, inl, conf.pnp_threshold_px,
+                                                            conf.pixel_sigma_px)
     info_cam = loop_information(T_cm_cq, X[idx][keep], xn[keep], f, source, kf_m.camera, kf_q.camera,
                                 min_pixel_sigma=conf.pixel_sigma_px)  # per-point noise: lcd/information.py
     n_inl = int(keep.sum())
@@ -265,86 +214,3 @@ def estimate_loop_pose(
         T_mq = inv(T_mq)
     info = 0.5 * (info + info.T)
     return PoseVerdict(True, T_mq, info, n_inl, rms, "ok", source, mask)
-
-
-def refine_pose(
-    T_cm_cq: np.ndarray,
-    X_m: np.ndarray,
-    xn_q: np.ndarray,
-    focal: float,
-    inliers: np.ndarray,
-    conf: LcdConfig,
-    iterations: int = 10,
-) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
-    """Gauss-Newton on the reprojection error of the match's points in the query image.
-
-    State ``X = T_cm_cq`` with right perturbation ``X Exp(xi)``; residuals in pixels
-    (normalised error x focal). Returns the refined pose, the information matrix of ``xi``
-    (``J^T J / sigma^2`` with ``sigma = max(rms, pixel_sigma_px)``), the RMS in pixels and
-    the final inlier mask (points within the PnP threshold after refinement).
-    """
-    X = T_cm_cq.copy()
-    keep = np.zeros(len(X_m), bool)
-    keep[inliers] = True
-    thr = conf.pnp_threshold_px
-    H = np.eye(6)
-    rms = float("nan")
-    for it in range(iterations):
-        P, J, r = _residuals_and_jacobian(X, X_m[keep], xn_q[keep], focal)
-        if len(r) < 6:
-            break
-        H = J.T @ J
-        g = J.T @ r
-        try:
-            dx = -np.linalg.solve(H + 1e-9 * np.eye(6), g)
-        except np.linalg.LinAlgError:
-            break
-        X = X @ se3_exp(dx)
-        if np.linalg.norm(dx) < 1e-10:
-            break
-    # re-select inliers with the refined pose, then a final linearisation for the information
-    err = _reprojection_errors(X, X_m, xn_q, focal)
-    keep = np.isfinite(err) & (err < thr)
-    P, J, r = _residuals_and_jacobian(X, X_m[keep], xn_q[keep], focal)
-    if len(r) == 0:
-        return X, np.zeros((6, 6)), float("nan"), keep
-    rms = float(np.sqrt(np.mean(r.reshape(-1, 2) ** 2) * 2.0))  # RMS of 2-D pixel error
-    sigma = max(rms / np.sqrt(2.0), conf.pixel_sigma_px)  # per-axis pixel noise
-    info = (J.T @ J) / sigma**2
-    return X, info, rms, keep
-
-
-def _reprojection_errors(T_cm_cq: np.ndarray, X_m: np.ndarray, xn_q: np.ndarray, focal: float) -> np.ndarray:
-    T = inv(T_cm_cq)
-    P = X_m @ T[:3, :3].T + T[:3, 3]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        proj = P[:, :2] / P[:, 2:3]
-    err = np.linalg.norm(proj - xn_q, axis=1) * focal
-    err[~(P[:, 2] > 1e-6)] = np.inf
-    return err
-
-
-def _residuals_and_jacobian(T_cm_cq: np.ndarray, X_m: np.ndarray, xn_q: np.ndarray, focal: float):
-    """Stacked residuals (2N,) in pixels and their Jacobian (2N, 6) w.r.t. the right perturbation."""
-    T = inv(T_cm_cq)
-    P = X_m @ T[:3, :3].T + T[:3, 3]  # points in the query camera
-    front = P[:, 2] > 1e-6
-    P, xn = P[front], xn_q[front]
-    if len(P) == 0:
-        return P, np.zeros((0, 6)), np.zeros(0)
-    x, y, z = P[:, 0], P[:, 1], P[:, 2]
-    r = np.stack([x / z - xn[:, 0], y / z - xn[:, 1]], axis=1) * focal
-    # d proj / d P
-    Jp = np.zeros((len(P), 2, 3))
-    Jp[:, 0, 0] = 1 / z
-    Jp[:, 0, 2] = -x / z**2
-    Jp[:, 1, 1] = 1 / z
-    Jp[:, 1, 2] = -y / z**2
-    # P = Exp(-xi) P0  ->  dP/dxi = [ [P]x , -I ]
-    JP = np.zeros((len(P), 3, 6))
-    JP[:, 0, 1], JP[:, 0, 2] = -z, y
-    JP[:, 1, 0], JP[:, 1, 2] = z, -x
-    JP[:, 2, 0], JP[:, 2, 1] = -y, x
-    JP[:, :, 3:] = -np.eye(3)
-    J = (Jp @ JP) * focal
-    return P, J.reshape(-1, 6), r.reshape(-1)

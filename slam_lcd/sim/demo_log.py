@@ -235,12 +235,10 @@ def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int =
 
 
 def _write_log(out, fmt, sc: _Scenario, frames_iter, *, depth, stereo, compressed, color, io_conf):
-    try:
-        from ..io import messages as M
-        from ..io.config import IOConfig
-        from ..io.writers import open_writer
-    except ImportError as e:  # pragma: no cover - the io package is part of slam-lcd
-        raise InputError(f"log writers unavailable ({e}); use --format folder") from None
+    from ..io import messages as M
+    from ..io.config import IOConfig
+    from ..io.writers import open_writer
+
     conf = io_conf
     if conf is None:
         conf = IOConfig()
@@ -298,7 +296,7 @@ def _stamp_name(stamp_ns: int) -> str:
 
 
 def _write_tum(path: Path, traj: Trajectory) -> None:
-    """TUM lines ``t x y z qx qy qz qw`` (uses slam_lcd.io when present)."""
+    """TUM lines ``t x y z qx qy qz qw``."""
     from ..io.trajectory_files import write_tum
 
     write_tum(path, traj)

@@ -14,6 +14,8 @@ import string
 import cv2
 import numpy as np
 
+from ..vision.gray import to_gray_uint8
+
 _GLYPHS = string.ascii_uppercase + string.digits + "#&%@+="
 _FONTS = (
     cv2.FONT_HERSHEY_SIMPLEX,
@@ -189,7 +191,7 @@ def door(rng: np.random.Generator, h: int, w: int, res: float) -> np.ndarray:
 def ceiling_panels(rng: np.random.Generator, h: int, w: int, res: float) -> np.ndarray:
     """Suspended-ceiling grid (60 cm) with mottled panels."""
     img = tiles(rng, h, w, res, tile_m=0.6)
-    gray = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY)
+    gray = to_gray_uint8(img)
     return cv2.cvtColor(cv2.addWeighted(gray, 0.6, np.full_like(gray, 200), 0.4, 0), cv2.COLOR_GRAY2RGB)
 
 

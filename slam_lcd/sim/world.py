@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from ..vision.gray import to_gray_uint8
 from . import textures as tx
 
 HEIGHT = 3.0  # wall height (m)
@@ -243,7 +244,7 @@ def _wall_planes(name, p0, p1, tex, lamps, z_top=HEIGHT, double_sided=False) -> 
         pl = Plane(f"{name}#{k}", origin, u, v, a1 - a0, z_top, [], [], double_sided=double_sided)
         lit, pl.lamp_weights = _bake(pl, seg_tex, lamps)
         pl.rgb = _mips(lit)
-        pl.gray = [cv2.cvtColor(m, cv2.COLOR_RGB2GRAY) for m in pl.rgb]
+        pl.gray = [to_gray_uint8(m) for m in pl.rgb]
         out.append(pl)
     return out
 
@@ -271,7 +272,7 @@ def _horizontal_planes(name, tex_full, res, z, lamps, facing_up: bool) -> list[P
             pl = Plane(f"{name}[{i},{j}]", origin, u, v, x1 - x0, y1 - y0, [], [])
             lit, pl.lamp_weights = _bake(pl, seg, lamps)
             pl.rgb = _mips(lit)
-            pl.gray = [cv2.cvtColor(m, cv2.COLOR_RGB2GRAY) for m in pl.rgb]
+            pl.gray = [to_gray_uint8(m) for m in pl.rgb]
             out.append(pl)
     return out
 

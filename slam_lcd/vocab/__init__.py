@@ -1,4 +1,5 @@
 """Bag of SuperPoints: incremental vocabulary, DP word tree, hierarchical k-means baseline, tf-idf database.
+May import: numpy, scikit-learn, faiss and the base modules (types, errors, atomic); never io or another stage.
 
 Public API (docs/CONTRACTS.md): :func:`train_vocabulary`, :func:`train_hkmeans`,
 :class:`Vocabulary` (``quantize``, ``save``, ``load``, ``len``), :class:`BowDatabase`

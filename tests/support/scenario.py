@@ -23,9 +23,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
-from ..errors import FileMissingError, TrajectoryFormatError
-from ..geometry import inv, project_to_se3
-from ..types import LoopClosure
+from slam_lcd.errors import FileMissingError, TrajectoryFormatError
+from slam_lcd.geometry import inv, project_to_se3
+from slam_lcd.types import LoopClosure
 
 
 @dataclass
@@ -208,7 +208,7 @@ def run_scenario(sc: Scenario, backend_conf=None, finalize: bool = True):
     """Feed the scenario keyframe by keyframe into a PoseGraph; returns (graph, RunResult)."""
     import time
 
-    from .pose_graph import ACCEPTED, PoseGraph
+    from slam_lcd.backend.pose_graph import ACCEPTED, PoseGraph
 
     t0 = time.perf_counter()
     g = PoseGraph(backend_conf)

@@ -15,8 +15,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ..types import Features
-from .matching import mutual_nn_match
+from slam_lcd.features.matching import mutual_nn_match
+from slam_lcd.types import Features
 
 
 def homography_about_centre(w: int, h: int, angle_deg: float = 0.0, scale: float = 1.0,

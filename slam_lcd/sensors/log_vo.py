@@ -3,7 +3,8 @@
 Streams the camera topics of a log in time order, pairs each image with its depth image
 (RGB-D) or right image (stereo) by header stamp, reads the camera model from CameraInfo
 and the camera mounting from ``/tf_static`` (or the config), and feeds the frames to
-:class:`RgbdOdometry` / :class:`StereoOdometry`.
+:class:`~slam_lcd.frontend.vo.RgbdOdometry` / :class:`~slam_lcd.frontend.vo.StereoOdometry`.
+This is the log's odometry source when it has no odometry topic (``slam-lcd run``).
 """
 from __future__ import annotations
 
@@ -12,11 +13,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import PipelineError, SlamLcdError, in_context, stamp_text
+from ..errors import PipelineError, TopicNotFoundError
+from ..frontend.config import FrontendConfig
+from ..frontend.vo import RgbdOdometry, StereoOdometry, VoResult
+from ..io import open_log
+from ..io.tf import TfBuffer
 from ..types import CameraModel
-from .camera import camera_from_camera_info, camera_mounting
-from .config import FrontendConfig
-from .vo import RgbdOdometry, StereoOdometry, VoResult
+from .messages import at_message, camera_from_camera_info, decode_any_image, decode_gray
+from .mounting import camera_mounting
 
 log = logging.getLogger(__name__)
 
@@ -30,6 +34,15 @@ class LogVo:
     T_body_camera: np.ndarray
     mode: str  # 'rgbd' | 'stereo'
 
+    def odometry_samples(self):
+        """``(stamp_ns, T_world_body, covariance or None, segment_start)`` per VO pose: the log's
+        odometry source when it has no odometry topic (a tracking loss starts a new segment)."""
+        traj = self.result.trajectory()
+        breaks = self.result.segment_starts
+        for k in range(len(traj)):
+            cov = None if traj.covariances is None else traj.covariances[k]
+            yield int(traj.stamps[k]), traj.poses[k], cov, bool(breaks[k]) and k > 0
+
 
 def _info_topic(image_topic: str) -> str:
     base = image_topic.rsplit("/", 1)[0] if image_topic.count("/") > 1 else ""
@@ -38,24 +51,11 @@ def _info_topic(image_topic: str) -> str:
     return f"{base}/camera_info"
 
 
-def _decode(m) -> np.ndarray:
-    from ..io.decode import decode_compressed_image, decode_image
-
-    if m.msgtype.endswith("CompressedImage"):
-        img = decode_compressed_image(m.msg)
-    else:
-        img = decode_image(m.msg)
-    return img
-
-
 def visual_odometry_from_log(path, conf: FrontendConfig | None = None, *, image_topic: str = "/camera/image_raw",
                              depth_topic: str | None = None, right_topic: str | None = None,
                              camera_info_topic: str | None = None, right_camera_info_topic: str | None = None,
                              extractor=None, max_frames: int | None = None) -> LogVo:
     """VO over a log: RGB-D when ``depth_topic`` is given, stereo when ``right_topic`` is."""
-    from ..io import open_log
-    from ..io.decode import image_to_gray
-
     conf = conf or FrontendConfig()
     if (depth_topic is None) == (right_topic is None):
         raise PipelineError("visual odometry needs exactly one of a depth topic (RGB-D) or a right image topic (stereo)")
@@ -66,16 +66,12 @@ def visual_odometry_from_log(path, conf: FrontendConfig | None = None, *, image_
         topics = reader.topics
         for t in (image_topic, aux_topic, info_topic):
             if t not in topics:
-                from ..errors import TopicNotFoundError
-
                 raise TopicNotFoundError(t, topics, reader.path)
         camera = None
         cam_frame = None
         for m in reader.messages([info_topic]):
-            try:
+            with at_message(m, reader.path, decoding=False):
                 camera = camera_from_camera_info(m.msg)
-            except SlamLcdError as e:
-                raise in_context(e, f"topic {m.topic}, stamp {stamp_text(m.stamp)}", reader.path) from None
             cam_frame = m.msg.header.frame_id
             break
         if camera is None:
@@ -91,8 +87,6 @@ def visual_odometry_from_log(path, conf: FrontendConfig | None = None, *, image_
                     break
         tf = None
         if "/tf_static" in topics or "tf_static" in topics:
-            from ..io.tf import TfBuffer
-
             tf = TfBuffer.from_log(reader, tf_topics=(), static_topics=("/tf_static",))
         T_bc = camera_mounting(conf, tf, cam_frame)
         vo = (RgbdOdometry(camera, conf, T_bc, extractor) if mode == "rgbd"
@@ -101,14 +95,11 @@ def visual_odometry_from_log(path, conf: FrontendConfig | None = None, *, image_
         pending_aux: dict[int, np.ndarray] = {}
         n = 0
         for m in reader.messages([image_topic, aux_topic]):
-            try:
+            with at_message(m, reader.path, decoding=False):  # name the log, topic and stamp of a bad message
                 if m.topic == image_topic:
-                    pending_img[m.stamp] = image_to_gray(_decode(m))
+                    pending_img[m.stamp] = decode_gray(m)
                 else:
-                    a = _decode(m)
-                    pending_aux[m.stamp] = a if mode == "rgbd" else image_to_gray(a)
-            except SlamLcdError as e:  # name the log, topic and stamp of the bad message
-                raise in_context(e, f"topic {m.topic}, stamp {stamp_text(m.stamp)}", reader.path) from None
+                    pending_aux[m.stamp] = decode_any_image(m) if mode == "rgbd" else decode_gray(m)
             # pair the oldest image with an aux image within tolerance, in time order
             while pending_img and pending_aux:
                 si = min(pending_img)

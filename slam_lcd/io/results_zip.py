@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..atomic import atomic_path
-from ..io.trajectory_files import write_tum
+from .trajectory_files import write_tum
 from ..types import Trajectory
 
 
@@ -37,7 +37,7 @@ def _safe_name(name: str) -> str:
 
 
 def write_evo_results(out: str | Path, result, *, ref_name: str = "reference", est_name: str = "estimate") -> Path:
-    """Write ``result`` (a :class:`slam_lcd.eval.relations.PoseErrorResult`) as an evo result zip."""
+    """Write ``result`` (a :class:`slam_lcd.eval.relations.PoseErrorResult`, or anything with its fields) as an evo result zip."""
     out = Path(out)
     unit = result.unit or "none"
     info = {"title": result.title(), "ref_name": ref_name, "est_name": est_name,

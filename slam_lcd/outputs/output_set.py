@@ -25,9 +25,9 @@ import tempfile
 from pathlib import Path
 from typing import Iterable, Mapping
 
-from .atomic import check_no_clash, check_writable_target
-from .errors import InputError
-from .interrupts import defer_sigint
+from ..atomic import check_no_clash, check_writable_target
+from ..errors import InputError
+from ..interrupts import defer_sigint
 
 PARTIAL_MARKER = "PARTIAL.txt"
 STAGING_PREFIX = ".slam-lcd-staging."

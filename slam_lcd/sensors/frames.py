@@ -12,9 +12,11 @@ from typing import Iterator
 
 import numpy as np
 
-from ..errors import InputError, PipelineError, SlamLcdError, in_context, stamp_text
+from ..errors import InputError, PipelineError
+from ..io import open_log
+from ..io.image_folder import list_image_files, read_frame
 from ..types import CameraModel, Keyframe
-from .evaluation import list_images
+from .messages import at_message, decode_any_image, decode_camera_of
 
 
 @dataclass
@@ -27,9 +29,7 @@ class Frame:
 
 def folder_frames(folder: str | Path, exclude=()) -> tuple[list[str], list[int], Iterator[Frame]]:
     """Names, stamps and a lazy iterator of the frames of an image folder (``exclude``: files to skip)."""
-    import cv2
-
-    files = list_images(folder, exclude)
+    files = list_image_files(folder, exclude)
     if not files:
         raise InputError("no images (.png/.jpg/...) in folder", folder)
     try:
@@ -41,37 +41,25 @@ def folder_frames(folder: str | Path, exclude=()) -> tuple[list[str], list[int],
     stamps = [int(round(float(p.stem) * 1e9)) if use_stems else k * 1_000_000_000 for k, p in enumerate(files)]
 
     def gen():
-        from ..image_files import read_image
-
         for k, p in enumerate(files):
-            img = read_image(p, cv2.IMREAD_UNCHANGED)  # damaged or unreadable: a one-line error naming it
-            if img.ndim == 3:
-                img = cv2.cvtColor(img[:, :, :3], cv2.COLOR_BGR2RGB)
-            yield Frame(p.name, stamps[k], img)
+            # damaged or unreadable: a one-line error naming it
+            yield Frame(p.name, stamps[k], read_frame(p))
 
     return [p.name for p in files], stamps, gen()
 
 
 def log_frames(path: str | Path, topic: str, camera_info_topic: str | None = None) -> tuple[list[str], list[int], list[Frame]]:
     """All frames of an image (or compressed image) topic of a bag/MCAP file, in time order."""
-    from ..io import open_log
-    from ..io.decode import decode_camera_info, decode_compressed_image, decode_image
-
     frames: list[Frame] = []
     camera = None
     with open_log(path) as reader:
         topics = [topic] + ([camera_info_topic] if camera_info_topic else [])
         for m in reader.messages(topics):
-            try:
+            with at_message(m, reader.path, decoding=False):  # name the log, topic and stamp of a bad message
                 if m.topic == camera_info_topic:
-                    camera = decode_camera_info(m.msg)
+                    camera = decode_camera_of(m)
                     continue
-                if m.msgtype.endswith("CompressedImage"):
-                    img = decode_compressed_image(m.msg)
-                else:
-                    img = decode_image(m.msg)
-            except SlamLcdError as e:  # name the log, topic and stamp of the bad message
-                raise in_context(e, f"topic {m.topic}, stamp {stamp_text(m.stamp)}", reader.path) from None
+                img = decode_any_image(m)
             frames.append(Frame(f"{m.stamp}", int(m.stamp), img, camera))
     if not frames:
         raise PipelineError(f"topic {topic!r} holds no images", path)

@@ -4,13 +4,14 @@
 bag, rosbag2 folder or MCAP file; the part before the first ``:`` that names an existing
 path is the log. A TF frame pair is ``LOG:/tf:PARENT:CHILD`` (``run.bag:/tf:map:base_link``) or, as evo
 spells it, ``LOG:/tf:PARENT.CHILD``.
-Reading topics is delegated to ``slam_lcd.io.read_trajectory_from_log``.
+Reading topics is delegated to :func:`slam_lcd.io.read_trajectory_from_log`.
 """
 from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import FileMissingError, NotBuiltError
+from ..errors import FileMissingError, InputError
+from ..io import read_trajectory_from_log
 from ..io.trajectory_files import read_trajectory
 from ..types import Trajectory
 
@@ -42,17 +43,7 @@ def load_trajectory_source(spec: str, fmt: str | None = None, times_path: str | 
     log, topic = log_topic
     if not Path(log).exists():
         raise FileMissingError("log not found (argument read as LOG:TOPIC)", log)
-    from .. import io as slam_io
-
-    reader = getattr(slam_io, "read_trajectory_from_log", None)
-    if reader is None:
-        raise NotBuiltError(
-            f"reading a trajectory from a log topic ({topic}) is not built yet "
-            "(slam_lcd.io.read_trajectory_from_log is missing)",
-            log,
-        )
-    from ..errors import InputError
-
+    reader = read_trajectory_from_log
     parts = topic.split(":")
     if len(parts) == 1:
         return reader(log, topic)

@@ -10,9 +10,9 @@ import numpy as np
 
 import gtsam
 
-from .config import BackendConfig
-from .g2o import G2oEdge, chain_initial_estimate
-from .pose_graph import isam2_params
+from slam_lcd.backend.config import BackendConfig
+from slam_lcd.backend.g2o import G2oEdge, chain_initial_estimate
+from slam_lcd.backend.pose_graph import isam2_params
 
 
 def between_factor(e: G2oEdge) -> gtsam.BetweenFactorPose3:

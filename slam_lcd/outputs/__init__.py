@@ -1,0 +1,3 @@
+"""slam_lcd.outputs: the files a run writes (trajectories, loops.csv judged against ground truth, reports, plots), as one set.
+May import: the stages (eval, backend), io writers, config and the base modules; only the runner and the CLI import it.
+"""

@@ -1,0 +1,79 @@
+"""``loops.csv``: every loop candidate with the back end's verdict, judged against ground truth.
+
+A row joins the loop detector's :class:`~slam_lcd.lcd.detector.CandidateRecord` (its
+evidence, ``verdict`` = verified or not) with the back end's record of the same
+``(query, match)`` (``backend_verdict``, ``backend_reason``). With ground truth, the
+distance between the two keyframes' true poses and the error of the loop's metric pose
+are added; an accepted loop whose keyframes are further apart than
+``run.loop_true_max_distance`` is counted as false.
+"""
+from __future__ import annotations
+
+import csv
+import io
+from pathlib import Path
+
+import numpy as np
+
+from ..atomic import write_text
+from ..backend.pose_graph import ACCEPTED
+from ..geometry import interpolate_poses, inv, rotation_angle_deg
+from ..types import Trajectory
+
+VERIFIED = "accepted"  # the detector's verdict column: verified by appearance and geometry
+NOT_VERIFIED = "rejected"
+EMPTY_COLUMNS = ["query_id", "match_id", "verdict", "reason"]
+
+
+def _fmt(x):
+    return "" if x is None else f"{float(x):.6g}"
+
+
+def gt_at_keyframes(gt: Trajectory, kf_stamp: dict[int, int]) -> dict[int, np.ndarray]:
+    """Ground-truth pose (interpolated) of every keyframe id, in one pass over the ground truth."""
+    ids = list(kf_stamp)
+    if not ids:
+        return {}
+    P = interpolate_poses(gt.stamps, gt.poses, np.array([kf_stamp[i] for i in ids], np.int64))
+    return dict(zip(ids, P))
+
+
+def loop_rows(candidate_records, loop_records, keyframes, gt: Trajectory | None) -> list[dict]:
+    """One row per candidate (see the module docstring), in the detector's order."""
+    backend = {(r.query_id, r.match_id): r for r in loop_records}
+    kf_stamp = {k.id: k.stamp for k in keyframes}
+    gt_pose = gt_at_keyframes(gt, kf_stamp) if gt is not None else {}
+    rows = []
+    for rec in candidate_records:
+        q, mt = int(rec.query_id), int(rec.match_id)
+        b = backend.get((q, mt))
+        row = {"query_stamp_ns": kf_stamp.get(q, ""), "match_stamp_ns": kf_stamp.get(mt, "")}
+        row.update(rec.row())
+        row["verdict"] = VERIFIED if rec.accepted else NOT_VERIFIED
+        row["backend_verdict"] = b.verdict if b is not None else ""
+        row["backend_reason"] = b.reason if b is not None else ""
+        row.update({"gt_distance_m": "", "err_trans_m": "", "err_rot_deg": ""})
+        if q in gt_pose and mt in gt_pose:
+            T_gt = inv(gt_pose[mt]) @ gt_pose[q]  # ground-truth T_match_query (body frames)
+            row["gt_distance_m"] = _fmt(float(np.linalg.norm(T_gt[:3, 3])))
+            if rec.pose is not None and rec.pose.ok:
+                E = inv(T_gt) @ np.asarray(rec.pose.T_match_query)
+                row["err_trans_m"] = _fmt(float(np.linalg.norm(E[:3, 3])))
+                row["err_rot_deg"] = _fmt(rotation_angle_deg(E))
+        rows.append(row)
+    return rows
+
+
+def count_false_accepted(rows: list[dict], true_max_distance: float) -> int:
+    """Loops the back end accepted whose keyframes are truly further apart than ``true_max_distance``."""
+    return sum(1 for r in rows if r["backend_verdict"] == ACCEPTED and r["gt_distance_m"] != ""
+               and float(r["gt_distance_m"]) > true_max_distance)
+
+
+def write_loops_csv(path: Path, rows: list[dict]) -> None:
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(rows[0].keys()) if rows else EMPTY_COLUMNS)
+    w.writeheader()
+    for r in rows:
+        w.writerow(r)
+    write_text(path, buf.getvalue())

@@ -1,0 +1,164 @@
+"""Every output of ``slam-lcd run``, written as one set (:class:`~slam_lcd.outputs.output_set.OutputSet`).
+
+:data:`RUN_OUTPUTS`: config.yaml, odometry.tum, corrected.tum, keyframes_corrected.tum,
+loops.csv, graph.g2o, corrected.mcap, report.json, report.md, trajectory.png,
+ate_over_time.png; ``PARTIAL.txt`` when the run was interrupted.
+"""
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from ..backend.pose_graph import ACCEPTED
+from ..config import save_config
+from ..errors import InputError, SlamLcdError
+from ..interrupts import defer_sigint
+from ..types import Trajectory
+from .loops import VERIFIED, count_false_accepted, loop_rows, write_loops_csv
+from .output_set import PARTIAL_MARKER, OutputSet
+from .report import write_plots, write_report
+from .result import RunResult
+
+log = logging.getLogger(__name__)
+
+# every name `run` may write into --out (the set is published as a whole: slam_lcd.outputs.output_set)
+RUN_OUTPUTS = ("config.yaml", "odometry.tum", "corrected.tum", "keyframes_corrected.tum", "graph.g2o", "loops.csv",
+               "corrected.mcap", "trajectory.png", "ate_over_time.png", "report.json", "report.md")
+
+
+def partial_text(result: RunResult, notes=(), *, read_to_end: bool, while_writing: bool = False) -> str:
+    """What PARTIAL.txt says: why the set is incomplete, and what is missing from it."""
+    lines = []
+    if not read_to_end:
+        lines += [f"This run was interrupted (Ctrl-C) after {result.n_frames} frames: the files here hold the",
+                  "result up to that point and agree with each other, but the log was not processed to its end."]
+    lines += list(notes)
+    if while_writing:
+        lines.append(f"This run was interrupted{' again' if lines else ''} while the outputs were written: "
+                     "only the files present here were written.")
+    return "\n".join(lines)
+
+
+def write_set(outputs: OutputSet, pipe, result: RunResult, gt, mcap_source, copy_topics, notes=None,
+              read_to_end: bool = True) -> None:
+    """Write every output into the staging folder, then publish the set (partial when interrupted)."""
+    notes = list(notes or [])
+    partial = result.interrupted
+    try:
+        if partial:  # said first: a second Ctrl-C may stop the writing at any file
+            outputs.mark_partial(partial_text(result, notes, read_to_end=read_to_end))
+        write_outputs(pipe, outputs.staging, result, gt, mcap_source, copy_topics,
+                      skipped=notes if partial else None)
+        if partial:
+            outputs.mark_partial(partial_text(result, notes, read_to_end=read_to_end))
+    except KeyboardInterrupt:
+        try:
+            with defer_sigint():
+                result.interrupted = True
+                outputs.mark_partial(partial_text(result, notes, read_to_end=read_to_end, while_writing=True))
+                result.outputs = outputs.publish()
+        except OSError as e:
+            outputs.discard()
+            raise _write_error(e, outputs) from None
+        log.warning("interrupted while writing the outputs: %s holds a partial set (see %s)",
+                    outputs.target, PARTIAL_MARKER)
+        return
+    except OSError as e:
+        outputs.discard()
+        raise _write_error(e, outputs) from None
+    except BaseException:
+        outputs.discard()
+        raise
+    try:
+        outputs.publish()
+    except OSError as e:
+        outputs.discard()
+        raise _write_error(e, outputs) from None
+
+
+def _write_error(e: OSError, outputs: OutputSet) -> InputError:
+    name = Path(e.filename).name if getattr(e, "filename", None) else ""
+    target = outputs.target / name if name in outputs.names else outputs.target
+    return InputError(f"cannot write the outputs ({e.strerror or e}); nothing was written there", target)
+
+
+def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
+                  mcap_source: Path | None, copy_topics: list[str] | None = None,
+                  skipped: list[str] | None = None) -> None:
+    """Write every output of a run into ``out_dir`` (normally an :class:`OutputSet` staging folder).
+
+    ``skipped`` (a list) means a partial result: outputs that have nothing to hold yet
+    (no odometry, no keyframe) are left out and said so in ``skipped`` instead of failing.
+    """
+    from ..eval import ate_with_config
+    from ..io.trajectory_files import write_tum
+
+    cfg = pipe.config
+    out_dir.mkdir(parents=True, exist_ok=True)
+    save_config(cfg, out_dir / "config.yaml")
+    outputs = ["config.yaml"]
+    odom = pipe.odometry_trajectory()
+    corrected = pipe.corrected_trajectory()
+    kf_corr = pipe.keyframe_trajectory() if pipe.keyframes else Trajectory(np.zeros(0, np.int64), np.zeros((0, 4, 4)))
+    for name, traj in (("odometry.tum", odom), ("corrected.tum", corrected), ("keyframes_corrected.tum", kf_corr)):
+        if len(traj) == 0 and skipped is not None:
+            skipped.append(f"{name}: not written (no poses yet)")
+            continue
+        write_tum(out_dir / name, traj)
+        outputs.append(name)
+    if pipe.keyframes or skipped is None:
+        pipe.graph.write_g2o(out_dir / "graph.g2o")
+        outputs.append("graph.g2o")
+    else:
+        skipped.append("graph.g2o: not written (no keyframe yet)")
+
+    rows = loop_rows(pipe.candidate_records, pipe.loop_records, pipe.keyframes, gt)
+    write_loops_csv(out_dir / "loops.csv", rows)
+    outputs.append("loops.csv")
+
+    result.n_keyframes = len(pipe.keyframes)
+    result.loops_proposed = len(rows)
+    result.loops_verified = sum(1 for r in rows if r["verdict"] == VERIFIED)
+    result.loops_accepted = sum(1 for r in pipe.loop_records if r.verdict == ACCEPTED)
+    result.loops_rejected_backend = sum(1 for r in pipe.loop_records if r.verdict != ACCEPTED)
+    result.stages = pipe.timer.as_dict()
+    result.keyframe_seconds = list(pipe.keyframe_seconds)
+
+    # ---- evaluation against ground truth
+    ate_before = ate_after = None
+    if gt is not None and len(gt) > 1 and len(odom) > 1:
+        try:
+            ate_before = ate_with_config(gt, odom, cfg.eval)
+            ate_after = ate_with_config(gt, corrected, cfg.eval)
+        except SlamLcdError as e:  # the trajectories are still worth having
+            ate_before = ate_after = None
+            log.warning("ATE against the ground truth not computed: %s", e.problem)
+    if ate_before is not None:
+        result.ate_before, result.ate_after = ate_before.rmse, ate_after.rmse
+        result.alignment = cfg.eval.align
+        result.false_loops_accepted = count_false_accepted(rows, cfg.run.loop_true_max_distance)
+
+    # ---- corrected MCAP (input topics + corrected trajectory)
+    if mcap_source is not None and len(corrected) == 0 and skipped is not None:
+        skipped.append("corrected.mcap: not written (no poses yet)")
+    elif mcap_source is not None:
+        from ..io.writers import write_trajectory_log
+
+        write_trajectory_log(out_dir / "corrected.mcap", corrected, "mcap", topic="/slam_lcd/corrected",
+                             frame_id="map", child_frame_id="base_link_corrected",
+                             copy_from=mcap_source, copy_topics=copy_topics)
+        outputs.append("corrected.mcap")
+
+    # ---- plots
+    if cfg.run.plots:
+        try:
+            write_plots(out_dir, odom, corrected, gt, pipe.keyframes, pipe.keyframe_trajectory(), pipe.loop_records,
+                        ate_before, ate_after)
+            outputs += ["trajectory.png", "ate_over_time.png"] if ate_before is not None else ["trajectory.png"]
+        except Exception as e:  # a plot must never cost the user the numbers
+            log.warning("plots not written: %s", e)
+    outputs += ["report.json", "report.md"]
+    result.outputs = outputs
+    write_report(out_dir, result, ate_before, ate_after)

@@ -1,0 +1,109 @@
+"""Which topics of a log a run reads, and which it copies into corrected.mcap.
+
+Explicit flags win; otherwise the log's only ``sensor_msgs/Image`` (or ``CompressedImage``)
+topic that is not a depth or right-stereo image, its ``CameraInfo`` in the same namespace,
+the depth image in the same namespace, the only ``nav_msgs/Odometry`` topic, and a
+ground-truth ``PoseStamped`` topic whose name says so.
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+from ..errors import PipelineError, TopicTypeError
+
+log = logging.getLogger(__name__)
+
+IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
+CAMINFO_TYPE = "sensor_msgs/msg/CameraInfo"
+ODOM_TYPES = ("nav_msgs/msg/Odometry",)
+POSE_TYPES = ("geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped", "nav_msgs/msg/Odometry")
+GT_TYPES = (*POSE_TYPES, "geometry_msgs/msg/TransformStamped")
+TF_TYPE = "tf2_msgs/msg/TFMessage"
+
+
+@dataclass
+class Topics:
+    image: str
+    odom: str | None
+    camera_info: str | None = None
+    depth: str | None = None
+    gt: str | None = None
+
+    def wanted(self) -> list[str]:
+        """The chosen topics, in the order they are listed here (each once)."""
+        return [t for t in (self.image, self.odom, self.camera_info, self.depth, self.gt) if t]
+
+
+def _ns(topic: str) -> str:
+    return topic.rsplit("/", 1)[0]
+
+
+def _check_type(reader, flag: str, topic: str, allowed, what: str) -> None:
+    msgtype = reader.topics[topic].msgtype
+    if msgtype not in allowed:
+        raise TopicTypeError(f"{flag} {topic} carries {msgtype}, not {what} ({' or '.join(allowed)})", reader.path)
+
+
+def choose_topics(reader, image_topic=None, odom_topic=None, gt_topic=None, depth_topic=None) -> Topics:
+    """The topics of a run (see the module docstring); explicit ones are checked against their use."""
+    topics = reader.topics
+    path = reader.path
+    images = [t for t, info in topics.items() if info.msgtype in IMAGE_TYPES]
+    if image_topic is not None:
+        image_topic = reader.resolve_topics(image_topic)[0]
+        _check_type(reader, "--image-topic", image_topic, IMAGE_TYPES, "a camera image")
+    else:
+        plain = [t for t in images if "depth" not in t.lower() and "right" not in t.lower()]
+        if not plain:
+            listing = ", ".join(f"{t} ({i.msgtype})" for t, i in sorted(topics.items())) or "(none)"
+            raise PipelineError(
+                f"no camera image topic (sensor_msgs/Image or CompressedImage) in the log; loop detection needs one "
+                f"(pass --image-topic); topics: {listing}", path)
+        if len(plain) > 1:
+            raise PipelineError(f"several image topics {plain}; choose one with --image-topic", path)
+        image_topic = plain[0]
+    if odom_topic is not None:
+        odom_topic = reader.resolve_topics(odom_topic)[0]
+        _check_type(reader, "--odom-topic", odom_topic, POSE_TYPES, "odometry")
+    else:
+        odoms = [t for t, i in topics.items() if i.msgtype in ODOM_TYPES]
+        odom_topic = odoms[0] if len(odoms) == 1 else None
+        if len(odoms) > 1:
+            raise PipelineError(f"several odometry topics {odoms}; choose one with --odom-topic", path)
+    ns = _ns(image_topic)
+    infos = [t for t, i in topics.items() if i.msgtype == CAMINFO_TYPE and _ns(t) == ns]
+    if depth_topic is not None:
+        depth_topic = reader.resolve_topics(depth_topic)[0]
+        _check_type(reader, "--depth-topic", depth_topic, IMAGE_TYPES, "a depth image")
+    else:
+        depths = [t for t in images if "depth" in t.lower() and (_ns(t) == ns or _ns(_ns(t)) == ns)]
+        depth_topic = depths[0] if depths else None
+    if gt_topic is not None:
+        gt_topic = reader.resolve_topics(gt_topic)[0]
+        _check_type(reader, "--gt-topic", gt_topic, GT_TYPES, "a pose")
+    else:
+        gts = [t for t, i in topics.items() if i.msgtype in POSE_TYPES and ("ground_truth" in t or "groundtruth" in t)]
+        gt_topic = gts[0] if len(gts) == 1 else None
+    return Topics(image_topic, odom_topic, infos[0] if infos else None, depth_topic, gt_topic)
+
+
+def static_tf_topics(reader) -> list[str]:
+    """The log's static TF topics (``/tf_static`` and the like)."""
+    return [t for t, i in reader.topics.items() if i.msgtype == TF_TYPE and "static" in t]
+
+
+def copyable_topics(reader, copy_images: bool, log_path) -> list[str]:
+    """Input topics copied into corrected.mcap: all (or all but images), minus types we cannot describe."""
+    from ..io.writers import describable
+
+    chosen, skipped = [], []
+    for t, i in reader.topics.items():
+        if not (copy_images or i.msgtype not in IMAGE_TYPES):
+            continue
+        (chosen if describable(i.msgtype, reader.typestore) else skipped).append(t)
+    if skipped:
+        kinds = ", ".join(f"{t} ({reader.topics[t].msgtype})" for t in skipped)
+        log.warning("%s: topics with message types the log does not define are not copied into corrected.mcap: %s",
+                    log_path, kinds)
+    return chosen

@@ -1,0 +1,1 @@
+"""Test harnesses: scenarios and solvers the tests (and tools/bench_backend.py) drive the library with."""
