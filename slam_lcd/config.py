@@ -164,7 +164,8 @@ def _from_dict(cls, data: dict, where: str = ""):
 
 
 # keys that moved to another section: a config naming the old place gets an error that says where
-MOVED_KEYS = {"run.align": "eval.align", "run.t_max_diff": "eval.t_max_diff"}
+MOVED_KEYS = {"run.align": "eval.align", "run.t_max_diff": "eval.t_max_diff", "vocab.top_k": "lcd.top_k",
+              "vocab.exclude_recent_s": "lcd.exclude_recent_s", "vocab.exclude_recent_n": "lcd.exclude_recent_n"}
 
 
 def config_to_dict(cfg) -> dict:

@@ -76,9 +76,6 @@ RANGES: dict[str, str] = {
     "vocab.hk_branching": "[2, inf)",
     "vocab.hk_depth": "[1, inf)",
     "vocab.seed": "[0, inf)",
-    "vocab.top_k": "[1, inf)",
-    "vocab.exclude_recent_s": "[0, inf)",
-    "vocab.exclude_recent_n": "[0, inf)",
     "vocab.min_previous_score": "[0, 1]",
     "vocab.online_word_radius": "(0, 2]",  # on unit vectors
     "vocab.ann_min_words": "[1, inf)",

@@ -11,7 +11,7 @@ Conventions (the same everywhere in slam-lcd):
   motions compose with the adjoint (:func:`compose_covariance`, :func:`relative_covariance`,
   :func:`transform_covariance`).
 
-(:mod:`slam_lcd.backend.lie` keeps the SE(3) log/exp on GTSAM for the back end only.)
+This is the one SE(3) module: every stage, the back end included, uses it.
 """
 from __future__ import annotations
 

@@ -58,3 +58,14 @@ def test_unknown_key_in_file_suggests(tmp_path):
     p.write_text(yaml.safe_dump({"lcd": {"top_kk": 3}}))
     with pytest.raises(ConfigError, match="did you mean 'top_kk' -> 'top_k'"):
         load_config(p)
+
+
+@pytest.mark.parametrize("old,new", [("run.align", "eval.align"), ("vocab.top_k", "lcd.top_k"),
+                                     ("vocab.exclude_recent_n", "lcd.exclude_recent_n")])
+def test_a_key_that_moved_says_where_it_lives_now(tmp_path, old, new):
+    """Every knob has one home: a config naming the old place gets a one-line error naming the new one."""
+    section, key = old.split(".")
+    p = tmp_path / "c.yaml"
+    p.write_text(yaml.safe_dump({section: {key: 3}}))
+    with pytest.raises(ConfigError, match=f"{old} moved to {new}"):
+        load_config(str(p))

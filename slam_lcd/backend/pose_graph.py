@@ -48,7 +48,7 @@ from .relatives import MarginalRelatives
 
 __all__ = ["ACCEPTED", "REJECTED", "LoopRecord", "PoseGraph", "isam2_params", "robust_kernel", "values_to_array"]
 
-log_ = logging.getLogger(__name__)
+log = logging.getLogger(__name__)
 
 
 class PoseGraph(GraphOutputs):
@@ -230,7 +230,7 @@ class PoseGraph(GraphOutputs):
         if ok:
             rec.chi2_residual = self._residual_chi2(lp)
         rec.history.append(f"{rec.verdict}: {rec.reason}")
-        log_.debug("loop %d->%d %s: %s", rec.match_id, rec.query_id, rec.verdict, rec.reason)
+        log.debug("loop %d->%d %s: %s", rec.match_id, rec.query_id, rec.verdict, rec.reason)
         self.loop_times.append(time.perf_counter() - t0)
 
         if mode in ("gate+gnc", "gnc") and lp.passed_gate:

@@ -38,12 +38,8 @@ class VocabConfig:
     # --- BoW database ---
     # idf weights: from the vocabulary's training images, or from the database so far
     idf_source: Literal["vocabulary", "database"] = "vocabulary"
-    # candidates returned by a query
-    top_k: int = 5
-    # keyframes newer than this many seconds before the query are never candidates
-    exclude_recent_s: float = 0.0
-    # the most recent this-many keyframes are never candidates
-    exclude_recent_n: int = 0
+    # (how many candidates a query returns and which recent keyframes it skips are the loop
+    # detector's: lcd.top_k, lcd.exclude_recent_n / _s; BowDatabase.query takes them as arguments)
     # divide scores by the score against the previous keyframe (DBoW2's alpha normalisation)
     normalise_by_previous: bool = False
     # with normalise_by_previous: skip the query when the previous-keyframe score is below this

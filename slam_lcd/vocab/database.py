@@ -309,8 +309,8 @@ class BowDatabase:
         b = np.divide(tf * idf_q[pos], nk, out=np.zeros_like(tf), where=nk > 0)
         return np.bincount(kf, weights=np.minimum(a[pos], b), minlength=n)
 
-    def query(self, descriptors_or_bow, top_k: int | None = None, exclude_recent_s: float | None = None,
-              exclude_recent_n: int | None = None, *, query_id: int | None = None, stamp_ns: int | None = None,
+    def query(self, descriptors_or_bow, top_k: int = 5, exclude_recent_s: float = 0.0,
+              exclude_recent_n: int = 0, *, query_id: int | None = None, stamp_ns: int | None = None,
               normalise_by_previous: bool | None = None) -> list[LoopCandidate]:
         """Top-K keyframes by score, best first, skipping the recent window (and the query itself).
 
@@ -319,9 +319,7 @@ class BowDatabase:
         that is not the query (DBoW2's alpha); below ``min_previous_score`` nothing is returned.
         """
         c = self.conf
-        top_k = c.top_k if top_k is None else top_k
-        ex_s = c.exclude_recent_s if exclude_recent_s is None else exclude_recent_s
-        ex_n = c.exclude_recent_n if exclude_recent_n is None else exclude_recent_n
+        ex_s, ex_n = exclude_recent_s, exclude_recent_n
         norm_prev = c.normalise_by_previous if normalise_by_previous is None else normalise_by_previous
         bow = descriptors_or_bow if isinstance(descriptors_or_bow, BowVector) else self.transform(descriptors_or_bow)
         n = len(self)
