@@ -76,8 +76,9 @@ class RunConfig:
     # go through loop detection and the back end (SuperPoint releases the GIL); 0 = one at a
     # time. Loops of a keyframe are then reported up to this many keyframes later.
     extract_ahead: int = 1
-    # with extract_ahead > 0: BLAS and faiss threads of the loop-detection thread, so that the
-    # background extraction keeps a core (slam_lcd/thread_limits.py); 0 = the libraries' defaults
+    # with extract_ahead > 0: BLAS and faiss threads of the loop-detection thread while a
+    # keyframe's features are being extracted in the background, so that the extraction keeps a
+    # core (slam_lcd/thread_limits.py); 0 = the libraries' defaults
     lcd_threads: int = 1
 
 

@@ -18,8 +18,8 @@ database half-updated: its candidates for that keyframe are dropped and later ke
 go to the back end without loop detection (one warning says so).
 
 Background extraction (``run.extract_ahead``): a keyframe's features are computed in a worker
-thread while earlier keyframes go through loop detection (with ``run.lcd_threads`` BLAS/faiss
-threads); keyframes reach the graph in order; one interrupted waiting for features stays queued.
+thread while earlier keyframes go through loop detection (``run.lcd_threads`` BLAS/faiss threads
+while it runs); keyframes reach the graph in order; one interrupted waiting for features stays queued.
 """
 from __future__ import annotations
 
@@ -107,8 +107,7 @@ class Pipeline:
         self._early_depth: dict[int, np.ndarray] = {}  # depth that arrived before its image
         self._segment_from: int | None = None  # stamp of an odometry break not yet handed to a keyframe
         self._finalized = False
-        self._detector_stale = False  # an interrupt inside the loop detector: no more detection
-        self._stale_warned = False
+        self._detector_stale = self._stale_warned = False  # an interrupt inside the detector: no more detection
         # keyframes handed in, made by the selector but not handed in, waiting for features / loops
         self._n_submitted = 0
         self._unsubmitted: list[Keyframe] = []
@@ -263,7 +262,8 @@ class Pipeline:
         n_records, n_closures = len(det.records), len(det.closures)
         done = False
         try:
-            with self.timer("loop_detection"), limited_threads(self._lcd_threads):
+            busy = any(f is not None and not f.done() for _, f in self._inflight)  # extraction running now
+            with self.timer("loop_detection"), limited_threads(self._lcd_threads if busy else 0):
                 closures = det.add(kf)
             done = True
             return closures
