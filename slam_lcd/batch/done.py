@@ -1,7 +1,7 @@
 """Is a log already done? The test that makes a re-run of the same batch do no work.
 
 A log counts as done when its output folder holds a complete set (see
-:mod:`slam_lcd.output_set`) of a run of the same configuration on the same log:
+:mod:`slam_lcd.outputs.output_set`) of a run of the same configuration on the same log:
 
 - no ``PARTIAL.txt`` (an interrupted or half-replaced set is redone);
 - ``report.json`` reads, says the run was not interrupted, and every output it lists exists;
@@ -18,7 +18,7 @@ import json
 from pathlib import Path
 
 from ..config import Config, dump_config
-from ..output_set import PARTIAL_MARKER
+from ..outputs.output_set import PARTIAL_MARKER
 
 
 def _newest_mtime(path: Path) -> int:

@@ -1,6 +1,6 @@
 """The batch's own outputs in ``--out``: summary.csv, summary.md and the ATE plot, as one set.
 
-Why an :class:`~slam_lcd.output_set.OutputSet`: the three files describe the same rows and
+Why an :class:`~slam_lcd.outputs.output_set.OutputSet`: the three files describe the same rows and
 are rewritten on every batch run. Published as a set they are never a mix of two runs, and
 an interrupted batch writes them marked partial (``PARTIAL.txt`` in ``--out``, saying which
 logs did not run). The per-log folders beside them are not part of the set and are never
@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Sequence
 
 from ..atomic import write_text
-from ..output_set import OutputSet
+from ..outputs.output_set import OutputSet
 from .rows import COLUMNS
 
 SUMMARY_OUTPUTS = ("summary.csv", "summary.md", "ate_before_after.png")
