@@ -65,6 +65,8 @@ def run_log(
     progress: bool = True,
     write_mcap: bool = True,
     input_paths: dict | None = None,
+    command_line: list[str] | None = None,
+    overrides: list[str] | None = None,
 ) -> RunResult:
     """Correct the trajectory of ``log_path`` with loop closures; write outputs into ``out_dir``.
 
@@ -73,6 +75,7 @@ def run_log(
     topics must have the right types and their first messages must decode. Outputs are
     written as one set (:class:`slam_lcd.outputs.output_set.OutputSet`). A Ctrl-C stops the stream
     and writes the result so far, marked partial (``PARTIAL.txt``); ``result.interrupted``.
+    ``command_line`` and ``overrides`` (the ``--set`` assignments) are only reported.
     """
     cfg = validate_config(config or Config())
     log_path = Path(log_path)
@@ -84,7 +87,8 @@ def run_log(
     outputs = OutputSet(out_dir, RUN_OUTPUTS)
     outputs.check(run_inputs(log_path, gt_file, cfg, input_paths))
     t_start = time.perf_counter()
-    result = RunResult(out_dir=out_dir)
+    result = RunResult(out_dir=out_dir, log_path=str(log_path), command_line=command_line,
+                       overrides=list(overrides or []))
     gt_traj = read_trajectory(gt_file) if gt_file is not None else None
 
     with open_log(log_path, conf=cfg.io) as reader:
@@ -92,6 +96,9 @@ def run_log(
             raise PipelineError("log holds no messages", log_path)
         topics = choose_topics(reader, image_topic, odom_topic, gt_topic, depth_topic)
         first = check_first_messages(reader, topics)
+        result.topics = {k: v for k, v in vars(topics).items() if v}
+        result.gt_source = (f"file {gt_file}" if gt_file is not None else
+                            f"topic {topics.gt}" if topics.gt else None)
         mcap_wanted = write_mcap and cfg.run.write_mcap
         copy_topics = copyable_topics(reader, cfg.run.copy_images, log_path) if mcap_wanted else []
         vo_odometry = None
@@ -122,6 +129,8 @@ def run_log(
         raise PipelineError(_no_keyframe_reason(pipe, topics, result.n_frames), log_path)
     if gt_traj is None:
         gt_traj = gt_traj_from_log
+    if gt_traj is None:
+        result.gt_source = None  # a ground-truth topic without a message
     result.wall_s = time.perf_counter() - t_start
     write_set(outputs, pipe, result, gt_traj, log_path if mcap_wanted else None, copy_topics, notes, read_to_end)
     return result

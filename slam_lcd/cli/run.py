@@ -95,7 +95,8 @@ def run(args) -> int:
     cfg = config_from_args(args)
     res = run_log(args.log, Path(args.out), cfg, image_topic=args.image_topic, odom_topic=args.odom_topic,
                   depth_topic=args.depth_topic, gt_topic=args.gt_topic, gt_file=args.gt,
-                  progress=not args.no_progress, write_mcap=not args.no_mcap, input_paths=config_inputs(args))
+                  progress=not args.no_progress, write_mcap=not args.no_mcap, input_paths=config_inputs(args),
+                  command_line=getattr(args, "command_line", None), overrides=list(args.overrides))
     for line in res.summary_lines():
         print(line)
     print(f"outputs in {res.out_dir}/ ({', '.join(res.outputs)})"

@@ -18,7 +18,8 @@ from ..interrupts import defer_sigint
 from ..types import Trajectory
 from .loops import VERIFIED, count_false_accepted, loop_rows, write_loops_csv
 from .output_set import PARTIAL_MARKER, OutputSet
-from .report import write_plots, write_report
+from .figures import write_plots
+from .report import report_facts, write_report
 from .result import RunResult
 
 log = logging.getLogger(__name__)
@@ -93,6 +94,7 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
     (no odometry, no keyframe) are left out and said so in ``skipped`` instead of failing.
     """
     from ..eval import ate_with_config
+    from ..eval.metrics import rpe_with_config
     from ..io.trajectory_files import write_tum
 
     cfg = pipe.config
@@ -127,7 +129,7 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
     result.keyframe_seconds = list(pipe.keyframe_seconds)
 
     # ---- evaluation against ground truth
-    ate_before = ate_after = None
+    ate_before = ate_after = rpe_before = rpe_after = None
     if gt is not None and len(gt) > 1 and len(odom) > 1:
         try:
             ate_before = ate_with_config(gt, odom, cfg.eval)
@@ -135,6 +137,12 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
         except SlamLcdError as e:  # the trajectories are still worth having
             ate_before = ate_after = None
             log.warning("ATE against the ground truth not computed: %s", e.problem)
+    if ate_before is not None:
+        try:
+            rpe_before, rpe_after = (rpe_with_config(gt, t, cfg.eval) for t in (odom, corrected))
+        except SlamLcdError as e:  # e.g. a log shorter than one RPE step
+            rpe_before = rpe_after = None
+            log.warning("RPE against the ground truth not computed: %s", e.problem)
     if ate_before is not None:
         result.ate_before, result.ate_after = ate_before.rmse, ate_after.rmse
         result.alignment = cfg.eval.align
@@ -161,4 +169,5 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
             log.warning("plots not written: %s", e)
     outputs += ["report.json", "report.md"]
     result.outputs = outputs
-    write_report(out_dir, result, ate_before, ate_after)
+    facts = report_facts(result, cfg, rows, ate_before, ate_after, rpe_before, rpe_after)
+    write_report(out_dir, facts, result.summary_lines())
