@@ -65,8 +65,13 @@ class RunConfig:
     plots: bool = True
     # write corrected.mcap (input topics + corrected trajectory)
     write_mcap: bool = True
-    # copy image topics into corrected.mcap too (large); false copies every non-image topic
+    # copy image topics into corrected.mcap too (large; `run --copy-images`); false copies every non-image topic
     copy_images: bool = False
+    # corrected.mcap frames (slam_lcd.outputs.corrected_log): the corrected map frame, and the
+    # odometry and body frames ("" = the odometry topic's frame_id / child_frame_id)
+    mcap_map_frame: str = "map"
+    mcap_odom_frame: str = ""
+    mcap_body_frame: str = ""
     # also take keyframes on image overlap (frontend.kf_min_overlap): needs features of EVERY
     # frame, not only of keyframes (about 5x the SuperPoint cost at 10 Hz); odometry
     # thresholds alone are the default

@@ -97,6 +97,7 @@ def run_log(
         topics = choose_topics(reader, image_topic, odom_topic, gt_topic, depth_topic)
         first = check_first_messages(reader, topics)
         result.topics = {k: v for k, v in vars(topics).items() if v}
+        result.frames = _log_frames(first, topics)
         result.gt_source = (f"file {gt_file}" if gt_file is not None else
                             f"topic {topics.gt}" if topics.gt else None)
         mcap_wanted = write_mcap and cfg.run.write_mcap
@@ -134,6 +135,19 @@ def run_log(
     result.wall_s = time.perf_counter() - t_start
     write_set(outputs, pipe, result, gt_traj, log_path if mcap_wanted else None, copy_topics, notes, read_to_end)
     return result
+
+
+def _log_frames(first: dict, topics: Topics) -> dict:
+    """The odometry's frame_id and child_frame_id and the ground truth's frame_id (from their first messages)."""
+    frames = {}
+    m = first.get(topics.odom) if topics.odom else None
+    if m is not None:
+        frames["odom"] = m.msg.header.frame_id.lstrip("/") or None
+        frames["body"] = (getattr(m.msg, "child_frame_id", "") or "").lstrip("/") or None
+    g = first.get(topics.gt) if topics.gt else None
+    if g is not None and hasattr(g.msg, "header"):
+        frames["gt"] = g.msg.header.frame_id.lstrip("/") or None
+    return {k: v for k, v in frames.items() if v}
 
 
 def _make_pipeline(cfg, extractor, log_path, topics: Topics):

@@ -85,6 +85,9 @@ def register(sub) -> None:
                         "ground-truth topic if any)")
     p.add_argument("--no-mcap", action="store_true",
                    help="do not write corrected.mcap (default: write it, run.write_mcap)")
+    p.add_argument("--copy-images", action="store_true",
+                   help="copy the log's image topics into corrected.mcap too (large; default: every topic but "
+                        "images, run.copy_images)")
     add_config_args(p)
     p.set_defaults(func=run)
 
@@ -92,7 +95,7 @@ def register(sub) -> None:
 def run(args) -> int:
     from ..runner import run_log
 
-    cfg = config_from_args(args)
+    cfg = config_from_args(args, extra=["run.copy_images=true"] if args.copy_images else [])
     res = run_log(args.log, Path(args.out), cfg, image_topic=args.image_topic, odom_topic=args.odom_topic,
                   depth_topic=args.depth_topic, gt_topic=args.gt_topic, gt_file=args.gt,
                   progress=not args.no_progress, write_mcap=not args.no_mcap, input_paths=config_inputs(args),

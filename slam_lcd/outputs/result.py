@@ -42,6 +42,8 @@ class RunResult:
     log_path: str = ""
     gt_source: str | None = None
     topics: dict = field(default_factory=dict)
+    # frame names of the log: the odometry's frame_id ("odom") and child_frame_id ("body"), the ground truth's ("gt")
+    frames: dict = field(default_factory=dict)
     command_line: list[str] | None = None
     overrides: list[str] = field(default_factory=list)
 
