@@ -72,6 +72,11 @@ class RunConfig:
     mcap_map_frame: str = "map"
     mcap_odom_frame: str = ""
     mcap_body_frame: str = ""
+    # loops/: a picture per accepted (and back-end-rejected) loop and a contact sheet
+    # (slam_lcd.outputs.loop_pictures; keyframe images and features are kept on disk meanwhile)
+    loop_pictures: bool = True
+    # ... plus this many detector-rejected candidates that came closest
+    loop_pictures_rejected: int = 8
     # also take keyframes on image overlap (frontend.kf_min_overlap): needs features of EVERY
     # frame, not only of keyframes (about 5x the SuperPoint cost at 10 Hz); odometry
     # thresholds alone are the default

@@ -150,6 +150,7 @@ RANGES: dict[str, str] = {
     # run
     "run.loop_true_max_distance": "(0, inf)",
     "run.extract_ahead": "[0, 64]",
+    "run.loop_pictures_rejected": "[0, inf)",
 }
 
 # (smaller, larger): the first must be below the second

@@ -34,6 +34,7 @@ class RunResult:
     log_duration_s: float = 0.0
     stages: dict = field(default_factory=dict)
     outputs: list[str] = field(default_factory=list)
+    loop_pictures: list[str] = field(default_factory=list)  # names under loops/
     # per keyframe: loop detection (and its parts) and back end seconds, resident kB (benchmarks)
     keyframe_seconds: list = field(default_factory=list, repr=False)
     # where the run came from (report.json / report.html say it): the input log, the ground

@@ -16,6 +16,7 @@ from ..config import save_config
 from ..errors import InputError, SlamLcdError
 from ..interrupts import defer_sigint
 from ..types import Trajectory
+from .loop_pictures import LOOPS_DIR
 from .loops import VERIFIED, count_false_accepted, loop_rows, write_loops_csv
 from .output_set import PARTIAL_MARKER, OutputSet
 from .figures import write_plots
@@ -26,7 +27,7 @@ log = logging.getLogger(__name__)
 
 # every name `run` may write into --out (the set is published as a whole: slam_lcd.outputs.output_set)
 RUN_OUTPUTS = ("config.yaml", "odometry.tum", "corrected.tum", "keyframes_corrected.tum", "graph.g2o", "loops.csv",
-               "corrected.mcap", "trajectory.png", "ate_over_time.png", "report.json", "report.md")
+               "corrected.mcap", "trajectory.png", "ate_over_time.png", "report.json", "report.md", LOOPS_DIR)
 
 
 def partial_text(result: RunResult, notes=(), *, read_to_end: bool, while_writing: bool = False) -> str:
@@ -43,7 +44,7 @@ def partial_text(result: RunResult, notes=(), *, read_to_end: bool, while_writin
 
 
 def write_set(outputs: OutputSet, pipe, result: RunResult, gt, mcap_source, copy_topics, notes=None,
-              read_to_end: bool = True) -> None:
+              read_to_end: bool = True, album=None) -> None:
     """Write every output into the staging folder, then publish the set (partial when interrupted)."""
     notes = list(notes or [])
     partial = result.interrupted
@@ -51,7 +52,7 @@ def write_set(outputs: OutputSet, pipe, result: RunResult, gt, mcap_source, copy
         if partial:  # said first: a second Ctrl-C may stop the writing at any file
             outputs.mark_partial(partial_text(result, notes, read_to_end=read_to_end))
         write_outputs(pipe, outputs.staging, result, gt, mcap_source, copy_topics,
-                      skipped=notes if partial else None)
+                      skipped=notes if partial else None, album=album)
         if partial:
             outputs.mark_partial(partial_text(result, notes, read_to_end=read_to_end))
     except KeyboardInterrupt:
@@ -87,9 +88,10 @@ def _write_error(e: OSError, outputs: OutputSet) -> InputError:
 
 def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
                   mcap_source: Path | None, copy_topics: list[str] | None = None,
-                  skipped: list[str] | None = None) -> None:
+                  skipped: list[str] | None = None, album=None) -> None:
     """Write every output of a run into ``out_dir`` (normally an :class:`OutputSet` staging folder).
 
+    ``album``: the run's :class:`~.loop_pictures.KeyframeAlbum` (loop pictures), removed here.
     ``skipped`` (a list) means a partial result: outputs that have nothing to hold yet
     (no odometry, no keyframe) are left out and said so in ``skipped`` instead of failing.
     """
@@ -163,6 +165,20 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
                             copy_topics=copy_topics or [], io_conf=cfg.io,
                             gt_alignment=ate_after.alignment if ate_after is not None else None)
         outputs.append("corrected.mcap")
+
+    # ---- loop pictures (need the verdicts and the ground-truth errors of the rows)
+    result.loop_pictures = []
+    if album is not None:
+        try:
+            from .loop_pictures import write_loop_pictures
+
+            result.loop_pictures = write_loop_pictures(out_dir, album, rows, cfg.lcd, cfg.run.loop_pictures_rejected)
+            if result.loop_pictures:
+                outputs.append(LOOPS_DIR + "/")
+        except Exception as e:  # a picture must never cost the user the numbers
+            log.warning("loop pictures not written: %s", e)
+        finally:
+            album.close()
 
     # ---- plots
     if cfg.run.plots:
