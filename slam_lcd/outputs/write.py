@@ -1,8 +1,8 @@
 """Every output of ``slam-lcd run``, written as one set (:class:`~slam_lcd.outputs.output_set.OutputSet`).
 
 :data:`RUN_OUTPUTS`: config.yaml, odometry.tum, corrected.tum, keyframes_corrected.tum,
-loops.csv, graph.g2o, corrected.mcap, report.json, report.md, trajectory.png,
-ate_over_time.png; ``PARTIAL.txt`` when the run was interrupted.
+loops.csv, graph.g2o, corrected.mcap, report.json, report.md, report.html, trajectory.png,
+ate_over_time.png, loops/ (pictures); ``PARTIAL.txt`` when the run was interrupted.
 """
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ log = logging.getLogger(__name__)
 
 # every name `run` may write into --out (the set is published as a whole: slam_lcd.outputs.output_set)
 RUN_OUTPUTS = ("config.yaml", "odometry.tum", "corrected.tum", "keyframes_corrected.tum", "graph.g2o", "loops.csv",
-               "corrected.mcap", "trajectory.png", "ate_over_time.png", "report.json", "report.md", LOOPS_DIR)
+               "corrected.mcap", "trajectory.png", "ate_over_time.png", "report.json", "report.md", "report.html", LOOPS_DIR)
 
 
 def partial_text(result: RunResult, notes=(), *, read_to_end: bool, while_writing: bool = False) -> str:
@@ -188,7 +188,19 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
             outputs += ["trajectory.png", "ate_over_time.png"] if ate_before is not None else ["trajectory.png"]
         except Exception as e:  # a plot must never cost the user the numbers
             log.warning("plots not written: %s", e)
-    outputs += ["report.json", "report.md"]
+    outputs += ["report.json", "report.md", "report.html"]
     result.outputs = outputs
     facts = report_facts(result, cfg, rows, ate_before, ate_after, rpe_before, rpe_after)
     write_report(out_dir, facts, result.summary_lines())
+    try:
+        from .html_report import write_html_report
+
+        write_html_report(out_dir, facts, result.summary_lines(), rows,
+                          [f for f in outputs if f.endswith(".png")], result.loop_pictures,
+                          (out_dir / "config.yaml").read_text(encoding="utf-8"))
+    except OSError:
+        raise
+    except Exception as e:  # the page must never cost the user the numbers
+        outputs.remove("report.html")
+        log.warning("report.html not written: %s", e)
+        write_report(out_dir, facts, result.summary_lines())
