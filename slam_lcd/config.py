@@ -14,7 +14,7 @@ import typing
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import yaml
 
@@ -63,6 +63,8 @@ class RunConfig:
     loop_true_max_distance: float = 3.0
     # write trajectory.png and ate_over_time.png
     plots: bool = True
+    # trajectory.png: a plane (xy, xz, yz), 3-D (xyz) or auto (the plane the motion spans)
+    plot_mode: Literal["auto", "xy", "xz", "yz", "xyz"] = "auto"
     # write corrected.mcap (input topics + corrected trajectory)
     write_mcap: bool = True
     # copy image topics into corrected.mcap too (large; `run --copy-images`); false copies every non-image topic

@@ -184,7 +184,7 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
     if cfg.run.plots:
         try:
             write_plots(out_dir, odom, corrected, gt, pipe.keyframes, pipe.keyframe_trajectory(), pipe.loop_records,
-                        ate_before, ate_after)
+                        ate_before, ate_after, mode=cfg.run.plot_mode)
             outputs += ["trajectory.png", "ate_over_time.png"] if ate_before is not None else ["trajectory.png"]
         except Exception as e:  # a plot must never cost the user the numbers
             log.warning("plots not written: %s", e)
