@@ -103,6 +103,37 @@ def test_map_to_odom_correction_when_odom_has_no_parent(report_run, tmp_path):
     assert np.allclose(T_map_odom @ odom.poses[i], corr.poses[i], atol=1e-6)
 
 
+def test_ground_truth_file_tied_under_an_odom_that_has_a_parent(report_run, tmp_path):
+    """--gt FILE: the ground truth is written into the MCAP (frame ground_truth) and, as the
+    demo's odom has a parent (world), tied to the tree as a child of odom."""
+    from slam_lcd.config import load_config
+    from slam_lcd.eval import ate
+    from slam_lcd.io.trajectory_files import read_tum
+    from slam_lcd.outputs.corrected_log import GT_FILE_FRAME, GT_TOPIC
+    from slam_lcd.types import Trajectory
+
+    _, out, log = report_run
+    odom, corr, kf = (read_tum(out / n) for n in ("odometry.tum", "corrected.tum", "keyframes_corrected.tum"))
+    gt_msgs = _read(log)["/ground_truth/pose"]
+    gt = Trajectory(np.array([t for t, _ in gt_msgs], np.int64), np.array([_pose(m.pose) for _, m in gt_msgs]))
+    align = ate(gt, corr, "se3", t_max_diff=0.02).alignment
+    plan = write_corrected_log(tmp_path / "c.mcap", odom=odom, corrected=corr, kf_ids=list(range(len(kf))),
+                               kf_corrected=kf, loops=[], log_frames={"odom": "odom", "body": "base_link",
+                                                                     "gt": GT_FILE_FRAME},
+                               run_conf=load_config("default").run, copy_from=log,
+                               copy_topics=["/tf_static", "/odom"], gt_alignment=align, gt_poses=gt)
+    assert not plan.publish_map_odom and plan.link_gt
+    msgs = _read(tmp_path / "c.mcap")
+    parents = _tree(msgs)
+    assert parents[GT_FILE_FRAME] == "odom" and _root(GT_FILE_FRAME, parents) == _root("base_link_corrected", parents)
+    assert len(msgs[GT_TOPIC]) == len(gt) and msgs[GT_TOPIC][0][1].header.frame_id == GT_FILE_FRAME
+    # the ground truth seen from odom lands on the corrected trajectory (within the corrected ATE)
+    static = [ts for _, m in msgs["/tf_static"] for ts in m.transforms if ts.child_frame_id == GT_FILE_FRAME][0]
+    T_odom_gt = _transform(static.transform)
+    p = (T_odom_gt @ gt.poses[len(gt) // 2])[:3, 3]
+    assert np.min(np.linalg.norm(corr.positions - p, axis=1)) < 0.5
+
+
 def test_frame_plan_names_a_clash_and_takes_overrides():
     from slam_lcd.config import load_config
 

@@ -12,8 +12,11 @@ of the log (fixed frame = the odometry's ``frame_id``, body = its ``child_frame_
   ``map -> odom`` would give it two: the corrected body is then its own frame
   ``<body>_corrected``, a child of ``odom`` (said in the log at INFO level);
 - a ground-truth frame that the tree does not reach (the ground-truth topic's
-  ``frame_id``) is tied to ``map`` on ``/tf_static`` by the ATE's alignment of the
-  corrected trajectory (its rotation and translation; a Sim(3) scale cannot be a transform);
+  ``frame_id``; ``ground_truth`` for a ``--gt`` file, whose poses are then written on
+  ``/slam_lcd/ground_truth``) is tied to the tree on ``/tf_static`` by the ATE's alignment
+  of the corrected trajectory (rotation and translation; a Sim(3) scale cannot be a
+  transform): as the parent of ``map``, or, when the odometry frame has a parent already,
+  as a child of it;
 - ``/slam_lcd/corrected`` (PoseStamped per stamp), ``/slam_lcd/corrected/path``
   (nav_msgs/Path of the corrected keyframes, growing: once per keyframe, at most
   :data:`MAX_PATH_MESSAGES` messages so a long log does not grow quadratically) and
@@ -40,6 +43,8 @@ MAX_PATH_MESSAGES = 200
 POSE_TOPIC = "/slam_lcd/corrected"
 PATH_TOPIC = "/slam_lcd/corrected/path"
 LOOPS_TOPIC = "/slam_lcd/loops"
+GT_TOPIC = "/slam_lcd/ground_truth"  # ground truth given as a file (--gt), in frame GT_FILE_FRAME
+GT_FILE_FRAME = "ground_truth"
 
 
 @dataclass
@@ -104,8 +109,11 @@ def plan_frames(run_conf, log_frames: dict, parents: dict[str, str]) -> TfPlan:
             tree[body] = odom
         if not plan.publish_map_odom:
             tree[corrected_body] = odom
-        plan.link_gt = plan.publish_map_odom and _root(gt, tree) != _root(map_frame, tree)
-        if not plan.link_gt and _root(gt, tree) != _root(plan.corrected_body, tree):
+        apart = _root(gt, tree) != _root(plan.corrected_frame, tree)
+        # map (new, parentless) becomes the ground truth's child; else the ground truth, if it
+        # has no parent, becomes a child of the corrected trajectory's frame
+        plan.link_gt = apart and (plan.publish_map_odom or gt not in tree)
+        if apart and not plan.link_gt:
             notes.append(f"ground-truth frame {gt!r} is not connected to the corrected trajectory's tree")
     plan.notes = notes
     return plan
@@ -124,8 +132,12 @@ def _keyframe_paths(kf: Trajectory, frame: str):
 
 def write_corrected_log(path: Path, *, odom: Trajectory, corrected: Trajectory, kf_ids: list[int],
                         kf_corrected: Trajectory, loops: list[tuple[int, int, int]], log_frames: dict, run_conf,
-                        copy_from: Path, copy_topics: list[str], gt_alignment=None, io_conf=None) -> TfPlan:
-    """Write ``path`` (see the module docstring). ``loops``: ``(query_id, match_id, stamp_ns)`` of accepted loops."""
+                        copy_from: Path, copy_topics: list[str], gt_alignment=None, gt_poses: Trajectory | None = None,
+                        io_conf=None) -> TfPlan:
+    """Write ``path`` (see the module docstring). ``loops``: ``(query_id, match_id, stamp_ns)`` of accepted loops.
+
+    ``gt_poses``: a ground truth read from a file (it is not in the log), written on
+    :data:`GT_TOPIC` in frame ``log_frames['gt']`` and tied to the tree like a log's."""
     from ..io import messages as M
     from ..io.reader import open_log
     from ..io.writers import open_writer
@@ -135,7 +147,7 @@ def write_corrected_log(path: Path, *, odom: Trajectory, corrected: Trajectory, 
 
         raise InvalidPoseError("the corrected trajectory has NaN/inf poses; corrected.mcap not written")
     with open_log(copy_from) as reader:
-        chosen = [t for t in copy_topics if t not in (POSE_TOPIC, PATH_TOPIC, LOOPS_TOPIC)]
+        chosen = [t for t in copy_topics if t not in (POSE_TOPIC, PATH_TOPIC, LOOPS_TOPIC, GT_TOPIC)]
         plan = plan_frames(run_conf, log_frames, log_tf_parents(reader, chosen))
         for note in plan.notes:
             log.info("corrected.mcap: %s", note)
@@ -156,11 +168,16 @@ def write_corrected_log(path: Path, *, odom: Trajectory, corrected: Trajectory, 
         if plan.publish_odom_body:
             for s, T in zip(odom.stamps.tolist(), odom.poses):
                 add(s, "/tf", M.tf_message([(T, s, plan.odom_frame, plan.body_frame)]))
+        s0 = int(cs[0]) if len(cs) else 0
         if plan.link_gt and gt_alignment is not None:
-            T_gt_map = np.eye(4)
-            T_gt_map[:3, :3], T_gt_map[:3, 3] = gt_alignment.R, gt_alignment.t
-            s0 = int(cs[0]) if len(cs) else 0
-            add(s0, "/tf_static", M.tf_message([(T_gt_map, s0, plan.gt_frame, plan.map_frame)]))
+            T_gt_c = np.eye(4)  # the corrected trajectory's frame seen from the ground truth's (the ATE alignment)
+            T_gt_c[:3, :3], T_gt_c[:3, 3] = gt_alignment.R, gt_alignment.t
+            link = ((T_gt_c, s0, plan.gt_frame, plan.map_frame) if plan.publish_map_odom else
+                    (inv(T_gt_c), s0, plan.corrected_frame, plan.gt_frame))
+            add(s0, "/tf_static", M.tf_message([link]))
+        if gt_poses is not None:  # ground truth from a file: written here so that it can be overlaid
+            for s, T in zip(gt_poses.stamps.tolist(), gt_poses.poses):
+                add(s, GT_TOPIC, M.pose_stamped_msg(T, s, plan.gt_frame))
         for s, msg in _keyframe_paths(kf_corrected, plan.corrected_frame):
             add(s, PATH_TOPIC, msg)
         pos = {k: kf_corrected.poses[i][:3, 3] for i, k in enumerate(kf_ids) if i < len(kf_corrected)}

@@ -154,15 +154,18 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
     if mcap_source is not None and len(corrected) == 0 and skipped is not None:
         skipped.append("corrected.mcap: not written (no poses yet)")
     elif mcap_source is not None:
-        from .corrected_log import write_corrected_log
+        from .corrected_log import GT_FILE_FRAME, write_corrected_log
+
+        gt_file = gt if (gt is not None and (result.gt_source or "").startswith("file ")) else None
+        frames = dict(result.frames, gt=GT_FILE_FRAME) if gt_file is not None else result.frames
 
         kf_stamp = {k.id: int(k.stamp) for k in pipe.keyframes}
         accepted = [(r.query_id, r.match_id, kf_stamp[r.query_id]) for r in pipe.loop_records
                     if r.verdict == ACCEPTED and r.query_id in kf_stamp]
         write_corrected_log(out_dir / "corrected.mcap", odom=odom, corrected=corrected,
                             kf_ids=[k.id for k in pipe.keyframes], kf_corrected=kf_corr, loops=accepted,
-                            log_frames=result.frames, run_conf=cfg.run, copy_from=mcap_source,
-                            copy_topics=copy_topics or [], io_conf=cfg.io,
+                            log_frames=frames, run_conf=cfg.run, copy_from=mcap_source,
+                            copy_topics=copy_topics or [], io_conf=cfg.io, gt_poses=gt_file,
                             gt_alignment=ate_after.alignment if ate_after is not None else None)
         outputs.append("corrected.mcap")
 
