@@ -14,7 +14,7 @@ import typing
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import yaml
 
@@ -64,10 +64,22 @@ class RunConfig:
     loop_true_max_distance: float = 3.0
     # write trajectory.png and ate_over_time.png
     plots: bool = True
+    # trajectory.png: a plane (xy, xz, yz), 3-D (xyz) or auto (the plane the motion spans)
+    plot_mode: Literal["auto", "xy", "xz", "yz", "xyz"] = "auto"
     # write corrected.mcap (input topics + corrected trajectory)
     write_mcap: bool = True
-    # copy image topics into corrected.mcap too (large); false copies every non-image topic
+    # copy image topics into corrected.mcap too (large; `run --copy-images`); false copies every non-image topic
     copy_images: bool = False
+    # corrected.mcap frames (slam_lcd.outputs.corrected_log): the corrected map frame, and the
+    # odometry and body frames ("" = the odometry topic's frame_id / child_frame_id)
+    mcap_map_frame: str = "map"
+    mcap_odom_frame: str = ""
+    mcap_body_frame: str = ""
+    # loops/: a picture per accepted (and back-end-rejected) loop and a contact sheet
+    # (slam_lcd.outputs.loop_pictures; keyframe images and features are kept on disk meanwhile)
+    loop_pictures: bool = True
+    # ... plus this many detector-rejected candidates that came closest
+    loop_pictures_rejected: int = 8
     # also take keyframes on image overlap (frontend.kf_min_overlap): needs features of EVERY
     # frame, not only of keyframes (about 5x the SuperPoint cost at 10 Hz); odometry
     # thresholds alone are the default

@@ -153,6 +153,7 @@ RANGES: dict[str, str] = {
     "batch.cpus_per_task": "(0, inf)",
     "batch.gpus_per_task": "[0, inf)",
     "batch.max_retries": "[0, inf)",
+    "run.loop_pictures_rejected": "[0, inf)",
 }
 
 # (smaller, larger): the first must be below the second

@@ -79,6 +79,7 @@ class Pipeline:
         on_loop: Callable[[LoopClosure, object], None] | None = None,
         feature_source: Callable[[int, np.ndarray], object] | None = None,
         expect_depth: bool = False,
+        keyframe_sink: Callable[[Keyframe], None] | None = None,
     ):
         self.config = config or Config()
         self.camera = camera
@@ -94,6 +95,8 @@ class Pipeline:
         self.graph = PoseGraph(self.config.backend)
         self.on_loop = on_loop
         self.feature_source = feature_source
+        # sees each keyframe (image and features) once, after loop detection, before they are dropped
+        self.keyframe_sink = keyframe_sink
         self.timer = StageTimer()
         self.keyframes: list[Keyframe] = []
         self.closures: list[LoopClosure] = []
@@ -240,6 +243,8 @@ class Pipeline:
                     if self.on_loop is not None:
                         self.on_loop(c, rec)
         finally:
+            if self.keyframe_sink is not None and kf.features is not None:
+                self._sink(kf)
             # memory stays bounded: the detector keeps what it needs of past keyframes (compactly), this list poses only
             kf.image = None
             kf.right_image = None
@@ -248,6 +253,14 @@ class Pipeline:
         self.keyframe_seconds.append({"loop_detection": t2 - t1, "backend": (t1 - t0) + (time.perf_counter() - t2),
                                       "rss_kb": resident_kb(), **self.detector.last_part_seconds})
         return accepted
+
+    def _sink(self, kf: Keyframe) -> None:
+        try:
+            with self.timer("keyframe_sink"):
+                self.keyframe_sink(kf)
+        except Exception as e:  # pictures are a nicety: never cost the run (said once)
+            log.warning("keyframe %d not kept for the loop pictures (%s); no more are kept", kf.id, e)
+            self.keyframe_sink = None
 
     def _detect_loops(self, kf: Keyframe) -> list[LoopClosure]:
         """Loop detection for a keyframe already in the graph; an interrupt inside it drops its candidates."""

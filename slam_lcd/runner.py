@@ -66,6 +66,8 @@ def run_log(
     progress: bool = True,
     write_mcap: bool = True,
     input_paths: dict | None = None,
+    command_line: list[str] | None = None,
+    overrides: list[str] | None = None,
 ) -> RunResult:
     """Correct the trajectory of ``log_path`` with loop closures; write outputs into ``out_dir``.
 
@@ -76,6 +78,7 @@ def run_log(
     and writes the result so far, marked partial (``PARTIAL.txt``); ``result.interrupted``.
     ``extractor`` and ``vocab`` (a :class:`slam_lcd.vocab.Vocabulary`; None: the online
     vocabulary) are used as given, so a caller running many logs loads each once.
+    ``command_line`` and ``overrides`` (the ``--set`` assignments) are only reported.
     """
     cfg = validate_config(config or Config())
     log_path = Path(log_path)
@@ -87,52 +90,82 @@ def run_log(
     outputs = OutputSet(out_dir, RUN_OUTPUTS)
     outputs.check(run_inputs(log_path, gt_file, cfg, input_paths))
     t_start = time.perf_counter()
-    result = RunResult(out_dir=out_dir)
+    result = RunResult(out_dir=out_dir, log_path=str(log_path), command_line=command_line,
+                       overrides=list(overrides or []))
     gt_traj = read_trajectory(gt_file) if gt_file is not None else None
 
-    with open_log(log_path, conf=cfg.io) as reader:
-        if reader.message_count == 0:
-            raise PipelineError("log holds no messages", log_path)
-        topics = choose_topics(reader, image_topic, odom_topic, gt_topic, depth_topic)
-        first = check_first_messages(reader, topics)
-        mcap_wanted = write_mcap and cfg.run.write_mcap
-        copy_topics = copyable_topics(reader, cfg.run.copy_images, log_path) if mcap_wanted else []
-        vo_odometry = None
-        if topics.odom is None:
-            if topics.depth is None:
-                raise PipelineError(
-                    "log has no odometry topic (nav_msgs/Odometry) and no depth image for the built-in "
-                    "visual odometry; pass --odom-topic", log_path)
-            vo_odometry = _visual_odometry(log_path, topics, cfg)
-        tf = static_transforms(reader, log_path)
-        pipe = _make_pipeline(cfg, extractor, vocab, log_path, topics)
-        if vo_odometry is not None:  # built-in VO ran first: its poses are the odometry
-            for stamp, T, cov, segment_start in vo_odometry.odometry_samples():
-                pipe.add_odometry(stamp, T, cov, segment_start=segment_start)
-        gt_traj_from_log = _drive(reader, topics, pipe, result, cfg, tf, body_frame_of(first.get(topics.odom)),
-                                  vo_odometry, log_path, progress)
-        result.log_duration_s = reader.duration_ns * 1e-9
+    album = None
+    try:  # the staging folder may exist from here on (the loop pictures' keyframe album)
+        with open_log(log_path, conf=cfg.io) as reader:
+            if reader.message_count == 0:
+                raise PipelineError("log holds no messages", log_path)
+            topics = choose_topics(reader, image_topic, odom_topic, gt_topic, depth_topic)
+            first = check_first_messages(reader, topics)
+            result.topics = {k: v for k, v in vars(topics).items() if v}
+            result.frames = _log_frames(first, topics)
+            result.gt_source = (f"file {gt_file}" if gt_file is not None else
+                                f"topic {topics.gt}" if topics.gt else None)
+            mcap_wanted = write_mcap and cfg.run.write_mcap
+            copy_topics = copyable_topics(reader, cfg.run.copy_images, log_path) if mcap_wanted else []
+            vo_odometry = None
+            if topics.odom is None:
+                if topics.depth is None:
+                    raise PipelineError(
+                        "log has no odometry topic (nav_msgs/Odometry) and no depth image for the built-in "
+                        "visual odometry; pass --odom-topic", log_path)
+                vo_odometry = _visual_odometry(log_path, topics, cfg)
+            tf = static_transforms(reader, log_path)
+            if cfg.run.loop_pictures:  # a working folder inside the staging folder: discarded with it on failure
+                from .outputs.loop_pictures import KeyframeAlbum
 
-    notes: list[str] = []
-    read_to_end = not result.interrupted
-    try:
-        pipe.finalize(flush=not result.interrupted)
-    except KeyboardInterrupt:  # Ctrl-C (maybe a second one): skip the back end's final re-check
-        log.warning("interrupted%s: the back end's final re-check is skipped", " again" if result.interrupted else "")
-        notes.append("The back end's final re-check (GNC) was interrupted and skipped.")
-        result.interrupted = True
-    if not result.interrupted and not pipe.keyframes:
-        raise PipelineError(_no_keyframe_reason(pipe, topics, result.n_frames), log_path)
-    if gt_traj is None:
-        gt_traj = gt_traj_from_log
-    result.wall_s = time.perf_counter() - t_start
-    write_set(outputs, pipe, result, gt_traj, log_path if mcap_wanted else None, copy_topics, notes, read_to_end)
+                album = KeyframeAlbum(outputs.staging / ".loop_keyframes", cfg.lcd.descriptor_dtype)
+            pipe = _make_pipeline(cfg, extractor, vocab, log_path, topics, album)
+            if vo_odometry is not None:  # built-in VO ran first: its poses are the odometry
+                for stamp, T, cov, segment_start in vo_odometry.odometry_samples():
+                    pipe.add_odometry(stamp, T, cov, segment_start=segment_start)
+            gt_traj_from_log = _drive(reader, topics, pipe, result, cfg, tf, body_frame_of(first.get(topics.odom)),
+                                      vo_odometry, log_path, progress)
+            result.log_duration_s = reader.duration_ns * 1e-9
+
+        notes: list[str] = []
+        read_to_end = not result.interrupted
+        try:
+            pipe.finalize(flush=not result.interrupted)
+        except KeyboardInterrupt:  # Ctrl-C (maybe a second one): skip the back end's final re-check
+            log.warning("interrupted%s: the back end's final re-check is skipped", " again" if result.interrupted else "")
+            notes.append("The back end's final re-check (GNC) was interrupted and skipped.")
+            result.interrupted = True
+        if not result.interrupted and not pipe.keyframes:
+            raise PipelineError(_no_keyframe_reason(pipe, topics, result.n_frames), log_path)
+        if gt_traj is None:
+            gt_traj = gt_traj_from_log
+        if gt_traj is None:
+            result.gt_source = None  # a ground-truth topic without a message
+        result.wall_s = time.perf_counter() - t_start
+    except BaseException:
+        outputs.discard()  # a run that fails before its outputs leaves no staging folder behind
+        raise
+    write_set(outputs, pipe, result, gt_traj, log_path if mcap_wanted else None, copy_topics, notes, read_to_end,
+              album=album)
     return result
 
 
-def _make_pipeline(cfg, extractor, vocab, log_path, topics: Topics):
+def _log_frames(first: dict, topics: Topics) -> dict:
+    """The odometry's frame_id and child_frame_id and the ground truth's frame_id (from their first messages)."""
+    frames = {}
+    m = first.get(topics.odom) if topics.odom else None
+    if m is not None:
+        frames["odom"] = m.msg.header.frame_id.lstrip("/") or None
+        frames["body"] = (getattr(m.msg, "child_frame_id", "") or "").lstrip("/") or None
+    g = first.get(topics.gt) if topics.gt else None
+    if g is not None and hasattr(g.msg, "header"):
+        frames["gt"] = g.msg.header.frame_id.lstrip("/") or None
+    return {k: v for k, v in frames.items() if v}
+
+
+def _make_pipeline(cfg, extractor, vocab, log_path, topics: Topics, keyframe_sink=None):
     """The pipeline with its collaborators: the extractor, the vocabulary (None: online), the feature
-    cache of this log, whether frames wait for depth."""
+    cache of this log, whether frames wait for depth, the loop pictures' keyframe album."""
     from .features import load_extractor
     from .pipeline import Pipeline  # imported late: topic errors need no model
 
@@ -147,7 +180,7 @@ def _make_pipeline(cfg, extractor, vocab, log_path, topics: Topics):
             return cache.extract(log_path, topics.image, stamp, img)
 
     return Pipeline(cfg, extractor=extractor, vocab=vocab, feature_source=feature_source,
-                    expect_depth=topics.depth is not None)
+                    expect_depth=topics.depth is not None, keyframe_sink=keyframe_sink)
 
 
 def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame, vo_odometry, log_path,

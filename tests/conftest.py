@@ -96,3 +96,25 @@ def demo_keyframes_rgbd(superpoint_cpu):
     from slam_lcd.sim.keyframes import demo_keyframes
 
     return demo_keyframes(superpoint_cpu, sensor="rgbd")
+
+
+# --------------------------------------------------------------------------- a run's outputs (issue 19)
+REPORT_RUN_FRAMES = 470  # a little more than one lap of the demo block: loops close
+
+
+@pytest.fixture(scope="session")
+def report_run(tmp_path_factory):
+    """`slam-lcd run` (ORB, in-process through the CLI) on a short demo log: (exit status, out dir, log).
+
+    One run shared by the tests of what a run writes (report.json/html, corrected.mcap,
+    loop pictures, plots): ORB keeps it under a minute on two cores."""
+    from slam_lcd.cli.main import main
+    from slam_lcd.sim import make_demo_log
+
+    root = tmp_path_factory.mktemp("report_run")
+    log = root / "demo.mcap"
+    make_demo_log(log, "mcap", frames=REPORT_RUN_FRAMES, seed=1, depth=True, width=320, height=240)
+    out = root / "out"
+    rc = main(["run", str(log), "--out", str(out), "--features", "orb", "--no-feature-cache", "--no-progress",
+               "--set", "eval.rpe_delta=2.0"])
+    return rc, out, log

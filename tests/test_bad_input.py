@@ -219,8 +219,8 @@ def _inject(monkeypatch, owner, name, at, when):
 
 def _targets():
     import slam_lcd.io.trajectory_files as trajectory_files
-    import slam_lcd.io.writers as writers
     import slam_lcd.lcd.detector as detector
+    import slam_lcd.outputs.corrected_log as corrected_log
     from slam_lcd.backend.pose_graph import PoseGraph
     from slam_lcd.features.extract import OrbExtractor
     from slam_lcd.vocab.database import BowDatabase
@@ -235,7 +235,7 @@ def _targets():
         "backend_isam2": (PoseGraph, "_isam_apply", 3),
         "backend_gnc": (PoseGraph, "gnc_recheck", 1),
         "writing_tum": (trajectory_files, "write_tum", 2),
-        "writing_mcap": (writers, "write_trajectory_log", 1),
+        "writing_mcap": (corrected_log, "write_corrected_log", 1),
     }
 
 

@@ -23,7 +23,7 @@ def test_demo_falls_back_to_orb_and_still_corrects(offline_demo):
     summary = proc.stdout[proc.stdout.index("slam-lcd demo summary"):]
     assert "features: orb" in summary and NOTICE in summary
     rep = json.loads((out / "report.json").read_text())
-    assert rep["ate"]["ratio_after_before"] <= 0.25, rep["ate"]
+    assert rep["eval"]["ate"]["ratio_after_before"] <= 0.25, rep["eval"]["ate"]
     assert rep["loops"]["accepted"] >= 3 and rep["loops"]["false_accepted"] == 0, rep["loops"]
     assert "kind: orb" in (out / "config.yaml").read_text()
     # stderr is not a terminal here: one line per stage, no bar

@@ -89,7 +89,7 @@ def test_every_output_written(runs):
                  "graph.g2o", "corrected.mcap", "report.json", "report.md", "trajectory.png", "ate_over_time.png"):
         assert (d / name).is_file() and (d / name).stat().st_size > 0, name
     rep = json.loads((d / "report.json").read_text())
-    assert rep["ate"]["after"]["rmse"] == pytest.approx(res.ate_after)
+    assert rep["eval"]["ate"]["after"]["translation_m"]["rmse"] == pytest.approx(res.ate_after)
     assert len(read_tum(d / "corrected.tum")) == len(read_tum(d / "odometry.tum"))  # full rate
     # the corrected MCAP carries the corrected trajectory next to the copied input topics
     from slam_lcd.io import open_log

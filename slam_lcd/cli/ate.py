@@ -139,7 +139,11 @@ def _naming_both(args):
 
 
 def _short(spec: str) -> str:
-    return Path(spec).stem if Path(spec).exists() else str(spec)
+    """A legend name: a file's stem, ``LOG:TOPIC`` as the log's stem and the topic (not full paths)."""
+    if Path(spec).exists():
+        return Path(spec).stem
+    log, sep, topic = str(spec).rpartition(":")
+    return f"{Path(log).stem}:{topic}" if sep and Path(log).exists() else str(spec)
 
 
 def run(args) -> int:

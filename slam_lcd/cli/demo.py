@@ -93,7 +93,8 @@ def run(args) -> int:
                                progress=not args.no_progress, width=width, height=height)
     print(f"demo log: {log_path}", flush=True)
     res = run_log(log_path, Path(args.out), cfg, extractor=extractor, progress=not args.no_progress,
-                  input_paths=config_inputs(args))
+                  input_paths=config_inputs(args),
+                  command_line=getattr(args, "command_line", None), overrides=list(args.overrides))
     print("slam-lcd demo summary")
     print(f"  features: {cfg.features.kind}" + (f" ({notice})" if notice else ""))
     for line in res.summary_lines():

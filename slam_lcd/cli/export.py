@@ -1,7 +1,8 @@
-"""`slam-lcd export TRAJ --to tum|kitti|euroc|mcap OUT`: convert a trajectory.
+"""`slam-lcd export TRAJ --to tum|kitti|euroc|mcap|rosbag1|rosbag2 OUT`: convert a trajectory.
 
 TRAJ is a TUM / KITTI / EuRoC file or ``LOG:TOPIC``. Text outputs keep full precision
-(stamps as exact decimal seconds or integer ns); MCAP output carries a PoseStamped per
+(stamps as exact decimal seconds or integer ns); log outputs (an MCAP file, a ROS1 ``.bag``,
+a rosbag2 folder, as evo's ``--save_as_bag`` / ``--save_as_bag2``) carry a PoseStamped per
 stamp, ``/tf`` and a ``nav_msgs/Path`` (see :func:`slam_lcd.io.writers.write_trajectory_log`).
 The output is written atomically and never onto the input.
 """
@@ -12,14 +13,15 @@ from .run import add_alias
 from .util import check_output_path, write_guard
 from ..io.trajectory_files import FORMATS
 
-TARGETS = (*FORMATS, "mcap")
+LOG_TARGETS = ("mcap", "rosbag1", "rosbag2")
+TARGETS = (*FORMATS, *LOG_TARGETS)
 DEFAULT_TOPIC = "/slam_lcd/trajectory"
 
 
 def register(sub) -> None:
     p = sub.add_parser(
         "export",
-        help="convert a trajectory (file or LOG:TOPIC) to TUM / KITTI / EuRoC / MCAP",
+        help="convert a trajectory (file or LOG:TOPIC) to TUM / KITTI / EuRoC / MCAP / ROS1 bag / rosbag2",
         description="Convert a trajectory (TUM / KITTI / EuRoC file or LOG:TOPIC) to another format.",
     )
     p.add_argument("traj", metavar="TRAJ", help="input trajectory: file (format detected) or LOG:TOPIC")
@@ -33,12 +35,12 @@ def register(sub) -> None:
     p.add_argument("--times-out", default=None, metavar="FILE",
                    help="with --to kitti: also write the stamps (s) here (default: stamps are not written)")
     p.add_argument("--out-topic", dest="topic", default=DEFAULT_TOPIC,
-                   help="with --to mcap: pose topic written (default %(default)s)")
+                   help="with --to mcap, rosbag1 or rosbag2: pose topic written (default %(default)s)")
     add_alias(p, "--topic", "topic")  # old spelling of --out-topic
     p.add_argument("--frame-id", default=None,
-                   help="with --to mcap: parent frame (default: the input's, else 'map')")
+                   help="with --to mcap, rosbag1 or rosbag2: parent frame (default: the input's, else 'map')")
     p.add_argument("--child-frame-id", default=None,
-                   help="with --to mcap: child frame (default: the input's, else 'base_link')")
+                   help="with --to mcap, rosbag1 or rosbag2: child frame (default: the input's, else 'base_link')")
     p.late_positional = "out"  # OUT may follow the options (see cli.util.one_line_errors)
     p.set_defaults(func=run)
 
@@ -58,11 +60,11 @@ def run(args) -> int:
             raise InputError("--times-out only applies to --to kitti (the other formats keep their stamps)")
         check_output_path(args.times_out, args.traj, args.times, args.out)
     for opt in ("topic", "frame_id", "child_frame_id"):
-        if args.to != "mcap" and getattr(args, opt) not in (None, DEFAULT_TOPIC):
+        if args.to not in LOG_TARGETS and getattr(args, opt) not in (None, DEFAULT_TOPIC):
             flag = "--out-topic" if opt == "topic" else f"--{opt.replace('_', '-')}"
-            raise InputError(f"{flag} only applies to --to mcap")
+            raise InputError(f"{flag} only applies to --to mcap, rosbag1 or rosbag2")
     traj = load_trajectory_source(args.traj, args.in_format, args.times)
-    if args.to == "mcap":
+    if args.to in LOG_TARGETS:
         from ..io.writers import write_trajectory_log
 
         frame = args.frame_id or (traj.frame_id if traj.frame_id != "world" else "map")
@@ -70,7 +72,7 @@ def run(args) -> int:
         if not args.topic.startswith("/"):
             raise InputError(f"--out-topic must start with '/', got {args.topic!r}")
         with write_guard(args.out):
-            counts = write_trajectory_log(args.out, traj, "mcap", topic=args.topic, frame_id=frame, child_frame_id=child)
+            counts = write_trajectory_log(args.out, traj, args.to, topic=args.topic, frame_id=frame, child_frame_id=child)
         print(f"wrote {args.out} ({len(traj)} poses; " + ", ".join(f"{k}: {v}" for k, v in counts.items()) + ")")
         return 0
     with write_guard(args.out):

@@ -84,6 +84,8 @@ def main(argv: list[str] | None = None) -> int:
     )
     if not args.debug:  # library warnings (torch, numpy, matplotlib) are not ours to show
         warnings.filterwarnings("ignore")
+    # the exact command line, for the run's report (argv as given, the program named as installed)
+    args.command_line = ["slam-lcd", *(sys.argv[1:] if argv is None else argv)]
     if not getattr(args, "func", None):
         parser.print_help()
         return 2

@@ -85,6 +85,13 @@ def register(sub) -> None:
                         "ground-truth topic if any)")
     p.add_argument("--no-mcap", action="store_true",
                    help="do not write corrected.mcap (default: write it, run.write_mcap)")
+    p.add_argument("--plot_mode", "--plot-mode", dest="plot_mode", default=None,
+                   choices=["auto", "xy", "xz", "yz", "xyz"],
+                   help="plane (or xyz: 3-D) of trajectory.png (default: the config's run.plot_mode, auto = the "
+                        "plane the motion spans)")
+    p.add_argument("--copy-images", action="store_true",
+                   help="copy the log's image topics into corrected.mcap too (large; default: every topic but "
+                        "images, run.copy_images)")
     add_config_args(p)
     p.set_defaults(func=run)
 
@@ -92,10 +99,14 @@ def register(sub) -> None:
 def run(args) -> int:
     from ..runner import run_log
 
-    cfg = config_from_args(args)
+    extra = ["run.copy_images=true"] if args.copy_images else []
+    if args.plot_mode:
+        extra.append(f"run.plot_mode={args.plot_mode}")
+    cfg = config_from_args(args, extra=extra)
     res = run_log(args.log, Path(args.out), cfg, image_topic=args.image_topic, odom_topic=args.odom_topic,
                   depth_topic=args.depth_topic, gt_topic=args.gt_topic, gt_file=args.gt,
-                  progress=not args.no_progress, write_mcap=not args.no_mcap, input_paths=config_inputs(args))
+                  progress=not args.no_progress, write_mcap=not args.no_mcap, input_paths=config_inputs(args),
+                  command_line=getattr(args, "command_line", None), overrides=list(args.overrides))
     for line in res.summary_lines():
         print(line)
     print(f"outputs in {res.out_dir}/ ({', '.join(res.outputs)})"

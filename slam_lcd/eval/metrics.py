@@ -272,6 +272,19 @@ def ate_with_config(ref: Trajectory, est: Trajectory, conf=None) -> AteResult:
     return ate(ref, est, conf.align, t_max_diff=conf.t_max_diff, t_offset=conf.t_offset, n_to_align=conf.n_to_align)
 
 
+def rpe_with_config(ref: Trajectory, est: Trajectory, conf=None) -> RpeResult:
+    """:func:`rpe` with the association, alignment and pair spacing of an ``EvalConfig``.
+
+    The alignment is the ATE's: an SE(3) one leaves relative motions (so RPE) unchanged; a
+    Sim(3) or scale one puts a scale-free estimate's translations in metres first.
+    """
+    from .config import EvalConfig
+
+    conf = conf or EvalConfig()
+    return rpe(ref, est, conf.rpe_delta, conf.rpe_delta_unit, conf.align, t_max_diff=conf.t_max_diff,
+               t_offset=conf.t_offset, n_to_align=conf.n_to_align)
+
+
 def ate_before_after(ref: Trajectory, before: Trajectory, after: Trajectory, conf=None) -> dict[str, AteResult]:
     """ATE of odometry (``before``) and corrected (``after``) under identical settings.
 

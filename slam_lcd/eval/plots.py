@@ -178,3 +178,77 @@ def plot_pose_error(
     if out is not None:
         save_figure(fig, out)
     return fig
+
+
+PLOT_MODES = ("auto", "xy", "xz", "yz", "xyz")
+
+
+def plot_run_trajectories(
+    *,
+    ground_truth: Trajectory | None,
+    odometry: Trajectory,
+    corrected: Trajectory,
+    corrected_errors: np.ndarray | None = None,
+    accepted_edges: Sequence[tuple[np.ndarray, np.ndarray]] = (),
+    rejected_edges: Sequence[tuple[np.ndarray, np.ndarray]] = (),
+    mode: str = "auto",
+    title: str = "trajectories",
+    out: str | Path | None = None,
+) -> Figure:
+    """A run's trajectories in one plane (``xy``/``xz``/``yz``, ``auto``: the plane the motion
+    spans) or in 3-D (``xyz``): ground truth grey, odometry dashed, the corrected trajectory
+    coloured by its error against ground truth (``corrected_errors``, one per pose), accepted
+    loops solid green, loops the back end rejected dashed red. Legends are short names."""
+    from matplotlib.collections import LineCollection
+
+    if mode not in PLOT_MODES:
+        raise ValueError(f"plot mode must be one of {list(PLOT_MODES)}, got {mode!r}")
+    base = ground_truth if ground_truth is not None and len(ground_truth) else corrected
+    if mode == "auto":
+        mode = auto_plane(base.positions)
+    three_d = mode == "xyz"
+    fig = _new_figure((7.5, 6.5))
+    ax = fig.add_subplot(1, 1, 1, projection="3d" if three_d else None)
+    axes = (0, 1, 2) if three_d else _PLANES[mode]
+
+    def xy(p):
+        return [p[..., k] for k in axes]
+
+    if ground_truth is not None and len(ground_truth):
+        ax.plot(*xy(ground_truth.positions), "-", color="0.55", linewidth=1.6, label="ground truth")
+    ax.plot(*xy(odometry.positions), "--", color="tab:orange", linewidth=1.0, label="odometry")
+    p = corrected.positions
+    if corrected_errors is not None and len(corrected_errors) == len(p) and len(p) > 1:
+        segs = np.stack([p[:-1], p[1:]], axis=1)[..., list(axes)]
+        err = 0.5 * (corrected_errors[:-1] + corrected_errors[1:])
+        if three_d:
+            from mpl_toolkits.mplot3d.art3d import Line3DCollection
+
+            lc = Line3DCollection(segs, cmap="viridis", linewidths=2.0)
+        else:
+            lc = LineCollection(segs, cmap="viridis", linewidths=2.0)
+        lc.set_array(err)
+        lc.set_label("corrected (colour: error)")
+        (ax.add_collection3d if three_d else ax.add_collection)(lc)
+        fig.colorbar(lc, ax=ax, shrink=0.7, label="corrected: translation error [m]")
+    else:
+        ax.plot(*xy(p), "-", color="tab:blue", linewidth=1.4, label="corrected")
+    for edges, style, colour, name in ((accepted_edges, "-", "tab:green", "accepted loops"),
+                                       (rejected_edges, "--", "tab:red", "rejected loops")):
+        for i, (pa, pb) in enumerate(edges):
+            ax.plot(*xy(np.array([pa, pb])), style, color=colour, linewidth=1.0, alpha=0.8,
+                    label=f"{name} ({len(edges)})" if i == 0 else None)
+    names = "xyz"
+    ax.set_xlabel(f"{names[axes[0]]} [m]")
+    ax.set_ylabel(f"{names[axes[1]]} [m]")
+    if three_d:
+        ax.set_zlabel(f"{names[axes[2]]} [m]")
+    else:
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.autoscale_view()
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    ax.set_title(title)
+    if out is not None:
+        save_figure(fig, out)
+    return fig

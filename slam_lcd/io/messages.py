@@ -199,3 +199,30 @@ def path_msg(traj: Trajectory, frame_id: str | None = None):
     poses = [pose_stamped_msg(T, s, frame) for s, T in zip(traj.stamps.tolist(), traj.poses)]
     last = int(traj.stamps[-1]) if len(traj) else 0
     return Path(header=header(last, frame), poses=poses)
+
+
+# ---- visualisation ------------------------------------------------------------------------
+
+def line_marker(segments, stamp_ns: int, frame_id: str, ns: str, marker_id: int,
+                rgba=(0.1, 0.8, 0.2, 1.0), width: float = 0.03):
+    """visualization_msgs/Marker LINE_LIST of ``[(p0, p1), ...]`` 3-D segments (m), one colour."""
+    T = _T
+    Marker = T["visualization_msgs/msg/Marker"]
+    ColorRGBA = T["std_msgs/msg/ColorRGBA"]
+    Duration = T["builtin_interfaces/msg/Duration"]
+    pts = [Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for seg in segments for p in seg]
+    if not all(np.isfinite([pt.x, pt.y, pt.z]).all() for pt in pts):
+        raise InvalidPoseError(f"marker {ns}/{marker_id} has NaN/inf points")
+    return Marker(
+        header=header(stamp_ns, frame_id), ns=str(ns), id=int(marker_id), type=Marker.LINE_LIST, action=Marker.ADD,
+        pose=pose_msg(np.eye(4)), scale=Vector3(x=float(width), y=0.0, z=0.0),
+        color=ColorRGBA(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3]), lifetime=Duration(sec=0, nanosec=0),
+        frame_locked=False, points=pts, colors=[], texture_resource="",
+        texture=CompressedImage(header=header(0, ""), format="", data=np.zeros(0, np.uint8)),
+        uv_coordinates=[], text="", mesh_resource="",
+        mesh_file=T["visualization_msgs/msg/MeshFile"](filename="", data=np.zeros(0, np.uint8)),
+        mesh_use_embedded_materials=False)
+
+
+def marker_array(markers):
+    return _T["visualization_msgs/msg/MarkerArray"](markers=list(markers))

@@ -22,7 +22,14 @@ from ..types import Trajectory
 
 VERIFIED = "accepted"  # the detector's verdict column: verified by appearance and geometry
 NOT_VERIFIED = "rejected"
-EMPTY_COLUMNS = ["query_id", "match_id", "verdict", "reason"]
+
+
+def loop_columns() -> list[str]:
+    """The header of ``loops.csv``: the same with 0 candidates as with 100 (taken from the record type itself)."""
+    from ..lcd.detector import CandidateRecord
+
+    return ["query_stamp_ns", "match_stamp_ns", *CandidateRecord(0, 0, 0, 0.0).row().keys(),
+            "verdict", "backend_verdict", "backend_reason", "gt_distance_m", "err_trans_m", "err_rot_deg"]
 
 
 def _fmt(x):
@@ -72,7 +79,7 @@ def count_false_accepted(rows: list[dict], true_max_distance: float) -> int:
 
 def write_loops_csv(path: Path, rows: list[dict]) -> None:
     buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=list(rows[0].keys()) if rows else EMPTY_COLUMNS)
+    w = csv.DictWriter(buf, fieldnames=loop_columns())  # a row with a key not in the header fails here
     w.writeheader()
     for r in rows:
         w.writerow(r)

@@ -11,11 +11,15 @@ earlier run's results. Here every file is written into a hidden staging folder f
 - into an existing folder, ``PARTIAL.txt`` is put in place first, the earlier run's
   files of the same names are replaced (and ones this run did not produce removed),
   and ``PARTIAL.txt`` is removed last, unless the new set is itself partial. Files of
-  other names (the user's own) are left alone.
+  other names (the user's own) are left alone. A declared folder (``loops/``) is
+  replaced as a whole.
 
 So at the final names there is, at every instant, a complete set or a set that says it is
 partial. A run that fails before :meth:`publish` removes its staging folder and leaves an
 earlier run's folder exactly as it was. Publishing holds Ctrl-C back until it is done.
+
+Names starting with ``.`` in the staging folder are the run's working files (the keyframe
+album of the loop pictures): never published, removed before the set is moved.
 """
 from __future__ import annotations
 
@@ -81,6 +85,9 @@ class OutputSet:
     def publish(self) -> list[str]:
         """Move the staged files to ``target``; returns the names published."""
         staging = self.staging
+        for p in staging.iterdir():
+            if p.name.startswith("."):  # a working folder of the run, not an output
+                shutil.rmtree(p, ignore_errors=True) if p.is_dir() else p.unlink()
         produced = sorted(p.name for p in staging.iterdir())
         unknown = [n for n in produced if n not in self.names]
         if unknown:  # a programming error: every output must be declared
@@ -103,8 +110,12 @@ class OutputSet:
                     old = t / name
                     if old.is_file() or old.is_symlink():
                         old.unlink()  # an earlier run's output that this run did not produce
+                    elif old.is_dir():
+                        shutil.rmtree(old)
                 for name in produced:
                     if name != PARTIAL_MARKER:
+                        if (t / name).is_dir() and not (t / name).is_symlink():
+                            shutil.rmtree(t / name)  # a folder output is replaced as a whole
                         os.replace(staging / name, t / name)
                 if not partial:
                     os.unlink(t / PARTIAL_MARKER)

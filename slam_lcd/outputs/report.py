@@ -1,59 +1,116 @@
-"""``report.json``, ``report.md`` and the two figures of a run (top view, ATE over time)."""
+"""``report.json`` (versioned: :mod:`.report_schema`), ``report.md`` and the figures of a run.
+
+One function, :func:`report_facts`, gathers what a run says about itself (where it came
+from, the counts, ATE and RPE before and after, the loops, the time per stage, the
+resolved config); ``report.json``, ``report.md`` and ``report.html`` all print those facts,
+so they cannot disagree.
+"""
 from __future__ import annotations
 
 import json
+import shlex
 from pathlib import Path
 
+from .. import __version__
 from ..atomic import write_text
 from ..backend.pose_graph import ACCEPTED
-from .result import RunResult
+from .report_schema import REPORT_SCHEMA_VERSION
+from .result import RunResult, ratio_or_none
 
 
-def write_plots(out_dir: Path, odom, corrected, gt, keyframes, kf_corrected, loop_records, ate_before, ate_after) -> None:
-    """Top view (estimates aligned to ground truth as in the ATE) and ATE over time."""
-    from ..eval.plots import plot_error_over_time, plot_trajectories_top
+def _errors_dict(translation, rotation, n: int) -> dict:
+    return {"translation_m": translation.to_dict(), "rotation_deg": rotation.to_dict(), "pairs": int(n)}
 
-    kf = kf_corrected
-    if ate_after is not None:
-        odom = ate_before.alignment.apply(odom)
-        corrected = ate_after.alignment.apply(corrected)
-        kf = ate_after.alignment.apply(kf)
-    trajs = [("odometry", odom), ("corrected", corrected)]
-    if gt is not None:
-        trajs = [("ground truth", gt)] + trajs
-    pos = {k.id: kf.poses[i][:3, 3] for i, k in enumerate(keyframes) if i < len(kf)}
-    edges = [(pos[r.query_id], pos[r.match_id]) for r in loop_records
-             if r.verdict == ACCEPTED and r.query_id in pos and r.match_id in pos]
-    align = ate_after.alignment.label if ate_after is not None else "no ground truth"
-    plot_trajectories_top(trajs, loop_edges=edges, title=f"trajectories, accepted loops ({align})",
-                          out=out_dir / "trajectory.png")
+
+def _before_after(before, after) -> dict:
+    return {"before": _errors_dict(before.translation, before.rotation, len(before.errors)),
+            "after": _errors_dict(after.translation, after.rotation, len(after.errors)),
+            "ratio_after_before": ratio_or_none(after.rmse, before.rmse)}
+
+
+def _num(text):
+    return None if text in ("", None) else float(text)
+
+
+def _int(text):
+    return None if text in ("", None) else int(text)
+
+
+def _loop_entry(row: dict) -> dict:
+    return {"query_id": int(row["query_id"]), "match_id": int(row["match_id"]),
+            "query_stamp_ns": _int(row["query_stamp_ns"]), "match_stamp_ns": _int(row["match_stamp_ns"]),
+            "backend_verdict": row["backend_verdict"], "backend_reason": row["backend_reason"],
+            "pose_inliers": _int(row.get("pose_inliers")), "gt_distance_m": _num(row["gt_distance_m"]),
+            "err_trans_m": _num(row["err_trans_m"]), "err_rot_deg": _num(row["err_rot_deg"])}
+
+
+def report_facts(result: RunResult, cfg, rows: list[dict], ate_before, ate_after, rpe_before=None,
+                 rpe_after=None) -> dict:
+    """Everything ``report.json`` holds (the shape is :data:`~.report_schema.REPORT_SCHEMA`)."""
+    from ..config import config_to_dict
+
+    ev = None
     if ate_before is not None:
-        plot_error_over_time([("odometry", ate_before), ("corrected", ate_after)],
-                             title=f"ATE over time ({align})", out=out_dir / "ate_over_time.png")
-
-
-def _ate_dict(a) -> dict:
-    return {k: float(getattr(a, k)) for k in ("rmse", "mean", "median", "max") if hasattr(a, k)} | {"pairs": int(len(a.errors))}
-
-
-def write_report(out_dir: Path, result: RunResult, ate_before, ate_after) -> None:
-    rep = {
+        e = cfg.eval
+        ev = {"alignment": e.align, "t_max_diff_s": float(e.t_max_diff), "t_offset_s": float(e.t_offset),
+              "rpe_delta": float(e.rpe_delta), "rpe_delta_unit": e.rpe_delta_unit,
+              "ate": _before_after(ate_before, ate_after),
+              "rpe": _before_after(rpe_before, rpe_after) if rpe_before is not None else None}
+    return {
+        "schema": REPORT_SCHEMA_VERSION,
+        "slam_lcd_version": __version__,
+        "input": {"log": result.log_path, "gt_source": result.gt_source, "topics": dict(result.topics)},
+        "command_line": result.command_line,
+        "config_overrides": list(result.overrides),
         "frames": result.n_frames, "keyframes": result.n_keyframes,
         "loops": {"candidates": result.loops_proposed, "verified": result.loops_verified,
                   "accepted": result.loops_accepted, "rejected_by_backend": result.loops_rejected_backend,
                   "false_accepted": result.false_loops_accepted},
-        "ate": None if ate_before is None else {
-            "alignment": result.alignment,
-            "before": _ate_dict(ate_before), "after": _ate_dict(ate_after),
-            "ratio_after_before": (ate_after.rmse / ate_before.rmse) if ate_before.rmse else None,
-        },
+        "eval": ev,
+        "accepted_loops": [_loop_entry(r) for r in rows if r["backend_verdict"] == ACCEPTED],
+        "backend_rejected_loops": [_loop_entry(r) for r in rows if r["backend_verdict"] not in ("", ACCEPTED)],
         "interrupted": result.interrupted,
         "wall_s": round(result.wall_s, 3), "log_duration_s": round(result.log_duration_s, 3),
         "stages": result.stages, "outputs": result.outputs,
+        "config": config_to_dict(cfg),
     }
-    write_text(out_dir / "report.json", json.dumps(rep, indent=2))
-    md = ["# slam-lcd run report", ""] + [f"- {line}" for line in result.summary_lines()]
+
+
+def command_text(command_line) -> str:
+    return shlex.join(command_line) if command_line else "(not run from the command line)"
+
+
+def _stats_line(name: str, ba: dict, unit_t="m", unit_r="deg") -> list[str]:
+    b, a = ba["before"], ba["after"]
+    ratio = ba["ratio_after_before"]
+    return [f"| {name} translation RMSE ({unit_t}) | {b['translation_m']['rmse']:.4f} | {a['translation_m']['rmse']:.4f} | "
+            + (f"{100 * ratio:.1f}% |" if ratio is not None else "(odometry error ~0) |"),
+            f"| {name} rotation RMSE ({unit_r}) | {b['rotation_deg']['rmse']:.3f} | {a['rotation_deg']['rmse']:.3f} | |"]
+
+
+def write_report(out_dir: Path, facts: dict, summary_lines: list[str]) -> None:
+    """``report.json`` (the facts) and ``report.md`` (the same, for a person)."""
+    write_text(out_dir / "report.json", json.dumps(facts, indent=2))
+    inp = facts["input"]
+    md = ["# slam-lcd run report", ""] + [f"- {line}" for line in summary_lines]
+    md += ["", f"- log: `{inp['log']}`", f"- ground truth: {inp['gt_source'] or 'none'}",
+           f"- slam-lcd {facts['slam_lcd_version']}; command: `{command_text(facts['command_line'])}`",
+           f"- overrides: {', '.join(f'`{o}`' for o in facts['config_overrides']) or 'none'}"]
+    ev = facts["eval"]
+    if ev is not None:
+        md += ["", f"## Error against ground truth (alignment {ev['alignment']}, t_max_diff {ev['t_max_diff_s']} s)",
+               "", "| metric | odometry | corrected | ratio |", "|---|---|---|---|"]
+        md += _stats_line("ATE", ev["ate"])
+        if ev["rpe"] is not None:
+            md += _stats_line(f"RPE ({ev['rpe_delta']:g} {ev['rpe_delta_unit']})", ev["rpe"])
+    if facts["accepted_loops"]:
+        md += ["", "## Accepted loops", "", "| query | match | inliers | GT distance (m) | error (m / deg) |",
+               "|---|---|---|---|---|"]
+        for lp in facts["accepted_loops"]:
+            err = (f"{lp['err_trans_m']:.3f} / {lp['err_rot_deg']:.2f}" if lp["err_trans_m"] is not None else "")
+            gd = f"{lp['gt_distance_m']:.2f}" if lp["gt_distance_m"] is not None else ""
+            md.append(f"| {lp['query_id']} | {lp['match_id']} | {lp['pose_inliers'] or ''} | {gd} | {err} |")
     md += ["", "## Time per stage", "", "| stage | seconds | calls |", "|---|---|---|"]
-    md += [f"| {k} | {v['seconds']:.2f} | {v['calls']} |" for k, v in result.stages.items()]
-    md += ["", "## Outputs", ""] + [f"- `{o}`" for o in result.outputs]
+    md += [f"| {k} | {v['seconds']:.2f} | {v['calls']} |" for k, v in facts["stages"].items()]
+    md += ["", "## Outputs", ""] + [f"- `{o}`" for o in facts["outputs"]]
     write_text(out_dir / "report.md", "\n".join(md) + "\n")

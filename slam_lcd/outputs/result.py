@@ -1,8 +1,19 @@
-"""What a run returns: counts, ATE before and after, timings and the files written."""
+"""What a run returns: counts, ATE before and after, timings, the files written and where it came from."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+
+# an odometry error below this (m) is numerical noise: a ratio against it would say nothing
+# (a perfect odometry printed "0.000 m -> 0.000 m (192.2% of odometry)")
+RATIO_FLOOR_M = 1e-3
+
+
+def ratio_or_none(after: float | None, before: float | None) -> float | None:
+    """``after / before``, or None when ``before`` is ~0 (below :data:`RATIO_FLOOR_M`) or missing."""
+    if after is None or before is None or before < RATIO_FLOOR_M:
+        return None
+    return after / before
 
 
 @dataclass
@@ -23,8 +34,23 @@ class RunResult:
     log_duration_s: float = 0.0
     stages: dict = field(default_factory=dict)
     outputs: list[str] = field(default_factory=list)
+    loop_pictures: list[str] = field(default_factory=list)  # names under loops/
     # per keyframe: loop detection (and its parts) and back end seconds, resident kB (benchmarks)
     keyframe_seconds: list = field(default_factory=list, repr=False)
+    # where the run came from (report.json / report.html say it): the input log, the ground
+    # truth's source ("file PATH" / "topic NAME" / None), the topics used, the command line
+    # and the --set overrides as the user typed them
+    log_path: str = ""
+    gt_source: str | None = None
+    topics: dict = field(default_factory=dict)
+    # frame names of the log: the odometry's frame_id ("odom") and child_frame_id ("body"), the ground truth's ("gt")
+    frames: dict = field(default_factory=dict)
+    command_line: list[str] | None = None
+    overrides: list[str] = field(default_factory=list)
+
+    @property
+    def ate_ratio(self) -> float | None:
+        return ratio_or_none(self.ate_after, self.ate_before)
 
     def summary_lines(self) -> list[str]:
         lines = [
@@ -34,8 +60,10 @@ class RunResult:
             + (f", {self.false_loops_accepted} false loops accepted" if self.false_loops_accepted is not None else ""),
         ]
         if self.ate_before is not None:
-            ratio = self.ate_after / self.ate_before if self.ate_before else float("nan")
-            lines.append(f"ATE ({self.alignment}): {self.ate_before:.3f} m -> {self.ate_after:.3f} m ({100 * ratio:.1f}% of odometry)")
+            ratio = self.ate_ratio
+            lines.append(f"ATE ({self.alignment}): {self.ate_before:.3f} m -> {self.ate_after:.3f} m"
+                         + (f" ({100 * ratio:.1f}% of odometry)" if ratio is not None else
+                            " (odometry error ~0: no ratio)"))
         lines.append(f"time: {self.wall_s:.1f} s wall for {self.log_duration_s:.1f} s of log"
                      + (" (interrupted: partial result)" if self.interrupted else ""))
         return lines

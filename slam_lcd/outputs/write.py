@@ -1,8 +1,8 @@
 """Every output of ``slam-lcd run``, written as one set (:class:`~slam_lcd.outputs.output_set.OutputSet`).
 
 :data:`RUN_OUTPUTS`: config.yaml, odometry.tum, corrected.tum, keyframes_corrected.tum,
-loops.csv, graph.g2o, corrected.mcap, report.json, report.md, trajectory.png,
-ate_over_time.png; ``PARTIAL.txt`` when the run was interrupted.
+loops.csv, graph.g2o, corrected.mcap, report.json, report.md, report.html, trajectory.png,
+ate_over_time.png, loops/ (pictures); ``PARTIAL.txt`` when the run was interrupted.
 """
 from __future__ import annotations
 
@@ -16,16 +16,18 @@ from ..config import save_config
 from ..errors import InputError, SlamLcdError
 from ..interrupts import defer_sigint
 from ..types import Trajectory
+from .loop_pictures import LOOPS_DIR
 from .loops import VERIFIED, count_false_accepted, loop_rows, write_loops_csv
 from .output_set import PARTIAL_MARKER, OutputSet
-from .report import write_plots, write_report
+from .figures import write_plots
+from .report import report_facts, write_report
 from .result import RunResult
 
 log = logging.getLogger(__name__)
 
 # every name `run` may write into --out (the set is published as a whole: slam_lcd.outputs.output_set)
 RUN_OUTPUTS = ("config.yaml", "odometry.tum", "corrected.tum", "keyframes_corrected.tum", "graph.g2o", "loops.csv",
-               "corrected.mcap", "trajectory.png", "ate_over_time.png", "report.json", "report.md")
+               "corrected.mcap", "trajectory.png", "ate_over_time.png", "report.json", "report.md", "report.html", LOOPS_DIR)
 
 
 def partial_text(result: RunResult, notes=(), *, read_to_end: bool, while_writing: bool = False) -> str:
@@ -42,7 +44,7 @@ def partial_text(result: RunResult, notes=(), *, read_to_end: bool, while_writin
 
 
 def write_set(outputs: OutputSet, pipe, result: RunResult, gt, mcap_source, copy_topics, notes=None,
-              read_to_end: bool = True) -> None:
+              read_to_end: bool = True, album=None) -> None:
     """Write every output into the staging folder, then publish the set (partial when interrupted)."""
     notes = list(notes or [])
     partial = result.interrupted
@@ -50,7 +52,7 @@ def write_set(outputs: OutputSet, pipe, result: RunResult, gt, mcap_source, copy
         if partial:  # said first: a second Ctrl-C may stop the writing at any file
             outputs.mark_partial(partial_text(result, notes, read_to_end=read_to_end))
         write_outputs(pipe, outputs.staging, result, gt, mcap_source, copy_topics,
-                      skipped=notes if partial else None)
+                      skipped=notes if partial else None, album=album)
         if partial:
             outputs.mark_partial(partial_text(result, notes, read_to_end=read_to_end))
     except KeyboardInterrupt:
@@ -86,13 +88,15 @@ def _write_error(e: OSError, outputs: OutputSet) -> InputError:
 
 def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
                   mcap_source: Path | None, copy_topics: list[str] | None = None,
-                  skipped: list[str] | None = None) -> None:
+                  skipped: list[str] | None = None, album=None) -> None:
     """Write every output of a run into ``out_dir`` (normally an :class:`OutputSet` staging folder).
 
+    ``album``: the run's :class:`~.loop_pictures.KeyframeAlbum` (loop pictures), removed here.
     ``skipped`` (a list) means a partial result: outputs that have nothing to hold yet
     (no odometry, no keyframe) are left out and said so in ``skipped`` instead of failing.
     """
     from ..eval import ate_with_config
+    from ..eval.metrics import rpe_with_config
     from ..io.trajectory_files import write_tum
 
     cfg = pipe.config
@@ -127,7 +131,7 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
     result.keyframe_seconds = list(pipe.keyframe_seconds)
 
     # ---- evaluation against ground truth
-    ate_before = ate_after = None
+    ate_before = ate_after = rpe_before = rpe_after = None
     if gt is not None and len(gt) > 1 and len(odom) > 1:
         try:
             ate_before = ate_with_config(gt, odom, cfg.eval)
@@ -135,6 +139,12 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
         except SlamLcdError as e:  # the trajectories are still worth having
             ate_before = ate_after = None
             log.warning("ATE against the ground truth not computed: %s", e.problem)
+    if ate_before is not None:
+        try:
+            rpe_before, rpe_after = (rpe_with_config(gt, t, cfg.eval) for t in (odom, corrected))
+        except SlamLcdError as e:  # e.g. a log shorter than one RPE step
+            rpe_before = rpe_after = None
+            log.warning("RPE against the ground truth not computed: %s", e.problem)
     if ate_before is not None:
         result.ate_before, result.ate_after = ate_before.rmse, ate_after.rmse
         result.alignment = cfg.eval.align
@@ -144,21 +154,56 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
     if mcap_source is not None and len(corrected) == 0 and skipped is not None:
         skipped.append("corrected.mcap: not written (no poses yet)")
     elif mcap_source is not None:
-        from ..io.writers import write_trajectory_log
+        from .corrected_log import GT_FILE_FRAME, write_corrected_log
 
-        write_trajectory_log(out_dir / "corrected.mcap", corrected, "mcap", topic="/slam_lcd/corrected",
-                             frame_id="map", child_frame_id="base_link_corrected",
-                             copy_from=mcap_source, copy_topics=copy_topics)
+        gt_file = gt if (gt is not None and (result.gt_source or "").startswith("file ")) else None
+        frames = dict(result.frames, gt=GT_FILE_FRAME) if gt_file is not None else result.frames
+
+        kf_stamp = {k.id: int(k.stamp) for k in pipe.keyframes}
+        accepted = [(r.query_id, r.match_id, kf_stamp[r.query_id]) for r in pipe.loop_records
+                    if r.verdict == ACCEPTED and r.query_id in kf_stamp]
+        write_corrected_log(out_dir / "corrected.mcap", odom=odom, corrected=corrected,
+                            kf_ids=[k.id for k in pipe.keyframes], kf_corrected=kf_corr, loops=accepted,
+                            log_frames=frames, run_conf=cfg.run, copy_from=mcap_source,
+                            copy_topics=copy_topics or [], io_conf=cfg.io, gt_poses=gt_file,
+                            gt_alignment=ate_after.alignment if ate_after is not None else None)
         outputs.append("corrected.mcap")
+
+    # ---- loop pictures (need the verdicts and the ground-truth errors of the rows)
+    result.loop_pictures = []
+    if album is not None:
+        try:
+            from .loop_pictures import write_loop_pictures
+
+            result.loop_pictures = write_loop_pictures(out_dir, album, rows, cfg.lcd, cfg.run.loop_pictures_rejected)
+            if result.loop_pictures:
+                outputs.append(LOOPS_DIR + "/")
+        except Exception as e:  # a picture must never cost the user the numbers
+            log.warning("loop pictures not written: %s", e)
+        finally:
+            album.close()
 
     # ---- plots
     if cfg.run.plots:
         try:
             write_plots(out_dir, odom, corrected, gt, pipe.keyframes, pipe.keyframe_trajectory(), pipe.loop_records,
-                        ate_before, ate_after)
+                        ate_before, ate_after, mode=cfg.run.plot_mode)
             outputs += ["trajectory.png", "ate_over_time.png"] if ate_before is not None else ["trajectory.png"]
         except Exception as e:  # a plot must never cost the user the numbers
             log.warning("plots not written: %s", e)
-    outputs += ["report.json", "report.md"]
+    outputs += ["report.json", "report.md", "report.html"]
     result.outputs = outputs
-    write_report(out_dir, result, ate_before, ate_after)
+    facts = report_facts(result, cfg, rows, ate_before, ate_after, rpe_before, rpe_after)
+    write_report(out_dir, facts, result.summary_lines())
+    try:
+        from .html_report import write_html_report
+
+        write_html_report(out_dir, facts, result.summary_lines(), rows,
+                          [f for f in outputs if f.endswith(".png")], result.loop_pictures,
+                          (out_dir / "config.yaml").read_text(encoding="utf-8"))
+    except OSError:
+        raise
+    except Exception as e:  # the page must never cost the user the numbers
+        outputs.remove("report.html")
+        log.warning("report.html not written: %s", e)
+        write_report(out_dir, facts, result.summary_lines())

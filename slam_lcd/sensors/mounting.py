@@ -34,6 +34,8 @@ def camera_mounting(conf, tf_buffer=None, camera_frame: str | None = None, stamp
         return pose_from_list(conf.T_body_camera)
     body = body_frame or conf.body_frame
     frame = conf.camera_frame or camera_frame
+    if frame and body and frame == body:  # the camera is the body (e.g. odometry of the optical frame)
+        return np.eye(4)
     if tf_buffer is not None and frame:
         try:
             return np.asarray(tf_buffer.lookup(body, frame, stamp_ns), dtype=np.float64)

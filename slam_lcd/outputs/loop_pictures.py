@@ -1,0 +1,233 @@
+"""Per-loop pictures under ``loops/`` (the paper's Fig. 1) and a contact sheet of the accepted loops.
+
+Why this way: at output time the run has dropped every image, and the loop detector's
+records keep figures, not per-match arrays (memory per keyframe stays small, issue 13).
+The cheapest honest source is a :class:`KeyframeAlbum` filled while the run goes: each
+keyframe's image (JPEG), keypoints and descriptors (in the detector's stored precision)
+go to a working folder on disk as the keyframe leaves loop detection, so memory stays
+bounded. At output time, for the loops that are drawn, the one-to-one matches, the
+verification budget and the graph verification are recomputed with the loop detector's
+own functions and settings (they are deterministic), and the picture says so when the
+recomputed figures differ from the run's record. The album costs about as much disk as
+the detector's descriptor store and is removed when the outputs are written.
+
+Drawn: every loop the back end accepted, every loop it rejected, and the
+``run.loop_pictures_rejected`` detector-rejected candidates that came closest (most
+graph nodes, then most matches), each with its verdict and reason.
+"""
+from __future__ import annotations
+
+import logging
+import shutil
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from ..backend.pose_graph import ACCEPTED
+
+log = logging.getLogger(__name__)
+
+LOOPS_DIR = "loops"
+CONTACT_SHEET = "contact_sheet.png"
+ALBUM_MAX_WIDTH = 640  # stored images are scaled down to this width (keypoints are scaled alike)
+
+
+class KeyframeAlbum:
+    """Keyframe images, keypoints and descriptors on disk (see the module docstring)."""
+
+    def __init__(self, folder: Path, descriptor_dtype: str = "float16"):
+        self.folder = Path(folder)
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self.descriptor_dtype = descriptor_dtype
+        self.ids: set[int] = set()
+        self.failed: str | None = None  # why keyframes stopped being kept (e.g. a full disk)
+
+    def __call__(self, kf) -> None:
+        """Keep keyframe ``kf`` (the pipeline calls this before it drops the keyframe's image).
+
+        A write error stops the album (said once, at output time): pictures are a nicety,
+        the run goes on."""
+        if kf.image is None or kf.features is None or self.failed is not None:
+            return
+        try:
+            self._keep(kf)
+        except OSError as e:
+            self.failed = f"keyframe {kf.id}: {e.strerror or e}"
+            log.info("loop pictures: keyframes no longer kept (%s)", self.failed)
+
+    def _keep(self, kf) -> None:
+        from ..lcd.store import compact_descriptors
+
+        img = np.asarray(kf.image)
+        if img.dtype != np.uint8:
+            img = np.clip(img * (255.0 if img.max() <= 1.0 else 1.0), 0, 255).astype(np.uint8)
+        scale = min(1.0, ALBUM_MAX_WIDTH / img.shape[1])
+        if scale < 1.0:
+            img = cv2.resize(img, (round(img.shape[1] * scale), round(img.shape[0] * scale)),
+                             interpolation=cv2.INTER_AREA)
+        if not cv2.imwrite(str(self.folder / f"{kf.id}.jpg"), img, [cv2.IMWRITE_JPEG_QUALITY, 90]):
+            raise OSError(f"cannot write {self.folder / f'{kf.id}.jpg'}")
+        f = kf.features
+        np.savez(self.folder / f"{kf.id}.npz", keypoints=np.asarray(f.keypoints, np.float32),
+                 descriptors=compact_descriptors(f.descriptors, self.descriptor_dtype),
+                 image_size=np.asarray(f.image_size, np.int64), scale=np.float64(scale))
+        self.ids.add(int(kf.id))
+
+    def load(self, kf_id: int):
+        """(image, keypoints in the stored image's pixels, descriptors, features image size) or None."""
+        if kf_id not in self.ids:
+            return None
+        img = cv2.imread(str(self.folder / f"{kf_id}.jpg"), cv2.IMREAD_GRAYSCALE)
+        with np.load(self.folder / f"{kf_id}.npz", allow_pickle=False) as z:
+            return img, z["keypoints"], z["descriptors"], tuple(int(v) for v in z["image_size"]), float(z["scale"])
+
+    def close(self) -> None:
+        shutil.rmtree(self.folder, ignore_errors=True)
+
+
+def picture_name(query_id: int, match_id: int, verdict: str) -> str:
+    """``loops/<name>``: one name per (query, match) and verdict ('accepted' / 'rejected')."""
+    return f"loop_q{int(query_id):05d}_m{int(match_id):05d}_{verdict}.png"
+
+
+def _recompute(rec_row: dict, q, m, conf):
+    """Matches, the rows the graph kept and the graph's edges, as the detector computed them."""
+    from ..features.matching import mutual_nn_match_bf
+    from ..lcd.budget import select_matches
+    from ..lcd.graph import planar_graph, verify_graph
+
+    _, kq, dq, size_q, _ = q
+    _, km, dm, _, _ = m
+    binary = dq.dtype == np.uint8
+    max_d = conf.match_max_distance_orb if binary else conf.match_max_distance_sp
+    matches, dist = mutual_nn_match_bf(dq, dm, ratio=conf.match_ratio, max_distance=max_d, return_distances=True)
+    n_found = len(matches)
+    if 0 < conf.verify_max_matches < len(matches):
+        matches = matches[select_matches(matches, dist, kq, conf.verify_max_matches, size_q, conf.verify_spread_cells)]
+    g = verify_graph(kq, km, matches, conf) if len(matches) else None
+    kept = np.asarray(g.kept, np.int64) if g is not None else np.zeros(0, np.int64)
+    edges = planar_graph(kq[matches[kept, 0]].astype(np.float64), conf.graph_max_edge_factor)[1] if len(kept) >= 3 \
+        else np.zeros((0, 2), np.int64)
+    notes = []
+    if str(rec_row.get("n_matches", "")) not in ("", str(n_found)):
+        notes.append(f"recomputed {n_found} matches (run: {rec_row['n_matches']})")
+    if g is not None and str(rec_row.get("graph_nodes", "")) not in ("", str(g.n_nodes)):
+        notes.append(f"recomputed {g.n_nodes} graph nodes (run: {rec_row['graph_nodes']})")
+    return matches, kept, edges, notes
+
+
+def draw_loop(q, m, matches, kept, edges, lines: list[str], colour: tuple[int, int, int]) -> np.ndarray:
+    """Query (left) and match (right) side by side: discarded matches thin red, surviving matches
+    green, the graph on the surviving query keypoints and the same edges on their matches (yellow)."""
+    img_q, kq, _, _, sq = q
+    img_m, km, _, _, sm = m
+    h = max(img_q.shape[0], img_m.shape[0])
+    canvas = np.full((h, img_q.shape[1] + img_m.shape[1], 3), 0, np.uint8)
+    canvas[:img_q.shape[0], :img_q.shape[1]] = cv2.cvtColor(img_q, cv2.COLOR_GRAY2BGR)
+    canvas[:img_m.shape[0], img_q.shape[1]:] = cv2.cvtColor(img_m, cv2.COLOR_GRAY2BGR)
+    off = np.array([img_q.shape[1], 0.0])
+    pq = kq[matches[:, 0]] * sq if len(matches) else np.zeros((0, 2))
+    pm = km[matches[:, 1]] * sm + off if len(matches) else np.zeros((0, 2))
+    survived = np.zeros(len(matches), bool)
+    survived[kept] = True
+    overlay = canvas.copy()
+    for a, b in zip(pq[~survived], pm[~survived]):
+        cv2.line(overlay, tuple(np.round(a).astype(int)), tuple(np.round(b).astype(int)), (60, 60, 220), 1, cv2.LINE_AA)
+    canvas = cv2.addWeighted(overlay, 0.5, canvas, 0.5, 0)
+    gq, gm = pq[kept], pm[kept]
+    for i, j in edges:
+        for P in (gq, gm):
+            cv2.line(canvas, tuple(np.round(P[i]).astype(int)), tuple(np.round(P[j]).astype(int)), (0, 220, 255), 1,
+                     cv2.LINE_AA)
+    for a, b in zip(gq, gm):
+        a, b = tuple(np.round(a).astype(int)), tuple(np.round(b).astype(int))
+        cv2.line(canvas, a, b, (80, 200, 80), 1, cv2.LINE_AA)
+        cv2.circle(canvas, a, 2, (80, 255, 80), -1, cv2.LINE_AA)
+        cv2.circle(canvas, b, 2, (80, 255, 80), -1, cv2.LINE_AA)
+    per_line = max(20, (canvas.shape[1] - 20) // 8)  # characters that fit at this font size
+    lines = [ln[i:i + per_line] for ln in lines for i in range(0, max(len(ln), 1), per_line)]
+    band = np.full((18 * len(lines) + 8, canvas.shape[1], 3), 255, np.uint8)
+    cv2.rectangle(band, (0, 0), (8, band.shape[0]), colour, -1)
+    for k, text in enumerate(lines):
+        cv2.putText(band, text, (14, 18 * (k + 1)), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (20, 20, 20), 1, cv2.LINE_AA)
+    return np.vstack([band, canvas])
+
+
+def _pictured(rows: list[dict], n_rejected: int) -> list[tuple[dict, str]]:
+    """(row, 'accepted'/'rejected') of the candidates to draw (see the module docstring)."""
+    chosen = [(r, "accepted") for r in rows if r["backend_verdict"] == ACCEPTED]
+    chosen += [(r, "rejected") for r in rows if r["backend_verdict"] not in ("", ACCEPTED)]
+
+    def closeness(r):  # failures of a check first (not 'not_best' / 'temporal_pending'), then the closest
+        failed = r["reason"].split(":")[0] in ("graph", "ransac", "pose")
+        return (failed, int(r["graph_nodes"] or 0), int(r["n_matches"] or 0))
+
+    near = sorted((r for r in rows if not r["backend_verdict"] and int(r["n_matches"] or 0) > 0),
+                  key=closeness, reverse=True)
+    seen = {(r["query_id"], r["match_id"]) for r, _ in chosen}
+    for r in near:
+        if n_rejected <= 0:
+            break
+        if (r["query_id"], r["match_id"]) not in seen:
+            seen.add((r["query_id"], r["match_id"]))
+            chosen.append((r, "rejected"))
+            n_rejected -= 1
+    return chosen
+
+
+def _caption(row: dict, verdict: str) -> list[str]:
+    lines = [f"query {row['query_id']} <-> match {row['match_id']}: {verdict.upper()}"
+             + (f" by the back end ({row['backend_reason']})" if row["backend_verdict"] else
+                f" by the detector ({row['reason']})")]
+    lines.append(f"BoW rank {row['rank']} score {row['bow_score']}, {row['n_matches']} matches, "
+                 f"graph nodes {row['graph_nodes'] or '-'}, pose inliers {row['pose_inliers'] or '-'}")
+    if row["gt_distance_m"] != "":
+        lines.append(f"ground truth: keyframes {float(row['gt_distance_m']):.2f} m apart"
+                     + (f", loop pose error {float(row['err_trans_m']):.3f} m / {float(row['err_rot_deg']):.2f} deg"
+                        if row["err_trans_m"] != "" else ""))
+    return lines
+
+
+def write_loop_pictures(out_dir: Path, album: KeyframeAlbum, rows: list[dict], lcd_conf,
+                        n_rejected: int) -> list[str]:
+    """Draw the chosen loops into ``out_dir/loops``; returns the picture names written (contact sheet last)."""
+    folder = out_dir / LOOPS_DIR
+    folder.mkdir(exist_ok=True)
+    written, thumbs, missing = [], [], 0
+    for row, verdict in _pictured(rows, n_rejected):
+        q, m = album.load(int(row["query_id"])), album.load(int(row["match_id"]))
+        if q is None or m is None:
+            missing += 1  # a keyframe the album did not keep (a write error, an interrupt mid-keyframe)
+            continue
+        matches, kept, edges, notes = _recompute(row, q, m, lcd_conf)
+        colour = (60, 170, 60) if verdict == "accepted" else (60, 60, 200)
+        pic = draw_loop(q, m, matches, kept, edges, _caption(row, verdict) + notes, colour)
+        name = picture_name(row["query_id"], row["match_id"], verdict)
+        cv2.imwrite(str(folder / name), pic)
+        written.append(name)
+        if verdict == "accepted":
+            thumbs.append(pic)
+    if thumbs:
+        cv2.imwrite(str(folder / CONTACT_SHEET), contact_sheet(thumbs))
+        written.append(CONTACT_SHEET)
+    if missing and album.failed:
+        log.warning("loop pictures: %d loop(s) not drawn, their keyframes were not kept (%s)", missing, album.failed)
+    if not written:
+        folder.rmdir()
+    return written
+
+
+def contact_sheet(pictures: list[np.ndarray], width: int = 360, columns: int = 4) -> np.ndarray:
+    """The pictures scaled to ``width`` and tiled ``columns`` to a row (white gaps)."""
+    tiles = []
+    for p in pictures:
+        s = width / p.shape[1]
+        tiles.append(cv2.resize(p, (width, max(1, round(p.shape[0] * s))), interpolation=cv2.INTER_AREA))
+    h = max(t.shape[0] for t in tiles)
+    rows = []
+    for i in range(0, len(tiles), columns):
+        row = [np.pad(t, ((0, h - t.shape[0]), (4, 4), (0, 0)), constant_values=255) for t in tiles[i:i + columns]]
+        row += [np.full((h, width + 8, 3), 255, np.uint8)] * (columns - len(row))
+        rows.append(np.pad(np.hstack(row), ((4, 4), (0, 0), (0, 0)), constant_values=255))
+    return np.vstack(rows)

@@ -1,0 +1,56 @@
+"""Loop pictures (issue 19): a PNG per accepted loop under loops/ (the two keyframe images side
+by side, surviving matches and graph edges), the back end's rejections and the closest
+detector rejections with their reason, a contact sheet; the keyframe album is gone after
+the run; a second run replaces the folder as a whole."""
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+
+from slam_lcd.outputs.loop_pictures import CONTACT_SHEET, LOOPS_DIR, picture_name
+from slam_lcd.outputs.output_set import OutputSet
+
+
+def test_a_picture_per_accepted_loop_and_a_contact_sheet(report_run):
+    _, out, _ = report_run
+    rep = json.loads((out / "report.json").read_text())
+    folder = out / LOOPS_DIR
+    assert rep["accepted_loops"]
+    for lp in rep["accepted_loops"]:
+        img = cv2.imread(str(folder / picture_name(lp["query_id"], lp["match_id"], "accepted")))
+        assert img is not None, lp
+        assert img.shape[1] == 2 * 320 and img.shape[0] > 240  # two 320x240 frames under a caption band
+        # matches drawn: green pixels (surviving matches) well beyond what the grey images hold
+        green = (img[..., 1] > 180) & (img[..., 0] < 120) & (img[..., 2] < 120)
+        assert green.sum() > 200
+    rejected = sorted(folder.glob("*_rejected.png"))
+    assert 1 <= len(rejected) <= 8 + rep["loops"]["rejected_by_backend"]
+    sheet = cv2.imread(str(folder / CONTACT_SHEET))
+    assert sheet is not None and sheet.shape[0] > 100
+    assert f"{LOOPS_DIR}/" in rep["outputs"]
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]  # album and staging removed
+    assert not [p for p in out.parent.iterdir() if p.name.startswith(".slam-lcd-staging")]
+
+
+def test_folder_output_replaced_as_a_whole(tmp_path):
+    target = tmp_path / "out"
+    (target / LOOPS_DIR).mkdir(parents=True)
+    (target / LOOPS_DIR / "old.png").write_bytes(b"x")
+    (target / "mine.txt").write_text("the user's")
+    s = OutputSet(target, ["report.md", LOOPS_DIR])
+    (s.staging / LOOPS_DIR).mkdir()
+    (s.staging / LOOPS_DIR / "new.png").write_bytes(b"y")
+    (s.staging / ".album").mkdir()
+    (s.staging / ".album" / "1.jpg").write_bytes(b"z")
+    (s.staging / "report.md").write_text("r")
+    assert s.publish() == [LOOPS_DIR, "report.md"]
+    assert sorted(p.name for p in (target / LOOPS_DIR).iterdir()) == ["new.png"]
+    assert (target / "mine.txt").read_text() == "the user's" and not (target / ".album").exists()
+    # a run that wrote no pictures removes an earlier run's folder
+    s = OutputSet(target, ["report.md", LOOPS_DIR])
+    (s.staging / "report.md").write_text("r2")
+    s.publish()
+    assert not (target / LOOPS_DIR).exists() and np.array_equal(sorted(p.name for p in target.iterdir()),
+                                                                ["mine.txt", "report.md"])
