@@ -29,7 +29,7 @@ from .outputs.result import RunResult
 from .outputs.write import RUN_OUTPUTS, write_outputs, write_set
 from .progress import progress_bar
 from .sensors.messages import at_message, check_first_messages, decode_camera_of, decode_depth, decode_gray, decode_pose_of
-from .sensors.mounting import body_frame_of, mounting_from_camera_info, static_transforms
+from .sensors.mounting import body_frame_of, calibrated_mounting, mounting_from_camera_info, static_transforms
 from .sensors.topics import Topics, choose_topics, copyable_topics
 from .types import Trajectory
 
@@ -66,6 +66,7 @@ def run_log(
     progress: bool = True,
     write_mcap: bool = True,
     input_paths: dict | None = None,
+    calib=None,
 ) -> RunResult:
     """Correct the trajectory of ``log_path`` with loop closures; write outputs into ``out_dir``.
 
@@ -76,6 +77,9 @@ def run_log(
     and writes the result so far, marked partial (``PARTIAL.txt``); ``result.interrupted``.
     ``extractor`` and ``vocab`` (a :class:`slam_lcd.vocab.Vocabulary`; None: the online
     vocabulary) are used as given, so a caller running many logs loads each once.
+    ``calib``: calibration file(s) (Kalibr camchain.yaml or EuRoC sensor.yaml, see
+    :mod:`slam_lcd.sensors.calibration`) or a loaded ``Calibration``; its camera and mounting
+    win over the log's CameraInfo and ``/tf_static``.
     """
     cfg = validate_config(config or Config())
     log_path = Path(log_path)
@@ -84,8 +88,12 @@ def run_log(
         raise FileMissingError("no such log file or directory", log_path)
     if gt_file is not None and not Path(gt_file).is_file():
         raise FileMissingError("ground-truth trajectory file not found (--gt)", gt_file)
+    calibration = _calibration(calib)
+    extra_inputs = dict(input_paths or {})
+    if calibration is not None:
+        extra_inputs.update({f"--calib {i}": p for i, p in enumerate(calibration.sources)})
     outputs = OutputSet(out_dir, RUN_OUTPUTS)
-    outputs.check(run_inputs(log_path, gt_file, cfg, input_paths))
+    outputs.check(run_inputs(log_path, gt_file, cfg, extra_inputs))
     t_start = time.perf_counter()
     result = RunResult(out_dir=out_dir)
     gt_traj = read_trajectory(gt_file) if gt_file is not None else None
@@ -94,6 +102,7 @@ def run_log(
         if reader.message_count == 0:
             raise PipelineError("log holds no messages", log_path)
         topics = choose_topics(reader, image_topic, odom_topic, gt_topic, depth_topic)
+        calibrated = _calibrated_camera(calibration, topics, log_path)
         first = check_first_messages(reader, topics)
         mcap_wanted = write_mcap and cfg.run.write_mcap
         copy_topics = copyable_topics(reader, cfg.run.copy_images, log_path) if mcap_wanted else []
@@ -103,9 +112,13 @@ def run_log(
                 raise PipelineError(
                     "log has no odometry topic (nav_msgs/Odometry) and no depth image for the built-in "
                     "visual odometry; pass --odom-topic", log_path)
-            vo_odometry = _visual_odometry(log_path, topics, cfg)
+            vo_odometry = _visual_odometry(log_path, topics, cfg, calibrated)
         tf = static_transforms(reader, log_path)
         pipe = _make_pipeline(cfg, extractor, vocab, log_path, topics)
+        if calibrated is not None:  # the calibration file's camera (CameraInfo is not read then)
+            T_bc = (vo_odometry.T_body_camera if vo_odometry is not None else
+                    calibrated_mounting(cfg.frontend, calibrated, tf, body_frame_of(first.get(topics.odom))))
+            pipe.set_camera(calibrated.camera, T_bc)
         if vo_odometry is not None:  # built-in VO ran first: its poses are the odometry
             for stamp, T, cov, segment_start in vo_odometry.odometry_samples():
                 pipe.add_odometry(stamp, T, cov, segment_start=segment_start)
@@ -223,10 +236,35 @@ def _no_keyframe_reason(pipe, topics: Topics, n_frames: int) -> str:
             f"of {source} ({span}); nothing to correct")
 
 
-def _visual_odometry(log_path, topics: Topics, cfg):
+def _visual_odometry(log_path, topics: Topics, cfg, calibrated=None):
     """Built-in RGB-D visual odometry over the whole log (a first pass; see slam_lcd.sensors.log_vo)."""
     from .sensors.log_vo import visual_odometry_from_log
 
     log.warning("%s: no odometry topic; running the built-in RGB-D visual odometry first", log_path)
+    cam = calibrated.camera if calibrated is not None else None
+    T_bc = calibrated.T_body_camera if calibrated is not None else None
     return visual_odometry_from_log(log_path, cfg.frontend, image_topic=topics.image, depth_topic=topics.depth,
-                                    camera_info_topic=topics.camera_info)
+                                    camera_info_topic=topics.camera_info, camera=cam, T_body_camera=T_bc)
+
+
+def _calibration(calib):
+    """None, or the :class:`~slam_lcd.sensors.calibration.Calibration` of ``calib`` (paths or loaded)."""
+    from .sensors.calibration import Calibration, load_calibration
+
+    if calib is None or isinstance(calib, Calibration):
+        return calib
+    return load_calibration(calib)
+
+
+def _calibrated_camera(calibration, topics: Topics, log_path):
+    """The calibration's camera of the image topic; it wins over the log's CameraInfo (said in the log)."""
+    if calibration is None:
+        return None
+    cam = calibration.camera_for(topics.image)
+    if topics.camera_info is not None:
+        log.warning("%s: --calib wins: camera %s of %s is used, not the log's CameraInfo %s", log_path, cam.name,
+                    calibration.describe(), topics.camera_info)
+        topics.camera_info = None
+    else:
+        log.info("%s: camera %s of %s for %s", log_path, cam.name, calibration.describe(), topics.image)
+    return cam

@@ -83,6 +83,10 @@ def register(sub) -> None:
     g.add_argument("--gt", default=None, metavar="FILE",
                    help="ground-truth trajectory file, TUM / KITTI / EuRoC (default: none; the log's "
                         "ground-truth topic if any)")
+    p.add_argument("--calib", action="append", default=None, metavar="FILE",
+                   help="camera calibration: a Kalibr camchain.yaml, or EuRoC camN/sensor.yaml files (repeat: cam0 "
+                        "first); wins over the log's CameraInfo and /tf_static mounting (default: none, the log's "
+                        "CameraInfo)")
     p.add_argument("--no-mcap", action="store_true",
                    help="do not write corrected.mcap (default: write it, run.write_mcap)")
     add_config_args(p)
@@ -95,7 +99,8 @@ def run(args) -> int:
     cfg = config_from_args(args)
     res = run_log(args.log, Path(args.out), cfg, image_topic=args.image_topic, odom_topic=args.odom_topic,
                   depth_topic=args.depth_topic, gt_topic=args.gt_topic, gt_file=args.gt,
-                  progress=not args.no_progress, write_mcap=not args.no_mcap, input_paths=config_inputs(args))
+                  progress=not args.no_progress, write_mcap=not args.no_mcap, input_paths=config_inputs(args),
+                  calib=args.calib)
     for line in res.summary_lines():
         print(line)
     print(f"outputs in {res.out_dir}/ ({', '.join(res.outputs)})"
