@@ -30,7 +30,8 @@ from .outputs.write import RUN_OUTPUTS, write_outputs, write_set
 from .progress import progress_bar
 from .sensors.messages import at_message, check_first_messages, decode_camera_of, decode_depth, decode_gray, decode_pose_of
 from .sensors.mounting import body_frame_of, calibrated_mounting, mounting_from_camera_info, static_transforms
-from .sensors.topics import Topics, choose_topics, copyable_topics
+from .sensors.ground_truth import POSITION_ONLY_NOTE, decode_ground_truth, ground_truth_from_tf
+from .sensors.topics import Topics, choose_topics, copyable_topics, static_tf_topics
 from .types import Trajectory
 
 log = logging.getLogger(__name__)
@@ -104,6 +105,12 @@ def run_log(
         topics = choose_topics(reader, image_topic, odom_topic, gt_topic, depth_topic)
         calibrated = _calibrated_camera(calibration, topics, log_path)
         first = check_first_messages(reader, topics)
+        gt_from_tf = None
+        if topics.gt_frames is not None:  # a TF chain: read before streaming (a tiny topic)
+            gt_from_tf = ground_truth_from_tf(reader, topics.gt, *topics.gt_frames, static_tf_topics(reader))
+        if topics.gt_position_only:
+            result.alignment = f"{cfg.eval.align}; {POSITION_ONLY_NOTE}"
+            log.warning("%s: %s", log_path, POSITION_ONLY_NOTE)
         mcap_wanted = write_mcap and cfg.run.write_mcap
         copy_topics = copyable_topics(reader, cfg.run.copy_images, log_path) if mcap_wanted else []
         vo_odometry = None
@@ -125,6 +132,8 @@ def run_log(
         gt_traj_from_log = _drive(reader, topics, pipe, result, cfg, tf, body_frame_of(first.get(topics.odom)),
                                   vo_odometry, log_path, progress)
         result.log_duration_s = reader.duration_ns * 1e-9
+        if gt_from_tf is not None:
+            gt_traj_from_log = gt_from_tf
 
     notes: list[str] = []
     read_to_end = not result.interrupted
@@ -210,7 +219,7 @@ def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame,
                 bar.update(1)
             elif m.topic == topics.gt:
                 with at_message(m, log_path):
-                    T, _ = decode_pose_of(m)
+                    T = decode_ground_truth(m)
                 gt_st.append(m.stamp)
                 gt_T.append(T)
     except KeyboardInterrupt:

@@ -112,3 +112,86 @@ def test_calib_gives_the_camera_of_a_log_without_camera_info(tiny_log, tmp_path,
     assert used.fx == pytest.approx(cam.fx) and np.allclose(T_used, T_bc, atol=1e-9)
     # the VO is metric and mounted right: ATE of a few cm over the 2 m of this log
     assert res.ate_before is not None and res.ate_before < 0.05, res.ate_before
+
+
+# ---------------------------------------------------------------------------- ground truth
+def _gt_of(log):
+    from slam_lcd.io import read_trajectory_from_log
+
+    return read_trajectory_from_log(log, "/ground_truth/pose")
+
+
+T_WORLD_MOCAP = np.array([[0.0, -1.0, 0.0, 2.0], [1.0, 0.0, 0.0, -1.0], [0.0, 0.0, 1.0, 0.5], [0, 0, 0, 1.0]])
+
+
+def _writer_of(kind, gt):
+    """``write(reader, writer)`` putting the ground truth ``gt`` as message type ``kind``."""
+    from slam_lcd.geometry import inv
+    from slam_lcd.io import messages as M
+
+    def write(_r, w):
+        if kind == "tf":
+            w.write("/tf_static", M.tf_message([(T_WORLD_MOCAP, int(gt.stamps[0]), "world", "mocap")]), int(gt.stamps[0]))
+        for s, T in zip(gt.stamps.tolist(), gt.poses):
+            if kind == "PoseWithCovarianceStamped":
+                msg, topic = M.pose_with_covariance_stamped_msg(T, np.eye(6) * 1e-4, s, "world"), "/gt"
+            elif kind == "Odometry":
+                msg, topic = M.odometry_msg(T, np.eye(6) * 1e-4, s, "world", "gt_body"), "/gt"
+            elif kind == "TransformStamped":
+                msg, topic = M.transform_stamped_msg(T, s, "world", "gt_body"), "/vicon/body/body"
+            elif kind == "PointStamped":
+                msg, topic = M.point_stamped_msg(T[:3, 3], s, "world"), "/leica/position"
+            else:  # tf: world -> mocap (static) -> gt_body (dynamic, on /tf)
+                msg, topic = M.tf_message([(inv(T_WORLD_MOCAP) @ T, s, "mocap", "gt_body")]), "/tf"
+            w.write(topic, msg, s)
+    return write
+
+
+GT_KINDS = {"PoseWithCovarianceStamped": "/gt", "Odometry": "/gt", "TransformStamped": "/vicon/body/body",
+            "PointStamped": "/leica/position", "tf": "/tf:world:gt_body"}
+
+
+@pytest.fixture(scope="module")
+def baseline_run(tiny_log, tmp_path_factory):
+    out = tmp_path_factory.mktemp("baseline") / "out"
+    return run_log(tiny_log, out, _orb_config(), gt_topic="/ground_truth/pose", progress=False, write_mcap=False)
+
+
+@pytest.mark.parametrize("kind", sorted(GT_KINDS))
+def test_ground_truth_of_every_message_type(kind, tiny_log, baseline_run, tmp_path):
+    import json
+
+    assert baseline_run.ate_before is not None
+    log = _variant(tiny_log, tmp_path / f"{kind}.mcap", drop=("/ground_truth/pose",),
+                   write=_writer_of(kind, _gt_of(tiny_log)))
+    res = run_log(log, tmp_path / "out", _orb_config(), gt_topic=GT_KINDS[kind], progress=False, write_mcap=False)
+    # the same positions over the same stamps: the same ATE (translation; the alignment takes the world offset)
+    assert res.ate_before == pytest.approx(baseline_run.ate_before, rel=1e-6, abs=1e-9)
+    assert res.ate_after == pytest.approx(baseline_run.ate_after, rel=1e-6, abs=1e-9)
+    rep = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert ("position-only" in rep["ate"]["alignment"]) == (kind == "PointStamped")
+
+
+@pytest.mark.parametrize("spec, expected", [("/tf", "name the frames as /tf:PARENT:CHILD"),
+                                             ("/tf:world:nowhere", "'nowhere' is not in the TF tree"),
+                                             ("/camera/image_raw", "not a pose or a position")])
+def test_bad_ground_truth_topic_is_one_line(spec, expected, tiny_log, tmp_path, capsys):
+    from slam_lcd.cli.main import main
+
+    log = _variant(tiny_log, tmp_path / "tf.mcap", write=_writer_of("tf", _gt_of(tiny_log)))
+    rc = main(["run", str(log), "--out", str(tmp_path / "out"), "--gt-topic", spec, "--features", "orb",
+               "--no-progress"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "tf.mcap" in err[0] and expected in err[0], err
+
+
+def test_tf_chain_ground_truth_goes_through_static_transforms(tiny_log, tmp_path):
+    from slam_lcd.sensors.ground_truth import ground_truth_from_tf
+    from slam_lcd.sensors.topics import static_tf_topics
+
+    gt = _gt_of(tiny_log)
+    log = _variant(tiny_log, tmp_path / "tf.mcap", drop=("/ground_truth/pose",), write=_writer_of("tf", gt))
+    with open_log(log) as r:
+        got = ground_truth_from_tf(r, "/tf", "world", "gt_body", static_tf_topics(r))
+    assert np.array_equal(got.stamps, gt.stamps)
+    assert np.allclose(got.poses, gt.poses, atol=1e-9)  # world -> mocap (static) -> gt_body composed

@@ -78,8 +78,10 @@ def register(sub) -> None:
                         "the camera's namespace; none: loops are scaled by triangulation)")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--gt-topic", default=None,
-                   help="ground-truth pose topic in the log (default: auto-detected, the only pose topic named "
-                        "*ground_truth* or *groundtruth*; none: no ATE)")
+                   help="ground truth in the log: a PoseStamped, PoseWithCovarianceStamped, Odometry, "
+                        "TransformStamped or PointStamped (position only: ATE on translation) topic, or a TF chain "
+                        "TOPIC:PARENT:CHILD such as /tf:world:kinect (default: auto-detected, the only pose topic "
+                        "named *ground_truth* or *groundtruth*; none: no ATE)")
     g.add_argument("--gt", default=None, metavar="FILE",
                    help="ground-truth trajectory file, TUM / KITTI / EuRoC (default: none; the log's "
                         "ground-truth topic if any)")
