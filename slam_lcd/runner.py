@@ -31,7 +31,7 @@ from .progress import progress_bar
 from .sensors.messages import at_message, check_first_messages, decode_camera_of, decode_depth, decode_gray, decode_pose_of
 from .sensors.mounting import body_frame_of, calibrated_mounting, mounting_from_camera_info, static_transforms
 from .sensors.ground_truth import POSITION_ONLY_NOTE, decode_ground_truth, ground_truth_from_tf
-from .sensors.topics import Topics, choose_topics, copyable_topics, static_tf_topics
+from .sensors.topics import Topics, choose_right_topic, choose_topics, copyable_topics, static_tf_topics
 from .types import Trajectory
 
 log = logging.getLogger(__name__)
@@ -68,6 +68,7 @@ def run_log(
     write_mcap: bool = True,
     input_paths: dict | None = None,
     calib=None,
+    right_topic: str | None = None,
 ) -> RunResult:
     """Correct the trajectory of ``log_path`` with loop closures; write outputs into ``out_dir``.
 
@@ -80,7 +81,9 @@ def run_log(
     vocabulary) are used as given, so a caller running many logs loads each once.
     ``calib``: calibration file(s) (Kalibr camchain.yaml or EuRoC sensor.yaml, see
     :mod:`slam_lcd.sensors.calibration`) or a loaded ``Calibration``; its camera and mounting
-    win over the log's CameraInfo and ``/tf_static``.
+    win over the log's CameraInfo and ``/tf_static``. A log without odometry gets the built-in
+    visual odometry: RGB-D on its depth topic, else stereo on ``right_topic`` (default: the
+    second camera found by :func:`slam_lcd.sensors.topics.choose_right_topic`).
     """
     cfg = validate_config(config or Config())
     log_path = Path(log_path)
@@ -115,11 +118,15 @@ def run_log(
         copy_topics = copyable_topics(reader, cfg.run.copy_images, log_path) if mcap_wanted else []
         vo_odometry = None
         if topics.odom is None:
+            right = None
             if topics.depth is None:
-                raise PipelineError(
-                    "log has no odometry topic (nav_msgs/Odometry) and no depth image for the built-in "
-                    "visual odometry; pass --odom-topic", log_path)
-            vo_odometry = _visual_odometry(log_path, topics, cfg, calibrated)
+                partner = calibration.stereo_partner(calibrated) if calibrated is not None else None
+                right = choose_right_topic(reader, topics.image, right_topic,
+                                           partner[0].rostopic if partner is not None else None)
+                if right is None:
+                    raise PipelineError(_no_odometry_reason(topics.image), log_path)
+                _check_rectified(calibration, calibrated, log_path)
+            vo_odometry = _visual_odometry(log_path, topics, cfg, calibrated, right)
         tf = static_transforms(reader, log_path)
         pipe = _make_pipeline(cfg, extractor, vocab, log_path, topics)
         if calibrated is not None:  # the calibration file's camera (CameraInfo is not read then)
@@ -245,15 +252,47 @@ def _no_keyframe_reason(pipe, topics: Topics, n_frames: int) -> str:
             f"of {source} ({span}); nothing to correct")
 
 
-def _visual_odometry(log_path, topics: Topics, cfg, calibrated=None):
-    """Built-in RGB-D visual odometry over the whole log (a first pass; see slam_lcd.sensors.log_vo)."""
+def _visual_odometry(log_path, topics: Topics, cfg, calibrated=None, right_topic: str | None = None):
+    """Built-in RGB-D (or, with ``right_topic``, stereo) visual odometry over the whole log (a first
+    pass; see slam_lcd.sensors.log_vo)."""
     from .sensors.log_vo import visual_odometry_from_log
 
-    log.warning("%s: no odometry topic; running the built-in RGB-D visual odometry first", log_path)
+    kind = f"stereo visual odometry on {topics.image} + {right_topic}" if right_topic else \
+        f"RGB-D visual odometry on {topics.image} + {topics.depth}"
+    log.warning("%s: no odometry topic; running the built-in %s first", log_path, kind)
     cam = calibrated.camera if calibrated is not None else None
     T_bc = calibrated.T_body_camera if calibrated is not None else None
     return visual_odometry_from_log(log_path, cfg.frontend, image_topic=topics.image, depth_topic=topics.depth,
-                                    camera_info_topic=topics.camera_info, camera=cam, T_body_camera=T_bc)
+                                    right_topic=right_topic, camera_info_topic=topics.camera_info, camera=cam,
+                                    T_body_camera=T_bc)
+
+
+def _no_odometry_reason(image_topic: str) -> str:
+    """What a monocular log without odometry lacks, and the three ways to provide it."""
+    return (f"no odometry: the log has no odometry topic (nav_msgs/Odometry), no depth image and no second camera "
+            f"beside {image_topic}, and one camera alone gives no metric odometry; pass --odom-topic TOPIC (an "
+            f"odometry or pose topic of the log), --depth-topic TOPIC (RGB-D visual odometry) or --right-topic TOPIC "
+            f"(a rectified right camera: stereo visual odometry)")
+
+
+def _check_rectified(calibration, calibrated, log_path) -> None:
+    """The stereo VO matches along image rows: a calibrated pair must be rectified already."""
+    from .errors import NotBuiltError
+
+    if calibration is None or calibrated is None:
+        return  # CameraInfo pairs: the right camera's projection gives the baseline of a rectified pair
+    partner = calibration.stereo_partner(calibrated)
+    if partner is None:
+        raise PipelineError(f"{calibration.describe()}: camera {calibrated.name} has no second camera with an "
+                            "extrinsic, so the stereo baseline is unknown", log_path)
+    T = partner[1]
+    distorted = any(c.camera.distortion_model != "none" for c in (calibrated, partner[0]))
+    rotated = np.linalg.norm(T[:3, :3] - np.eye(3)) > 1e-3
+    off_row = abs(T[1, 3]) + abs(T[2, 3]) > 1e-2 * abs(T[0, 3])
+    if distorted or rotated or off_row:
+        raise NotBuiltError(f"{calibration.describe()}: cameras {calibrated.name} and {partner[0].name} are not a "
+                            "rectified pair (distortion, relative rotation or vertical offset); rectifying raw stereo "
+                            "pairs is not built yet: give rectified images, an odometry topic or depth", log_path)
 
 
 def _calibration(calib):

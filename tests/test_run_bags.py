@@ -195,3 +195,45 @@ def test_tf_chain_ground_truth_goes_through_static_transforms(tiny_log, tmp_path
         got = ground_truth_from_tf(r, "/tf", "world", "gt_body", static_tf_topics(r))
     assert np.array_equal(got.stamps, gt.stamps)
     assert np.allclose(got.poses, gt.poses, atol=1e-9)  # world -> mocap (static) -> gt_body composed
+
+
+# ---------------------------------------------------------------------------- no odometry
+def test_stereo_log_without_odometry_or_depth_uses_stereo_vo(tiny_log, tmp_path, caplog):
+    log = _variant(tiny_log, tmp_path / "stereo.mcap", drop=("/odom", "/camera/depth"))
+    with caplog.at_level(logging.WARNING, logger="slam_lcd"):
+        res = run_log(log, tmp_path / "out", _orb_config(), gt_topic="/ground_truth/pose", progress=False,
+                      write_mcap=False)
+    assert any("stereo visual odometry on /camera/image_raw + /camera/right/image_raw" in r.getMessage()
+               for r in caplog.records)
+    assert res.n_keyframes > 0
+    # metric stereo VO on the rendered pair: a few cm over the 2 m of this log
+    assert res.ate_before is not None and res.ate_before < 0.05, res.ate_before
+
+
+def test_monocular_log_without_odometry_says_what_is_missing(tiny_log, tmp_path, capsys):
+    from slam_lcd.cli.main import main
+
+    log = _variant(tiny_log, tmp_path / "mono.mcap",
+                   drop=("/odom", "/camera/depth", "/camera/right/image_raw", "/camera/right/camera_info"))
+    rc = main(["run", str(log), "--out", str(tmp_path / "out"), "--features", "orb", "--no-progress"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1, err
+    for needed in ("mono.mcap", "no odometry", "/camera/image_raw", "--odom-topic", "--depth-topic", "--right-topic"):
+        assert needed in err[0], (needed, err[0])
+    assert not (tmp_path / "out").exists()
+
+
+def test_raw_calibrated_stereo_pair_is_refused_not_faked(tiny_log, tmp_path, capsys):
+    """A calibration saying the pair is not rectified (EuRoC's raw cameras): a typed error, not a wrong VO."""
+    from test_sensors_calibration import kalibr_camchain
+
+    from slam_lcd.cli.main import main
+
+    log = _variant(tiny_log, tmp_path / "raw.mcap", drop=("/odom", "/camera/depth"))
+    calib = tmp_path / "camchain.yaml"
+    calib.write_text(kalibr_camchain().replace("/cam0/image_raw", "/camera/image_raw")
+                     .replace("/cam1/image_raw", "/camera/right/image_raw"))
+    rc = main(["run", str(log), "--out", str(tmp_path / "out"), "--calib", str(calib), "--features", "orb",
+               "--no-progress"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "not a rectified pair" in err[0] and "camchain.yaml" in err[0], err

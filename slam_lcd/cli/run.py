@@ -72,10 +72,14 @@ def register(sub) -> None:
                         "topic without 'depth' or 'right' in its name)")
     p.add_argument("--odom-topic", default=None,
                    help="odometry topic (default: auto-detected, the only nav_msgs/Odometry topic; with none, the "
-                        "built-in RGB-D visual odometry runs on the depth topic)")
+                        "built-in visual odometry runs: RGB-D on the depth topic, else stereo on --right-topic)")
     p.add_argument("--depth-topic", default=None,
                    help="depth image topic (default: auto-detected, an image topic with 'depth' in its name in "
                         "the camera's namespace; none: loops are scaled by triangulation)")
+    p.add_argument("--right-topic", default=None,
+                   help="rectified right camera image topic, for the built-in stereo visual odometry of a log "
+                        "without odometry or depth (default: auto-detected, the calibration's second camera, the "
+                        "image topic with 'left' spelled 'right', or the only image topic named *right*)")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--gt-topic", default=None,
                    help="ground truth in the log: a PoseStamped, PoseWithCovarianceStamped, Odometry, "
@@ -102,7 +106,7 @@ def run(args) -> int:
     res = run_log(args.log, Path(args.out), cfg, image_topic=args.image_topic, odom_topic=args.odom_topic,
                   depth_topic=args.depth_topic, gt_topic=args.gt_topic, gt_file=args.gt,
                   progress=not args.no_progress, write_mcap=not args.no_mcap, input_paths=config_inputs(args),
-                  calib=args.calib)
+                  calib=args.calib, right_topic=args.right_topic)
     for line in res.summary_lines():
         print(line)
     print(f"outputs in {res.out_dir}/ ({', '.join(res.outputs)})"

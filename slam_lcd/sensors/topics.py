@@ -109,6 +109,33 @@ def choose_topics(reader, image_topic=None, odom_topic=None, gt_topic=None, dept
     return Topics(image_topic, odom_topic, infos[0] if infos else None, depth_topic, gt_topic, gt_frames, position_only)
 
 
+def choose_right_topic(reader, image_topic: str, right_topic: str | None = None,
+                       calibrated_partner: str | None = None) -> str | None:
+    """The second camera of a stereo pair, for the stereo VO of a log without odometry or depth.
+
+    ``right_topic`` when given (checked); else the calibration's next camera (its ``rostopic``,
+    e.g. EuRoC's ``/cam1/image_raw``) when the log has it; else ``image_topic`` with ``left``
+    spelled ``right`` (KITTI's ``camera_gray_left`` / ``camera_gray_right``); else the only
+    image topic with ``right`` in its name under the same first namespace (``/camera/right/image_raw``).
+    """
+    topics = reader.topics
+    if right_topic is not None:
+        right_topic = reader.resolve_topics(right_topic)[0]
+        _check_type(reader, "--right-topic", right_topic, IMAGE_TYPES, "a camera image")
+        return right_topic
+    if calibrated_partner:
+        for t in topics:
+            if t.strip("/") == calibrated_partner.strip("/") and topics[t].msgtype in IMAGE_TYPES:
+                return t
+    swapped = image_topic.replace("left", "right")
+    if swapped != image_topic and swapped in topics and topics[swapped].msgtype in IMAGE_TYPES:
+        return swapped
+    root = image_topic.strip("/").split("/")[0]
+    rights = [t for t, i in topics.items() if i.msgtype in IMAGE_TYPES and "right" in t.lower()
+              and "depth" not in t.lower() and t.strip("/").split("/")[0] == root and t != image_topic]
+    return rights[0] if len(rights) == 1 else None
+
+
 def static_tf_topics(reader) -> list[str]:
     """The log's static TF topics (``/tf_static`` and the like)."""
     return [t for t, i in reader.topics.items() if i.msgtype == TF_TYPE and "static" in t]
