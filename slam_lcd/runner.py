@@ -125,8 +125,8 @@ def run_log(
                                            partner[0].rostopic if partner is not None else None)
                 if right is None:
                     raise PipelineError(_no_odometry_reason(topics.image), log_path)
-                _check_rectified(calibration, calibrated, log_path)
-            vo_odometry = _visual_odometry(log_path, topics, cfg, calibrated, right)
+            rectifier = _rectifier(calibration, calibrated, log_path) if right is not None else None
+            vo_odometry = _visual_odometry(log_path, topics, cfg, calibrated, right, rectifier)
         tf = static_transforms(reader, log_path)
         pipe = _make_pipeline(cfg, extractor, vocab, log_path, topics)
         if calibrated is not None:  # the calibration file's camera (CameraInfo is not read then)
@@ -252,7 +252,8 @@ def _no_keyframe_reason(pipe, topics: Topics, n_frames: int) -> str:
             f"of {source} ({span}); nothing to correct")
 
 
-def _visual_odometry(log_path, topics: Topics, cfg, calibrated=None, right_topic: str | None = None):
+def _visual_odometry(log_path, topics: Topics, cfg, calibrated=None, right_topic: str | None = None,
+                     rectifier=None):
     """Built-in RGB-D (or, with ``right_topic``, stereo) visual odometry over the whole log (a first
     pass; see slam_lcd.sensors.log_vo)."""
     from .sensors.log_vo import visual_odometry_from_log
@@ -264,7 +265,7 @@ def _visual_odometry(log_path, topics: Topics, cfg, calibrated=None, right_topic
     T_bc = calibrated.T_body_camera if calibrated is not None else None
     return visual_odometry_from_log(log_path, cfg.frontend, image_topic=topics.image, depth_topic=topics.depth,
                                     right_topic=right_topic, camera_info_topic=topics.camera_info, camera=cam,
-                                    T_body_camera=T_bc)
+                                    T_body_camera=T_bc, rectifier=rectifier)
 
 
 def _no_odometry_reason(image_topic: str) -> str:
@@ -272,27 +273,25 @@ def _no_odometry_reason(image_topic: str) -> str:
     return (f"no odometry: the log has no odometry topic (nav_msgs/Odometry), no depth image and no second camera "
             f"beside {image_topic}, and one camera alone gives no metric odometry; pass --odom-topic TOPIC (an "
             f"odometry or pose topic of the log), --depth-topic TOPIC (RGB-D visual odometry) or --right-topic TOPIC "
-            f"(a rectified right camera: stereo visual odometry)")
+            f"(a second camera: stereo visual odometry; a raw pair is rectified with --calib)")
 
 
-def _check_rectified(calibration, calibrated, log_path) -> None:
-    """The stereo VO matches along image rows: a calibrated pair must be rectified already."""
-    from .errors import NotBuiltError
+def _rectifier(calibration, calibrated, log_path):
+    """None for a rectified pair (or one described by CameraInfo); else the rectification of the
+    calibrated pair (:mod:`slam_lcd.sensors.rectify`): the stereo VO matches along image rows."""
+    from .sensors.rectify import is_rectified, stereo_rectifier
 
     if calibration is None or calibrated is None:
-        return  # CameraInfo pairs: the right camera's projection gives the baseline of a rectified pair
+        return None  # CameraInfo pairs: the right camera's projection gives the baseline of a rectified pair
     partner = calibration.stereo_partner(calibrated)
     if partner is None:
         raise PipelineError(f"{calibration.describe()}: camera {calibrated.name} has no second camera with an "
                             "extrinsic, so the stereo baseline is unknown", log_path)
-    T = partner[1]
-    distorted = any(c.camera.distortion_model != "none" for c in (calibrated, partner[0]))
-    rotated = np.linalg.norm(T[:3, :3] - np.eye(3)) > 1e-3
-    off_row = abs(T[1, 3]) + abs(T[2, 3]) > 1e-2 * abs(T[0, 3])
-    if distorted or rotated or off_row:
-        raise NotBuiltError(f"{calibration.describe()}: cameras {calibrated.name} and {partner[0].name} are not a "
-                            "rectified pair (distortion, relative rotation or vertical offset); rectifying raw stereo "
-                            "pairs is not built yet: give rectified images, an odometry topic or depth", log_path)
+    if is_rectified(calibrated.camera, partner[0].camera, partner[1]):
+        return None
+    log.warning("%s: cameras %s and %s of %s are not a rectified pair: the stereo VO rectifies them", log_path,
+                calibrated.name, partner[0].name, calibration.describe())
+    return stereo_rectifier(calibrated.camera, partner[0].camera, partner[1], calibration.sources[0])
 
 
 def _calibration(calib):

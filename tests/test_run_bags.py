@@ -223,17 +223,93 @@ def test_monocular_log_without_odometry_says_what_is_missing(tiny_log, tmp_path,
     assert not (tmp_path / "out").exists()
 
 
-def test_raw_calibrated_stereo_pair_is_refused_not_faked(tiny_log, tmp_path, capsys):
-    """A calibration saying the pair is not rectified (EuRoC's raw cameras): a typed error, not a wrong VO."""
-    from test_sensors_calibration import kalibr_camchain
+def _rot(axis, deg):
+    import cv2
 
-    from slam_lcd.cli.main import main
+    return cv2.Rodrigues(np.radians(deg) * np.eye(3)[axis])[0]
 
-    log = _variant(tiny_log, tmp_path / "raw.mcap", drop=("/odom", "/camera/depth"))
+
+def _raw_stereo(tiny_log, tmp_path):
+    """The demo pair made raw (as EuRoC's cameras): each camera turned away from the rectified frame
+    (2 deg about y, 1.5 deg about x) and given radtan distortion; a Kalibr camchain.yaml that says so."""
+    import cv2
+
+    from slam_lcd.geometry import inv, make_T
+    from slam_lcd.io import messages as M
+    from slam_lcd.sensors.messages import decode_gray
+
+    cam, T_b_rect0 = _log_camera_and_mounting(tiny_log)
+    with open_log(tiny_log) as r:
+        baseline = next(iter(r.messages(["/camera/right/camera_info"]))).msg.p[3] / -cam.fx
+    T_b_rect1 = T_b_rect0 @ make_T(np.eye(3), [baseline, 0, 0])
+    rigs = {"/camera/image_raw": (_rot(1, 2.0), np.array([-0.05, 0.01, 0.001, -0.0005])),
+            "/camera/right/image_raw": (_rot(0, -1.5), np.array([-0.04, 0.008, 0.0, 0.0003]))}
+    T_b_raw = {"/camera/image_raw": T_b_rect0 @ make_T(rigs["/camera/image_raw"][0], np.zeros(3)),
+               "/camera/right/image_raw": T_b_rect1 @ make_T(rigs["/camera/right/image_raw"][0], np.zeros(3))}
+    u, v = np.meshgrid(np.arange(cam.width, dtype=np.float64), np.arange(cam.height, dtype=np.float64))
+    grid = np.stack([u.ravel(), v.ravel()], 1).reshape(-1, 1, 2)
+    maps = {}
+    for topic, (R, D) in rigs.items():  # raw pixel -> rectified pixel: X_rect = R X_raw
+        m = cv2.undistortPoints(grid, cam.K, D, R=R, P=cam.K).reshape(cam.height, cam.width, 2).astype(np.float32)
+        maps[topic] = (m[..., 0], m[..., 1])
+
+    def write(r, w):
+        for msg in r.messages(list(rigs)):
+            raw = cv2.remap(np.ascontiguousarray(decode_gray(msg)), *maps[msg.topic], cv2.INTER_LINEAR)
+            w.write(msg.topic, M.image_msg(raw, msg.stamp, msg.msg.header.frame_id), msg.stamp)
+
+    log = _variant(tiny_log, tmp_path / "raw.mcap", write=write,
+                   drop=("/odom", "/camera/depth", "/camera/camera_info", "/camera/right/camera_info", *rigs))
+
+    def block(T):
+        return "\n".join("  - [" + ", ".join(f"{x:.12f}" for x in row) + "]" for row in T)
+
+    cams = []
+    for k, (topic, (R, D)) in enumerate(rigs.items()):
+        cams.append(f"""cam{k}:
+  T_cam_imu:
+{block(inv(T_b_raw[topic]))}
+""" + (f"""  T_cn_cnm1:
+{block(inv(T_b_raw[topic]) @ T_b_raw["/camera/image_raw"])}
+""" if k else "") + f"""  camera_model: pinhole
+  distortion_coeffs: [{", ".join(map(str, D))}]
+  distortion_model: radtan
+  intrinsics: [{cam.fx}, {cam.fy}, {cam.cx}, {cam.cy}]
+  resolution: [{cam.width}, {cam.height}]
+  rostopic: {topic}
+""")
     calib = tmp_path / "camchain.yaml"
-    calib.write_text(kalibr_camchain().replace("/cam0/image_raw", "/camera/image_raw")
-                     .replace("/cam1/image_raw", "/camera/right/image_raw"))
-    rc = main(["run", str(log), "--out", str(tmp_path / "out"), "--calib", str(calib), "--features", "orb",
-               "--no-progress"])
-    err = capsys.readouterr().err.strip().splitlines()
-    assert rc == 2 and len(err) == 1 and "not a rectified pair" in err[0] and "camchain.yaml" in err[0], err
+    calib.write_text("".join(cams))
+    return log, calib, T_b_raw["/camera/image_raw"]
+
+
+def test_raw_calibrated_stereo_pair_is_rectified_for_the_vo(tiny_log, tmp_path, camera_spy, caplog):
+    log, calib, T_b_raw0 = _raw_stereo(tiny_log, tmp_path)
+    with caplog.at_level(logging.WARNING, logger="slam_lcd"):
+        res = run_log(log, tmp_path / "out", _orb_config(), calib=[calib], gt_topic="/ground_truth/pose",
+                      progress=False, write_mcap=False)
+    assert any("not a rectified pair: the stereo VO rectifies them" in r.getMessage() for r in caplog.records)
+    used, T_used = camera_spy[0]  # the main pass: the raw cam0 with its distortion, mounted as the file says
+    assert used.distortion_model == "plumb_bob" and np.allclose(T_used, T_b_raw0, atol=1e-6)
+    assert res.ate_before is not None and res.ate_before < 0.05, res.ate_before
+
+
+def test_raw_pair_without_rectification_tracks_worse(tiny_log, tmp_path):
+    """The same raw pair given as if rectified (CameraInfo-style): the check that rectification matters."""
+    from slam_lcd.sensors.calibration import load_calibration
+    from slam_lcd.sensors.log_vo import visual_odometry_from_log
+    from slam_lcd.sensors.rectify import stereo_rectifier
+    from slam_lcd.eval.metrics import ate
+
+    log, calib_path, T_b_raw0 = _raw_stereo(tiny_log, tmp_path)
+    calib = load_calibration(calib_path)
+    c0, (c1, T_c1_c0) = calib.cameras[0], calib.stereo_partner(calib.cameras[0])
+    gt = _gt_of(tiny_log)
+    kw = dict(image_topic="/camera/image_raw", right_topic="/camera/right/image_raw", camera=c0.camera,
+              T_body_camera=T_b_raw0)
+    good = visual_odometry_from_log(log, rectifier=stereo_rectifier(c0.camera, c1.camera, T_c1_c0), **kw)
+    bad = visual_odometry_from_log(log, **kw)
+    err_good = ate(gt, good.result.trajectory(), "se3").rmse
+    assert err_good < 0.05, err_good
+    unrectified = bad.result.trajectory()  # rows do not match: tracking fails, or drifts far more
+    assert len(unrectified) < len(good.result.trajectory()) / 2 or ate(gt, unrectified, "se3").rmse > 2 * err_good
