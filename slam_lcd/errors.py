@@ -86,6 +86,10 @@ class ConfigError(InputError):
     """Unknown key, wrong type or bad value in a configuration file or override."""
 
 
+class CalibrationError(InputError):
+    """A camera calibration file (Kalibr camchain.yaml, EuRoC sensor.yaml) with a key missing or malformed."""
+
+
 class WeightsError(InputError):
     """Network weights missing, corrupt, or of the wrong shape."""
 
@@ -107,6 +111,7 @@ class PipelineError(SlamLcdError):
 
 
 _CONTEXT_KINDS = (DamagedImageError, InvalidPoseError, UnsortedStampsError, MessageEncodingError, TopicTypeError, ConfigError,
+                  CalibrationError,
                   CorruptLogError, WeightsError, VocabularyError, FileMissingError, InputError, PipelineError)
 
 

@@ -29,8 +29,9 @@ from .outputs.result import RunResult
 from .outputs.write import RUN_OUTPUTS, write_outputs, write_set
 from .progress import progress_bar
 from .sensors.messages import at_message, check_first_messages, decode_camera_of, decode_depth, decode_gray, decode_pose_of
-from .sensors.mounting import body_frame_of, mounting_from_camera_info, static_transforms
-from .sensors.topics import Topics, choose_topics, copyable_topics
+from .sensors.mounting import body_frame_of, calibrated_mounting, mounting_from_camera_info, static_transforms
+from .sensors.ground_truth import POSITION_ONLY_NOTE, decode_ground_truth, ground_truth_from_tf
+from .sensors.topics import Topics, choose_right_topic, choose_topics, copyable_topics, static_tf_topics
 from .types import Trajectory
 
 log = logging.getLogger(__name__)
@@ -68,6 +69,8 @@ def run_log(
     input_paths: dict | None = None,
     command_line: list[str] | None = None,
     overrides: list[str] | None = None,
+    calib=None,
+    right_topic: str | None = None,
 ) -> RunResult:
     """Correct the trajectory of ``log_path`` with loop closures; write outputs into ``out_dir``.
 
@@ -79,6 +82,11 @@ def run_log(
     ``extractor`` and ``vocab`` (a :class:`slam_lcd.vocab.Vocabulary`; None: the online
     vocabulary) are used as given, so a caller running many logs loads each once.
     ``command_line`` and ``overrides`` (the ``--set`` assignments) are only reported.
+    ``calib``: calibration file(s) (Kalibr camchain.yaml or EuRoC sensor.yaml, see
+    :mod:`slam_lcd.sensors.calibration`) or a loaded ``Calibration``; its camera and mounting
+    win over the log's CameraInfo and ``/tf_static``. A log without odometry gets the built-in
+    visual odometry: RGB-D on its depth topic, else stereo on ``right_topic`` (default: the
+    second camera found by :func:`slam_lcd.sensors.topics.choose_right_topic`).
     """
     cfg = validate_config(config or Config())
     log_path = Path(log_path)
@@ -87,8 +95,12 @@ def run_log(
         raise FileMissingError("no such log file or directory", log_path)
     if gt_file is not None and not Path(gt_file).is_file():
         raise FileMissingError("ground-truth trajectory file not found (--gt)", gt_file)
+    calibration = _calibration(calib)
+    extra_inputs = dict(input_paths or {})
+    if calibration is not None:
+        extra_inputs.update({f"--calib {i}": p for i, p in enumerate(calibration.sources)})
     outputs = OutputSet(out_dir, RUN_OUTPUTS)
-    outputs.check(run_inputs(log_path, gt_file, cfg, input_paths))
+    outputs.check(run_inputs(log_path, gt_file, cfg, extra_inputs))
     t_start = time.perf_counter()
     result = RunResult(out_dir=out_dir, log_path=str(log_path), command_line=command_line,
                        overrides=list(overrides or []))
@@ -100,32 +112,49 @@ def run_log(
             if reader.message_count == 0:
                 raise PipelineError("log holds no messages", log_path)
             topics = choose_topics(reader, image_topic, odom_topic, gt_topic, depth_topic)
+            calibrated = _calibrated_camera(calibration, topics, log_path)
             first = check_first_messages(reader, topics)
             result.topics = {k: v for k, v in vars(topics).items() if v}
             result.frames = _log_frames(first, topics)
             result.gt_source = (f"file {gt_file}" if gt_file is not None else
                                 f"topic {topics.gt}" if topics.gt else None)
+            gt_from_tf = None
+            if topics.gt_frames is not None:  # a TF chain: read before streaming (a tiny topic)
+                gt_from_tf = ground_truth_from_tf(reader, topics.gt, *topics.gt_frames, static_tf_topics(reader))
+            if topics.gt_position_only:
+                result.alignment = f"{cfg.eval.align}; {POSITION_ONLY_NOTE}"
+                log.warning("%s: %s", log_path, POSITION_ONLY_NOTE)
             mcap_wanted = write_mcap and cfg.run.write_mcap
             copy_topics = copyable_topics(reader, cfg.run.copy_images, log_path) if mcap_wanted else []
             vo_odometry = None
             if topics.odom is None:
+                right = None
                 if topics.depth is None:
-                    raise PipelineError(
-                        "log has no odometry topic (nav_msgs/Odometry) and no depth image for the built-in "
-                        "visual odometry; pass --odom-topic", log_path)
-                vo_odometry = _visual_odometry(log_path, topics, cfg)
+                    partner = calibration.stereo_partner(calibrated) if calibrated is not None else None
+                    right = choose_right_topic(reader, topics.image, right_topic,
+                                               partner[0].rostopic if partner is not None else None)
+                    if right is None:
+                        raise PipelineError(_no_odometry_reason(topics.image), log_path)
+                rectifier = _rectifier(calibration, calibrated, log_path) if right is not None else None
+                vo_odometry = _visual_odometry(log_path, topics, cfg, calibrated, right, rectifier)
             tf = static_transforms(reader, log_path)
             if cfg.run.loop_pictures:  # a working folder inside the staging folder: discarded with it on failure
                 from .outputs.loop_pictures import KeyframeAlbum
 
                 album = KeyframeAlbum(outputs.staging / ".loop_keyframes", cfg.lcd.descriptor_dtype)
             pipe = _make_pipeline(cfg, extractor, vocab, log_path, topics, album)
+            if calibrated is not None:  # the calibration file's camera (CameraInfo is not read then)
+                T_bc = (vo_odometry.T_body_camera if vo_odometry is not None else
+                        calibrated_mounting(cfg.frontend, calibrated, tf, body_frame_of(first.get(topics.odom))))
+                pipe.set_camera(calibrated.camera, T_bc)
             if vo_odometry is not None:  # built-in VO ran first: its poses are the odometry
                 for stamp, T, cov, segment_start in vo_odometry.odometry_samples():
                     pipe.add_odometry(stamp, T, cov, segment_start=segment_start)
             gt_traj_from_log = _drive(reader, topics, pipe, result, cfg, tf, body_frame_of(first.get(topics.odom)),
                                       vo_odometry, log_path, progress)
             result.log_duration_s = reader.duration_ns * 1e-9
+            if gt_from_tf is not None:
+                gt_traj_from_log = gt_from_tf
 
         notes: list[str] = []
         read_to_end = not result.interrupted
@@ -230,7 +259,7 @@ def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame,
                 bar.update(1)
             elif m.topic == topics.gt:
                 with at_message(m, log_path):
-                    T, _ = decode_pose_of(m)
+                    T = decode_ground_truth(m)
                 gt_st.append(m.stamp)
                 gt_T.append(T)
     except KeyboardInterrupt:
@@ -256,10 +285,66 @@ def _no_keyframe_reason(pipe, topics: Topics, n_frames: int) -> str:
             f"of {source} ({span}); nothing to correct")
 
 
-def _visual_odometry(log_path, topics: Topics, cfg):
-    """Built-in RGB-D visual odometry over the whole log (a first pass; see slam_lcd.sensors.log_vo)."""
+def _visual_odometry(log_path, topics: Topics, cfg, calibrated=None, right_topic: str | None = None,
+                     rectifier=None):
+    """Built-in RGB-D (or, with ``right_topic``, stereo) visual odometry over the whole log (a first
+    pass; see slam_lcd.sensors.log_vo)."""
     from .sensors.log_vo import visual_odometry_from_log
 
-    log.warning("%s: no odometry topic; running the built-in RGB-D visual odometry first", log_path)
+    kind = f"stereo visual odometry on {topics.image} + {right_topic}" if right_topic else \
+        f"RGB-D visual odometry on {topics.image} + {topics.depth}"
+    log.warning("%s: no odometry topic; running the built-in %s first", log_path, kind)
+    cam = calibrated.camera if calibrated is not None else None
+    T_bc = calibrated.T_body_camera if calibrated is not None else None
     return visual_odometry_from_log(log_path, cfg.frontend, image_topic=topics.image, depth_topic=topics.depth,
-                                    camera_info_topic=topics.camera_info)
+                                    right_topic=right_topic, camera_info_topic=topics.camera_info, camera=cam,
+                                    T_body_camera=T_bc, rectifier=rectifier)
+
+
+def _no_odometry_reason(image_topic: str) -> str:
+    """What a monocular log without odometry lacks, and the three ways to provide it."""
+    return (f"no odometry: the log has no odometry topic (nav_msgs/Odometry), no depth image and no second camera "
+            f"beside {image_topic}, and one camera alone gives no metric odometry; pass --odom-topic TOPIC (an "
+            f"odometry or pose topic of the log), --depth-topic TOPIC (RGB-D visual odometry) or --right-topic TOPIC "
+            f"(a second camera: stereo visual odometry; a raw pair is rectified with --calib)")
+
+
+def _rectifier(calibration, calibrated, log_path):
+    """None for a rectified pair (or one described by CameraInfo); else the rectification of the
+    calibrated pair (:mod:`slam_lcd.sensors.rectify`): the stereo VO matches along image rows."""
+    from .sensors.rectify import is_rectified, stereo_rectifier
+
+    if calibration is None or calibrated is None:
+        return None  # CameraInfo pairs: the right camera's projection gives the baseline of a rectified pair
+    partner = calibration.stereo_partner(calibrated)
+    if partner is None:
+        raise PipelineError(f"{calibration.describe()}: camera {calibrated.name} has no second camera with an "
+                            "extrinsic, so the stereo baseline is unknown", log_path)
+    if is_rectified(calibrated.camera, partner[0].camera, partner[1]):
+        return None
+    log.warning("%s: cameras %s and %s of %s are not a rectified pair: the stereo VO rectifies them", log_path,
+                calibrated.name, partner[0].name, calibration.describe())
+    return stereo_rectifier(calibrated.camera, partner[0].camera, partner[1], calibration.sources[0])
+
+
+def _calibration(calib):
+    """None, or the :class:`~slam_lcd.sensors.calibration.Calibration` of ``calib`` (paths or loaded)."""
+    from .sensors.calibration import Calibration, load_calibration
+
+    if calib is None or isinstance(calib, Calibration):
+        return calib
+    return load_calibration(calib)
+
+
+def _calibrated_camera(calibration, topics: Topics, log_path):
+    """The calibration's camera of the image topic; it wins over the log's CameraInfo (said in the log)."""
+    if calibration is None:
+        return None
+    cam = calibration.camera_for(topics.image)
+    if topics.camera_info is not None:
+        log.warning("%s: --calib wins: camera %s of %s is used, not the log's CameraInfo %s", log_path, cam.name,
+                    calibration.describe(), topics.camera_info)
+        topics.camera_info = None
+    else:
+        log.info("%s: camera %s of %s for %s", log_path, cam.name, calibration.describe(), topics.image)
+    return cam

@@ -72,17 +72,27 @@ def register(sub) -> None:
                         "topic without 'depth' or 'right' in its name)")
     p.add_argument("--odom-topic", default=None,
                    help="odometry topic (default: auto-detected, the only nav_msgs/Odometry topic; with none, the "
-                        "built-in RGB-D visual odometry runs on the depth topic)")
+                        "built-in visual odometry runs: RGB-D on the depth topic, else stereo on --right-topic)")
     p.add_argument("--depth-topic", default=None,
                    help="depth image topic (default: auto-detected, an image topic with 'depth' in its name in "
                         "the camera's namespace; none: loops are scaled by triangulation)")
+    p.add_argument("--right-topic", default=None,
+                   help="rectified right camera image topic, for the built-in stereo visual odometry of a log "
+                        "without odometry or depth (default: auto-detected, the calibration's second camera, the "
+                        "image topic with 'left' spelled 'right', or the only image topic named *right*)")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--gt-topic", default=None,
-                   help="ground-truth pose topic in the log (default: auto-detected, the only pose topic named "
-                        "*ground_truth* or *groundtruth*; none: no ATE)")
+                   help="ground truth in the log: a PoseStamped, PoseWithCovarianceStamped, Odometry, "
+                        "TransformStamped or PointStamped (position only: ATE on translation) topic, or a TF chain "
+                        "TOPIC:PARENT:CHILD such as /tf:world:kinect (default: auto-detected, the only pose topic "
+                        "named *ground_truth* or *groundtruth*; none: no ATE)")
     g.add_argument("--gt", default=None, metavar="FILE",
                    help="ground-truth trajectory file, TUM / KITTI / EuRoC (default: none; the log's "
                         "ground-truth topic if any)")
+    p.add_argument("--calib", action="append", default=None, metavar="FILE",
+                   help="camera calibration: a Kalibr camchain.yaml, or EuRoC camN/sensor.yaml files (repeat: cam0 "
+                        "first); wins over the log's CameraInfo and /tf_static mounting (default: none, the log's "
+                        "CameraInfo)")
     p.add_argument("--no-mcap", action="store_true",
                    help="do not write corrected.mcap (default: write it, run.write_mcap)")
     p.add_argument("--plot_mode", "--plot-mode", dest="plot_mode", default=None,
@@ -106,7 +116,8 @@ def run(args) -> int:
     res = run_log(args.log, Path(args.out), cfg, image_topic=args.image_topic, odom_topic=args.odom_topic,
                   depth_topic=args.depth_topic, gt_topic=args.gt_topic, gt_file=args.gt,
                   progress=not args.no_progress, write_mcap=not args.no_mcap, input_paths=config_inputs(args),
-                  command_line=getattr(args, "command_line", None), overrides=list(args.overrides))
+                  command_line=getattr(args, "command_line", None), overrides=list(args.overrides),
+                  calib=args.calib, right_topic=args.right_topic)
     for line in res.summary_lines():
         print(line)
     print(f"outputs in {res.out_dir}/ ({', '.join(res.outputs)})"

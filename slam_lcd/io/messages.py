@@ -27,6 +27,7 @@ Vector3 = _T["geometry_msgs/msg/Vector3"]
 Quaternion = _T["geometry_msgs/msg/Quaternion"]
 Pose = _T["geometry_msgs/msg/Pose"]
 PoseStamped = _T["geometry_msgs/msg/PoseStamped"]
+PointStamped = _T["geometry_msgs/msg/PointStamped"]
 PoseWithCovariance = _T["geometry_msgs/msg/PoseWithCovariance"]
 PoseWithCovarianceStamped = _T["geometry_msgs/msg/PoseWithCovarianceStamped"]
 Twist = _T["geometry_msgs/msg/Twist"]
@@ -161,6 +162,14 @@ def camera_info_msg(camera: CameraModel, stamp_ns: int, frame_id: str):
 
 def pose_stamped_msg(T: np.ndarray, stamp_ns: int, frame_id: str):
     return PoseStamped(header=header(stamp_ns, frame_id), pose=pose_msg(T))
+
+
+def point_stamped_msg(position, stamp_ns: int, frame_id: str):
+    """geometry_msgs/PointStamped (a position-only ground truth, e.g. EuRoC's Leica ``/leica/position``)."""
+    x, y, z = (float(v) for v in np.asarray(position, dtype=np.float64).reshape(3))
+    if not all(np.isfinite([x, y, z])):
+        raise InvalidPoseError(f"position ({x}, {y}, {z}) holds NaN or inf")
+    return PointStamped(header=header(stamp_ns, frame_id), point=Point(x=x, y=y, z=z))
 
 
 def pose_with_covariance_stamped_msg(T: np.ndarray, cov6x6: np.ndarray | None, stamp_ns: int, frame_id: str):

@@ -54,8 +54,17 @@ def _info_topic(image_topic: str) -> str:
 def visual_odometry_from_log(path, conf: FrontendConfig | None = None, *, image_topic: str = "/camera/image_raw",
                              depth_topic: str | None = None, right_topic: str | None = None,
                              camera_info_topic: str | None = None, right_camera_info_topic: str | None = None,
-                             extractor=None, max_frames: int | None = None) -> LogVo:
-    """VO over a log: RGB-D when ``depth_topic`` is given, stereo when ``right_topic`` is."""
+                             extractor=None, max_frames: int | None = None, camera: CameraModel | None = None,
+                             T_body_camera: np.ndarray | None = None, rectifier=None) -> LogVo:
+    """VO over a log: RGB-D when ``depth_topic`` is given, stereo when ``right_topic`` is.
+
+    ``camera`` (e.g. from a calibration file, :mod:`slam_lcd.sensors.calibration`) replaces the
+    CameraInfo topic (stereo: its ``baseline`` is used); ``T_body_camera`` replaces the
+    ``/tf_static`` mounting (the config's ``frontend.T_body_camera`` still wins when set).
+    ``rectifier`` (a :class:`~slam_lcd.sensors.rectify.StereoRectifier` of a raw calibrated pair):
+    each pair is rectified first; the VO runs on the rectified camera, mounted at
+    ``T_body_camera @ rectifier.T_cam0_rect``, so its poses are still of the body.
+    """
     conf = conf or FrontendConfig()
     if (depth_topic is None) == (right_topic is None):
         raise PipelineError("visual odometry needs exactly one of a depth topic (RGB-D) or a right image topic (stereo)")
@@ -64,12 +73,12 @@ def visual_odometry_from_log(path, conf: FrontendConfig | None = None, *, image_
     info_topic = camera_info_topic or _info_topic(image_topic)
     with open_log(path) as reader:
         topics = reader.topics
-        for t in (image_topic, aux_topic, info_topic):
+        for t in (image_topic, aux_topic) + ((info_topic,) if camera is None else ()):
             if t not in topics:
                 raise TopicNotFoundError(t, topics, reader.path)
-        camera = None
+        given_camera = camera is not None
         cam_frame = None
-        for m in reader.messages([info_topic]):
+        for m in (reader.messages([info_topic]) if not given_camera else ()):
             with at_message(m, reader.path, decoding=False):
                 camera = camera_from_camera_info(m.msg)
             cam_frame = m.msg.header.frame_id
@@ -77,7 +86,7 @@ def visual_odometry_from_log(path, conf: FrontendConfig | None = None, *, image_
         if camera is None:
             raise PipelineError(f"camera info topic {info_topic} has no messages; visual odometry needs the intrinsics",
                                 reader.path)
-        if mode == "stereo":
+        if mode == "stereo" and not given_camera:
             rinfo = right_camera_info_topic or _info_topic(right_topic)
             if rinfo in topics:
                 for m in reader.messages([rinfo]):
@@ -88,9 +97,15 @@ def visual_odometry_from_log(path, conf: FrontendConfig | None = None, *, image_
         tf = None
         if "/tf_static" in topics or "tf_static" in topics:
             tf = TfBuffer.from_log(reader, tf_topics=(), static_topics=("/tf_static",))
-        T_bc = camera_mounting(conf, tf, cam_frame)
-        vo = (RgbdOdometry(camera, conf, T_bc, extractor) if mode == "rgbd"
-              else StereoOdometry(camera, conf, T_bc, extractor))
+        T_bc = (camera_mounting(conf, tf, cam_frame) if T_body_camera is None or conf.T_body_camera is not None
+                else np.asarray(T_body_camera, np.float64))
+        vo_camera, vo_T_bc = camera, T_bc  # LogVo keeps the log's camera and mounting (the main pass's)
+        if rectifier is not None:
+            if mode != "stereo":
+                raise PipelineError("a stereo rectifier was given for RGB-D visual odometry")
+            vo_camera, vo_T_bc = rectifier.camera, T_bc @ rectifier.T_cam0_rect
+        vo = (RgbdOdometry(vo_camera, conf, vo_T_bc, extractor) if mode == "rgbd"
+              else StereoOdometry(vo_camera, conf, vo_T_bc, extractor))
         pending_img: dict[int, np.ndarray] = {}
         pending_aux: dict[int, np.ndarray] = {}
         n = 0
@@ -105,7 +120,8 @@ def visual_odometry_from_log(path, conf: FrontendConfig | None = None, *, image_
                 si = min(pending_img)
                 sa = min(pending_aux, key=lambda s: abs(s - si))
                 if abs(sa - si) <= PAIR_TOLERANCE_NS:
-                    vo.process(si, pending_img.pop(si), pending_aux.pop(sa))
+                    pair = (pending_img.pop(si), pending_aux.pop(sa))
+                    vo.process(si, *(rectifier.rectify(*pair) if rectifier is not None else pair))
                     for s in [s for s in pending_aux if s < sa]:
                         pending_aux.pop(s)
                     n += 1

@@ -16,6 +16,7 @@ from ..errors import DamagedImageError, MessageEncodingError, PipelineError, Sla
 from ..vision.camera import normalise_camera
 from ..io.decode import decode_camera_info, decode_compressed_image, decode_image, decode_pose
 from ..types import CameraModel
+from .ground_truth import decode_ground_truth
 from ..vision.gray import image_to_gray
 
 DEPTH_ENCODINGS = ("16UC1", "mono16", "32FC1")
@@ -90,7 +91,8 @@ def check_first_messages(reader, topics) -> dict:
     """Read and decode the first message of every chosen topic before any work is done."""
     roles = [("--image-topic", topics.image, decode_gray), ("--odom-topic", topics.odom, decode_pose_of),
              ("camera info", topics.camera_info, decode_camera_of),
-             ("--depth-topic", topics.depth, decode_depth), ("--gt-topic", topics.gt, decode_pose_of)]
+             ("--depth-topic", topics.depth, decode_depth),
+             ("--gt-topic", topics.gt if topics.gt_frames is None else None, decode_ground_truth)]
     first = {}
     for flag, topic, decode in roles:
         if topic is None or topic in first:

@@ -65,3 +65,12 @@ def mounting_from_camera_info(frontend_conf, tf: TfBuffer, camera_info_message, 
     """``T_body_camera`` for the camera of a CameraInfo message (its header names the camera frame)."""
     m = camera_info_message
     return camera_mounting(frontend_conf, tf, m.msg.header.frame_id, m.stamp, body_frame=body_frame)
+
+
+def calibrated_mounting(frontend_conf, calibrated_camera, tf: TfBuffer, body_frame: str | None) -> np.ndarray:
+    """``T_body_camera`` of a camera from a calibration file: the config's when set, else the file's
+    (Kalibr ``inv(T_cam_imu)``, EuRoC ``T_BS``: its body is taken as the odometry's body), else the
+    ``/tf_static`` rule of :func:`camera_mounting`."""
+    if frontend_conf.T_body_camera is None and calibrated_camera.T_body_camera is not None:
+        return np.asarray(calibrated_camera.T_body_camera, dtype=np.float64)
+    return camera_mounting(frontend_conf, tf, None, 0, body_frame=body_frame)

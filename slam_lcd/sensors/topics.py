@@ -2,8 +2,10 @@
 
 Explicit flags win; otherwise the log's only ``sensor_msgs/Image`` (or ``CompressedImage``)
 topic that is not a depth or right-stereo image, its ``CameraInfo`` in the same namespace,
-the depth image in the same namespace, the only ``nav_msgs/Odometry`` topic, and a
-ground-truth ``PoseStamped`` topic whose name says so.
+the depth image in the same namespace, the only ``nav_msgs/Odometry`` topic (not the
+ground truth), and a ground-truth pose topic whose name says so. ``--gt-topic`` may also be
+a ``PointStamped``, ``TransformStamped`` or a TF chain ``TOPIC:PARENT:CHILD``
+(:mod:`slam_lcd.sensors.ground_truth`).
 """
 from __future__ import annotations
 
@@ -11,6 +13,7 @@ import logging
 from dataclasses import dataclass
 
 from ..errors import PipelineError, TopicTypeError
+from .ground_truth import GT_TYPES, POINT_TYPE, split_tf_spec
 
 log = logging.getLogger(__name__)
 
@@ -18,7 +21,6 @@ IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
 CAMINFO_TYPE = "sensor_msgs/msg/CameraInfo"
 ODOM_TYPES = ("nav_msgs/msg/Odometry",)
 POSE_TYPES = ("geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped", "nav_msgs/msg/Odometry")
-GT_TYPES = (*POSE_TYPES, "geometry_msgs/msg/TransformStamped")
 TF_TYPE = "tf2_msgs/msg/TFMessage"
 
 
@@ -29,14 +31,22 @@ class Topics:
     camera_info: str | None = None
     depth: str | None = None
     gt: str | None = None
+    gt_frames: tuple[str, str] | None = None  # (parent, child) when the ground truth is a TF chain on ``gt``
+    gt_position_only: bool = False  # PointStamped ground truth
 
     def wanted(self) -> list[str]:
-        """The chosen topics, in the order they are listed here (each once)."""
-        return [t for t in (self.image, self.odom, self.camera_info, self.depth, self.gt) if t]
+        """The topics streamed, in the order they are listed here (each once; a TF ground truth is read first)."""
+        gt = self.gt if self.gt_frames is None else None
+        return [t for t in (self.image, self.odom, self.camera_info, self.depth, gt) if t]
 
 
 def _ns(topic: str) -> str:
     return topic.rsplit("/", 1)[0]
+
+
+def _gt_name(topic: str) -> bool:
+    """A topic whose name says it is ground truth (never taken as the odometry)."""
+    return "ground_truth" in topic or "groundtruth" in topic
 
 
 def _check_type(reader, flag: str, topic: str, allowed, what: str) -> None:
@@ -67,7 +77,8 @@ def choose_topics(reader, image_topic=None, odom_topic=None, gt_topic=None, dept
         odom_topic = reader.resolve_topics(odom_topic)[0]
         _check_type(reader, "--odom-topic", odom_topic, POSE_TYPES, "odometry")
     else:
-        odoms = [t for t, i in topics.items() if i.msgtype in ODOM_TYPES]
+        named_gt = reader.resolve_topics(split_tf_spec(gt_topic)[0])[0] if gt_topic is not None else None
+        odoms = [t for t, i in topics.items() if i.msgtype in ODOM_TYPES and t != named_gt and not _gt_name(t)]
         odom_topic = odoms[0] if len(odoms) == 1 else None
         if len(odoms) > 1:
             raise PipelineError(f"several odometry topics {odoms}; choose one with --odom-topic", path)
@@ -79,13 +90,50 @@ def choose_topics(reader, image_topic=None, odom_topic=None, gt_topic=None, dept
     else:
         depths = [t for t in images if "depth" in t.lower() and (_ns(t) == ns or _ns(_ns(t)) == ns)]
         depth_topic = depths[0] if depths else None
+    gt_frames = None
     if gt_topic is not None:
+        gt_topic, parent, child = split_tf_spec(gt_topic)
         gt_topic = reader.resolve_topics(gt_topic)[0]
-        _check_type(reader, "--gt-topic", gt_topic, GT_TYPES, "a pose")
+        if parent is not None:
+            _check_type(reader, "--gt-topic", gt_topic, (TF_TYPE,), "a TF topic for TOPIC:PARENT:CHILD")
+            gt_frames = (parent, child)
+        elif reader.topics[gt_topic].msgtype == TF_TYPE:
+            raise TopicTypeError(f"--gt-topic {gt_topic} carries TF: name the frames as {gt_topic}:PARENT:CHILD",
+                                 reader.path)
+        else:
+            _check_type(reader, "--gt-topic", gt_topic, GT_TYPES, "a pose or a position")
     else:
-        gts = [t for t, i in topics.items() if i.msgtype in POSE_TYPES and ("ground_truth" in t or "groundtruth" in t)]
+        gts = [t for t, i in topics.items() if i.msgtype in POSE_TYPES and _gt_name(t)]
         gt_topic = gts[0] if len(gts) == 1 else None
-    return Topics(image_topic, odom_topic, infos[0] if infos else None, depth_topic, gt_topic)
+    position_only = gt_topic is not None and gt_frames is None and topics[gt_topic].msgtype == POINT_TYPE
+    return Topics(image_topic, odom_topic, infos[0] if infos else None, depth_topic, gt_topic, gt_frames, position_only)
+
+
+def choose_right_topic(reader, image_topic: str, right_topic: str | None = None,
+                       calibrated_partner: str | None = None) -> str | None:
+    """The second camera of a stereo pair, for the stereo VO of a log without odometry or depth.
+
+    ``right_topic`` when given (checked); else the calibration's next camera (its ``rostopic``,
+    e.g. EuRoC's ``/cam1/image_raw``) when the log has it; else ``image_topic`` with ``left``
+    spelled ``right`` (KITTI's ``camera_gray_left`` / ``camera_gray_right``); else the only
+    image topic with ``right`` in its name under the same first namespace (``/camera/right/image_raw``).
+    """
+    topics = reader.topics
+    if right_topic is not None:
+        right_topic = reader.resolve_topics(right_topic)[0]
+        _check_type(reader, "--right-topic", right_topic, IMAGE_TYPES, "a camera image")
+        return right_topic
+    if calibrated_partner:
+        for t in topics:
+            if t.strip("/") == calibrated_partner.strip("/") and topics[t].msgtype in IMAGE_TYPES:
+                return t
+    swapped = image_topic.replace("left", "right")
+    if swapped != image_topic and swapped in topics and topics[swapped].msgtype in IMAGE_TYPES:
+        return swapped
+    root = image_topic.strip("/").split("/")[0]
+    rights = [t for t, i in topics.items() if i.msgtype in IMAGE_TYPES and "right" in t.lower()
+              and "depth" not in t.lower() and t.strip("/").split("/")[0] == root and t != image_topic]
+    return rights[0] if len(rights) == 1 else None
 
 
 def static_tf_topics(reader) -> list[str]:
