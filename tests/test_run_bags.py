@@ -169,7 +169,7 @@ def test_ground_truth_of_every_message_type(kind, tiny_log, baseline_run, tmp_pa
     assert res.ate_before == pytest.approx(baseline_run.ate_before, rel=1e-6, abs=1e-9)
     assert res.ate_after == pytest.approx(baseline_run.ate_after, rel=1e-6, abs=1e-9)
     rep = json.loads((tmp_path / "out" / "report.json").read_text())
-    assert ("position-only" in rep["ate"]["alignment"]) == (kind == "PointStamped")
+    assert rep["eval"]["gt_position_only"] == (kind == "PointStamped")
 
 
 @pytest.mark.parametrize("spec, expected", [("/tf", "name the frames as /tf:PARENT:CHILD"),

@@ -4,7 +4,8 @@ A log counts as done when its output folder holds a complete set (see
 :mod:`slam_lcd.outputs.output_set`) of a run of the same configuration on the same log:
 
 - no ``PARTIAL.txt`` (an interrupted or half-replaced set is redone);
-- ``report.json`` reads, says the run was not interrupted, and every output it lists exists;
+- ``report.json`` reads, says the run was not interrupted, and every output it lists (files, and
+  folders such as ``loops/``) exists;
 - ``config.yaml`` is the configuration this batch would run with, byte for byte (a changed
   ``--set`` redoes the log instead of serving stale results);
 - the log is not newer than the report (a re-recorded log is redone).
@@ -42,7 +43,7 @@ def completed_report(out_dir: str | Path, config: Config, log: str | Path) -> tu
     if not isinstance(report, dict) or report.get("interrupted", True):
         return None, "earlier outputs are partial"
     listed = report.get("outputs")
-    if not isinstance(listed, list) or not all(isinstance(n, str) and (out / n).is_file() for n in listed):
+    if not isinstance(listed, list) or not all(isinstance(n, str) and (out / n).exists() for n in listed):
         return None, "earlier outputs are incomplete"
     if saved_config != dump_config(config):
         return None, "earlier outputs are of another configuration"

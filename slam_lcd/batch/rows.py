@@ -69,12 +69,14 @@ def row_from_result(name: str, log, result) -> dict:
 def row_from_report(name: str, log, out_dir, report: dict, status: str = "skipped", message: str = "") -> dict:
     """The row of an earlier run, from the report.json it wrote (a skipped log)."""
     loops = report.get("loops") or {}
-    ate = report.get("ate") or None
+    ev = report.get("eval") or None  # report.json schema 1 (slam_lcd/outputs/report_schema.py)
+    ate = ev["ate"] if ev else None
     row = _base(name, log, out_dir, status, message)
     return _figures(row, frames=report["frames"], keyframes=report["keyframes"], proposed=loops["candidates"],
                     verified=loops["verified"], accepted=loops["accepted"], false_loops=loops.get("false_accepted"),
-                    ate_before=ate["before"]["rmse"] if ate else None, ate_after=ate["after"]["rmse"] if ate else None,
-                    alignment=ate["alignment"] if ate else "", wall_s=report["wall_s"], log_s=report["log_duration_s"])
+                    ate_before=ate["before"]["translation_m"]["rmse"] if ate else None,
+                    ate_after=ate["after"]["translation_m"]["rmse"] if ate else None,
+                    alignment=ev["alignment"] if ev else "", wall_s=report["wall_s"], log_s=report["log_duration_s"])
 
 
 def error_row(name: str, log, out_dir, message: str) -> dict:

@@ -55,7 +55,9 @@ def report_facts(result: RunResult, cfg, rows: list[dict], ate_before, ate_after
         ev = {"alignment": e.align, "t_max_diff_s": float(e.t_max_diff), "t_offset_s": float(e.t_offset),
               "rpe_delta": float(e.rpe_delta), "rpe_delta_unit": e.rpe_delta_unit,
               "ate": _before_after(ate_before, ate_after),
-              "rpe": _before_after(rpe_before, rpe_after) if rpe_before is not None else None}
+              "rpe": _before_after(rpe_before, rpe_after) if rpe_before is not None else None,
+              # PointStamped ground truth: ATE on translation only (the rotations are not known)
+              "gt_position_only": "position-only" in (result.alignment or "")}
     return {
         "schema": REPORT_SCHEMA_VERSION,
         "slam_lcd_version": __version__,

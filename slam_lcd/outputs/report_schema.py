@@ -62,8 +62,10 @@ REPORT_SCHEMA: dict[str, Any] = {
                                  "rejected_by_backend": {"type": "integer", "minimum": 0},
                                  "false_accepted": {"type": ["integer", "null"]}}},
         "eval": {"type": ["object", "null"],
-                 "required": ["alignment", "t_max_diff_s", "t_offset_s", "rpe_delta", "rpe_delta_unit", "ate", "rpe"],
+                 "required": ["alignment", "t_max_diff_s", "t_offset_s", "rpe_delta", "rpe_delta_unit", "ate", "rpe",
+                              "gt_position_only"],
                  "properties": {"alignment": {"enum": ["none", "se3", "sim3", "scale"]},
+                                "gt_position_only": {"type": "boolean"},
                                 "t_max_diff_s": _NUM, "t_offset_s": _NUM, "rpe_delta": _NUM,
                                 "rpe_delta_unit": {"enum": ["frames", "m"]},
                                 "ate": _BEFORE_AFTER, "rpe": {"type": ["object", "null"], **{
