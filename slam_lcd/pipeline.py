@@ -23,7 +23,6 @@ while it runs); keyframes reach the graph in order; one interrupted waiting for 
 """
 from __future__ import annotations
 
-import bisect
 import logging
 import time
 from collections import deque
@@ -36,10 +35,9 @@ import numpy as np
 from .backend import PoseGraph, correct_full_rate
 from .backend.pose_graph import ACCEPTED
 from .config import Config
-from .errors import InvalidPoseError, UnsortedStampsError
 from .frontend import KeyframeSelector
-from .geometry import interpolate_poses
 from .lcd import LoopDetector
+from .odometry_buffer import OdometryBuffer
 from .stage_timer import StageTimer, resident_kb
 from .thread_limits import limited_threads
 from .types import CameraModel, Keyframe, LoopClosure, Trajectory
@@ -100,9 +98,7 @@ class Pipeline:
         self.timer = StageTimer()
         self.keyframes: list[Keyframe] = []
         self.closures: list[LoopClosure] = []
-        self._odom_stamps: list[int] = []
-        self._odom_poses: list[np.ndarray] = []
-        self._odom_covs: list[np.ndarray | None] = []
+        self._odom = OdometryBuffer()
         self._pending: list[_Frame] = []
         # when the log carries depth, a frame waits for its depth image (or for the next frame):
         # message order at equal stamps differs between log formats, the result must not
@@ -138,14 +134,7 @@ class Pipeline:
         """
         if segment_start:
             self._segment_from = int(stamp_ns)
-        T = np.asarray(T_world_body, dtype=np.float64).reshape(4, 4)
-        if not np.all(np.isfinite(T)):
-            raise InvalidPoseError(f"odometry pose at stamp {stamp_ns} has NaN/inf values")
-        if self._odom_stamps and stamp_ns < self._odom_stamps[-1]:
-            raise UnsortedStampsError(f"odometry stamp {stamp_ns} is earlier than the previous one ({self._odom_stamps[-1]})")
-        self._odom_stamps.append(int(stamp_ns))
-        self._odom_poses.append(T)
-        self._odom_covs.append(None if covariance is None else np.asarray(covariance, float).reshape(6, 6))
+        self._odom.add(stamp_ns, T_world_body, covariance)
         return self._release(final=False)
 
     def add_image(self, stamp_ns: int, image: np.ndarray, *, depth: np.ndarray | None = None,
@@ -299,34 +288,20 @@ class Pipeline:
                 return self.feature_source(stamp, image)
             return self.extractor.extract(image)
 
-    def _odom_at(self, stamp: int):
-        """Odometry pose interpolated at ``stamp`` from its two neighbours (clamped at the ends),
-        and the covariance of the first sample at or after it."""
-        st = self._odom_stamps
-        j = bisect.bisect_left(st, stamp)
-        if j >= len(st):  # after the last sample: clamp to it
-            j = len(st) - 1
-            i = j
-        else:
-            i = max(j - 1, 0)  # st[i] < stamp <= st[j]
-        T = interpolate_poses(np.array(st[i:j + 1], np.int64), np.array(self._odom_poses[i:j + 1]),
-                              np.array([stamp], np.int64))[0]
-        return T, self._odom_covs[j]
-
     def _release(self, final: bool) -> list[LoopClosure]:
         """Process the frames odometry covers (all with ``final``); with ``expect_depth`` the newest waits for its depth."""
         out: list[LoopClosure] = []
-        if not self._odom_stamps:
+        if not self._odom:
             if final:
                 self._pending.clear()
             return out
-        last = self._odom_stamps[-1]
+        last = self._odom.stamps[-1]
         keep, ready = [], []
         newest = self._pending[-1] if self._pending else None
         for f in self._pending:
             complete = f.depth is not None or not self.expect_depth or f is not newest
             if (f.stamp <= last and complete) or final:
-                if f.stamp < self._odom_stamps[0]:
+                if f.stamp < self._odom.stamps[0]:
                     continue  # before the first odometry sample: no pose to attach
                 ready.append(f)
             else:
@@ -341,7 +316,7 @@ class Pipeline:
         return out
 
     def _process(self, f: _Frame) -> list[LoopClosure]:
-        T, cov = self._odom_at(f.stamp)
+        T, cov = self._odom.at(f.stamp)
         features = None
         if self.config.run.keyframe_on_overlap and self.config.frontend.kf_min_overlap > 0:
             features = self._extract(f.stamp, f.image)
@@ -385,7 +360,7 @@ class Pipeline:
         return self
 
     def odometry_trajectory(self) -> Trajectory:
-        return Trajectory(np.asarray(self._odom_stamps, np.int64), np.asarray(self._odom_poses).reshape(-1, 4, 4))
+        return self._odom.trajectory()
 
     def keyframe_trajectory(self) -> Trajectory:
         """Corrected keyframe poses (current iSAM2 estimate)."""
