@@ -13,7 +13,7 @@ Names are imported lazily so that ``slam_lcd.config`` (which imports
 """
 from __future__ import annotations
 
-import importlib
+from ..lazy_names import lazy_getattr
 
 _EXPORTS = {
     "PoseGraph": ".pose_graph",
@@ -36,7 +36,4 @@ _EXPORTS = {
 __all__ = sorted(_EXPORTS)
 
 
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        return getattr(importlib.import_module(_EXPORTS[name], __name__), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = lazy_getattr(__name__, _EXPORTS, globals())

@@ -10,7 +10,7 @@ module, which must not pull in the runner (and torch) with it.
 """
 from __future__ import annotations
 
-import importlib
+from ..lazy_names import lazy_getattr
 
 from .config import BatchConfig
 
@@ -29,9 +29,4 @@ _LAZY = {
 __all__ = ["BatchConfig", *_LAZY]
 
 
-def __getattr__(name: str):
-    if name in _LAZY:
-        value = getattr(importlib.import_module(_LAZY[name], __name__), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = lazy_getattr(__name__, _LAZY, globals())

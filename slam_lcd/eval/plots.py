@@ -39,6 +39,16 @@ def save_figure(fig: Figure, out: str | Path, dpi: int = 120) -> Path:
     return out
 
 
+def _finish(fig: Figure, ax, title: str, out) -> Figure:
+    """Grid, legend and title of a one-axes figure; written to ``out`` when given."""
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    ax.set_title(title)
+    if out is not None:
+        save_figure(fig, out)
+    return fig
+
+
 def _new_figure(size=(7.0, 6.0)) -> Figure:
     # a bare Figure (no pyplot): nothing global is touched, figures are garbage-collected
     return Figure(figsize=size)
@@ -76,12 +86,7 @@ def plot_trajectories_top(
     ax.set_xlabel(f"{'xyz'[a]} [m]")
     ax.set_ylabel(f"{'xyz'[b]} [m]")
     ax.set_aspect("equal", adjustable="datalim")
-    ax.grid(True, alpha=0.3)
-    ax.legend(loc="best", fontsize=8)
-    ax.set_title(title)
-    if out is not None:
-        save_figure(fig, out)
-    return fig
+    return _finish(fig, ax, title, out)
 
 
 def plot_error_over_time(
@@ -101,12 +106,7 @@ def plot_error_over_time(
         labels.add(res.alignment.label)
     ax.set_xlabel("time [s]")
     ax.set_ylabel("translation error [m]")
-    ax.grid(True, alpha=0.3)
-    ax.legend(loc="best", fontsize=8)
-    ax.set_title(title or f"ATE over time ({', '.join(sorted(labels))})")
-    if out is not None:
-        save_figure(fig, out)
-    return fig
+    return _finish(fig, ax, title or f"ATE over time ({', '.join(sorted(labels))})", out)
 
 
 def _top_view_panel(ax1, ref: Trajectory, result, est_name: str, ref_name: str, plane: str) -> None:
@@ -246,9 +246,4 @@ def plot_run_trajectories(
     else:
         ax.set_aspect("equal", adjustable="datalim")
         ax.autoscale_view()
-    ax.grid(True, alpha=0.3)
-    ax.legend(loc="best", fontsize=8)
-    ax.set_title(title)
-    if out is not None:
-        save_figure(fig, out)
-    return fig
+    return _finish(fig, ax, title, out)

@@ -9,7 +9,7 @@ that needs no network (``slam-lcd info``), must not pay torch's import time.
 """
 from __future__ import annotations
 
-import importlib
+from ..lazy_names import lazy_getattr
 
 from .config import FeaturesConfig
 
@@ -26,9 +26,4 @@ _LAZY = {
 __all__ = ["FeaturesConfig", *_LAZY]
 
 
-def __getattr__(name: str):
-    if name in _LAZY:
-        value = getattr(importlib.import_module(_LAZY[name], __name__), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = lazy_getattr(__name__, _LAZY, globals())
