@@ -108,3 +108,24 @@ def test_first_accepted_mode_verifies_fewer_candidates_and_records_the_rest(corr
     assert counts["all"][0] == counts["first_accepted"][0]  # every candidate is listed either way
     assert counts["all"][1] == 0 and counts["first_accepted"][1] > 0
     assert counts["first_accepted"][2] < counts["all"][2]  # fewer graph verifications
+
+
+def test_auto_stops_early_only_for_chains_with_two_checks(corridor, superpoint_weights):
+    """verify_until='auto': graph+ransac stops at the first accepted candidate and accepts the same
+    number of loops as verifying all (none false); graph-only keeps verifying all candidates."""
+    from slam_lcd.lcd.config import stops_at_first_accepted
+
+    assert stops_at_first_accepted(LcdConfig(verify="graph+ransac"))
+    assert stops_at_first_accepted(LcdConfig(verify="ransac"))
+    assert not stops_at_first_accepted(LcdConfig(verify="graph"))
+    assert not stops_at_first_accepted(LcdConfig(verify="graph+ransac", verify_until="all"))
+    feats = corridor_features(str(corridor), "superpoint", str(superpoint_weights))
+    gt = load_loop_matrix(corridor / "samples_GT.bmp", [f"{i}.jpg" for i in range(1, 85)])
+    closures = {}
+    for mode in ("all", "auto"):
+        det = LoopDetector(LcdConfig(verify="graph+ransac", pose=False, verify_until=mode))
+        for k, f in enumerate(feats):
+            det.add(Keyframe(k, k * 1_000_000_000, np.eye(4), features=f))
+        assert all(gt[c.query_id, c.match_id] for c in det.closures)
+        closures[mode] = len(det.closures)
+    assert closures["auto"] == closures["all"] > 30

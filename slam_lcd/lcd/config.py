@@ -22,11 +22,12 @@ class LcdConfig:
     match_max_distance_orb: float | None = 64.0  # max Hamming distance between ORB descriptors (None: off)
     # 'all': every top-K candidate is verified and the one with the most verified
     # correspondences wins. 'first_accepted': candidates are verified in BoW order until one is
-    # accepted (the rest are recorded as skipped): graph verification ~4x cheaper per keyframe
-    # on the demo (29 vs 110 ms), same 0 false loops there, but with graph-only verification
-    # on the corridor it accepts a false loop that 'all' avoids, so it is not the default.
-    # Evaluation (run_all_checks) always verifies all.
-    verify_until: Literal["all", "first_accepted"] = "all"
+    # accepted (the rest are recorded as skipped). 'auto' (default): 'first_accepted' when the
+    # chain has two independent checks (graph+ransac) or is RANSAC alone, 'all' for graph-only
+    # and BoW-only chains. On the corridor, graph+ransac and ransac accept the same loops either
+    # way (0 false) with half the graph verifications; graph-only stopping early accepts one
+    # false loop that 'all' rejects (docs/lcd.md). Evaluation (run_all_checks) always verifies all.
+    verify_until: Literal["auto", "all", "first_accepted"] = "auto"
     verify_max_matches: int = 400  # budget: at most this many one-to-one matches go to graph/RANSAC/pose (0: all)
     verify_spread_cells: int = 4  # budget picks the best by distance round-robin over an NxN grid of the query image (0: globally best)
 
@@ -64,3 +65,10 @@ class LcdConfig:
     # --- temporal consistency (DBoW2-style) ---
     temporal_k: int = 0  # accept only after k consecutive consistent detections (0: off)
     temporal_window: int = 3  # two detections are consistent if their match ids differ by <= this
+
+
+def stops_at_first_accepted(conf: LcdConfig) -> bool:
+    """Whether verification of a keyframe's candidates stops at the first accepted one (``verify_until``)."""
+    if conf.verify_until == "auto":
+        return conf.verify in ("graph+ransac", "ransac")
+    return conf.verify_until == "first_accepted"

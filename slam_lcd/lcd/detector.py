@@ -21,7 +21,7 @@ from ..errors import InputError
 from ..features.matching import mutual_nn_match_bf
 from ..types import CameraModel, Features, Keyframe, LoopClosure
 from ..vision.camera import default_camera
-from .config import LcdConfig
+from .config import LcdConfig, stops_at_first_accepted
 from .geometry import EpipolarVerdict, PoseVerdict, estimate_loop_pose, keyframe_points3d, verify_epipolar
 from .budget import select_matches
 from .graph import GraphVerdict, verify_graph
@@ -267,7 +267,7 @@ class LoopDetector:
             )
         clock.lap("bow_query")
         records = []
-        stop = c.verify_until == "first_accepted" and not self.run_all_checks
+        stop = stops_at_first_accepted(c) and not self.run_all_checks
         for rank, cand in enumerate(candidates):
             if stop and any(r.accepted for r in records):
                 # bounded work per keyframe: the BoW ranking already put the likeliest first
