@@ -162,10 +162,13 @@ class LoopDetector:
     vocabulary. ``extractor``: a :class:`slam_lcd.features.Extractor` used when a keyframe
     arrives without features. ``run_all_checks``: run graph and RANSAC verification on every
     candidate whatever ``conf.verify`` is (evaluation compares the modes on one run).
+    ``retrieval_depth``: keep, per query, the ids of the best ``max(top_k, retrieval_depth)``
+    BoW candidates in ``detector.retrieved`` (evaluation's Recall@N of retrieval; only the
+    first ``top_k`` are verified). 0: nothing kept.
     """
 
     def __init__(self, conf: LcdConfig | None = None, vocab=None, extractor=None, *, vocab_conf=None,
-                 run_all_checks: bool = False):
+                 run_all_checks: bool = False, retrieval_depth: int = 0):
         from ..vocab import BowDatabase
 
         self.conf = conf or LcdConfig()
@@ -178,6 +181,8 @@ class LoopDetector:
         self.db = BowDatabase(vocab, vocab_conf)
         self.extractor = extractor
         self.run_all_checks = run_all_checks
+        self.retrieval_depth = int(retrieval_depth)
+        self.retrieved: dict[int, list[int]] = {}  # query id -> BoW-ranked match ids (with retrieval_depth)
         self.records: list[CandidateRecord] = []
         self.last_part_seconds: dict[str, float] = {}  # seconds per part of the last add()
         self.closures: list[LoopClosure] = []
@@ -262,9 +267,12 @@ class LoopDetector:
         candidates = []
         if len(self.db) and len(feats):
             candidates = self.db.query(
-                feats.descriptors, top_k=c.top_k, exclude_recent_s=c.exclude_recent_s,
+                feats.descriptors, top_k=max(c.top_k, self.retrieval_depth), exclude_recent_s=c.exclude_recent_s,
                 exclude_recent_n=c.exclude_recent_n, query_id=kf.id, stamp_ns=int(kf.stamp),
             )
+        if self.retrieval_depth > 0:
+            self.retrieved[kf.id] = [cand.match_id for cand in candidates]
+        candidates = candidates[:c.top_k]
         clock.lap("bow_query")
         records = []
         stop = stops_at_first_accepted(c) and not self.run_all_checks
