@@ -207,11 +207,12 @@ class LoopDetector:
         return kf.features
 
     def _match(self, dq: np.ndarray, dm: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """One-to-one matches, distances and symmetric ratios (see ``mutual_nn_match_symmetric``)."""
+        """One-to-one matches, distances and symmetric ratios (None when no ratio test is on; ``mutual_nn_match_symmetric``)."""
         c = self.conf
         binary = dq.dtype == np.uint8
         max_d = c.match_max_distance_orb if binary else c.match_max_distance_sp
-        return mutual_nn_match_symmetric(dq, dm, max_distance=max_d)
+        return mutual_nn_match_symmetric(dq, dm, max_distance=max_d,
+                                         with_ratios=c.match_ratio is not None or c.graph_match_ratio is not None)
 
     def memory_bytes(self) -> dict[str, int]:
         """Bytes the detector holds for its past keyframes: descriptors (RAM / file) and the rest."""

@@ -51,8 +51,8 @@ def canonical_flip(fa: Features, da: np.ndarray, fb: Features, db: np.ndarray) -
     return _fingerprint(fa, da) > _fingerprint(fb, db)
 
 
-def _ratio_mask(ratios: np.ndarray, ratio: float | None) -> np.ndarray:
-    return np.ones(len(ratios), bool) if ratio is None else ratios < ratio
+def _ratio_mask(ratios: np.ndarray | None, n: int, ratio: float | None) -> np.ndarray:
+    return np.ones(n, bool) if ratio is None else ratios < ratio
 
 
 def _budget(matches, distances, feats_first: Features, conf: LcdConfig) -> np.ndarray:
@@ -67,7 +67,7 @@ def check_pair(fq: Features, fm: Features, dq: np.ndarray, dm: np.ndarray, cam_q
                conf: LcdConfig, *, graph: bool, ransac: bool, graph_ransac: bool, match, clock=None) -> PairChecks:
     """Match and verify (query, match) in the canonical orientation; results in the caller's orientation.
 
-    ``match(d1, d2) -> (matches, distances, ratios)`` is the symmetric matcher; ``graph``,
+    ``match(d1, d2) -> (matches, distances, ratios or None)`` is the symmetric matcher; ``graph``,
     ``ransac``, ``graph_ransac``: which checks run (RANSAC on the graph's survivors only when
     the graph accepted).
     """
@@ -75,12 +75,14 @@ def check_pair(fq: Features, fm: Features, dq: np.ndarray, dm: np.ndarray, cam_q
     f1, f2, d1, d2, c1, c2 = (fm, fq, dm, dq, cam_m, cam_q) if flip else (fq, fm, dq, dm, cam_q, cam_m)
     matches, distances, ratios = match(d1, d2)
     order = np.argsort(matches[:, 0], kind="stable")  # rows by the first image's index, as the matcher gives them
-    matches, distances, ratios = matches[order], distances[order], ratios[order]
-    g_keep = _ratio_mask(ratios, conf.graph_match_ratio)
-    r_keep = _ratio_mask(ratios, conf.match_ratio)
+    matches, distances = matches[order], distances[order]
+    ratios = ratios[order] if ratios is not None else None
+    g_keep = _ratio_mask(ratios, len(matches), conf.graph_match_ratio)
+    r_keep = _ratio_mask(ratios, len(matches), conf.match_ratio)
     g_all, r_all = matches[g_keep], matches[r_keep]
     g_matches = _budget(g_all, distances[g_keep], f1, conf)
-    r_matches = _budget(r_all, distances[r_keep], f1, conf)
+    same = conf.graph_match_ratio == conf.match_ratio  # one set for both chains (the default: no ratio test)
+    r_matches = g_matches if same else _budget(r_all, distances[r_keep], f1, conf)
     if clock is not None:
         clock.lap("matching")
     k1, k2 = f1.keypoints, f2.keypoints
@@ -97,7 +99,8 @@ def check_pair(fq: Features, fm: Features, dq: np.ndarray, dm: np.ndarray, cam_q
     if clock is not None:
         clock.lap("ransac")
     if flip:  # back to (query, match) columns; row order (and so every mask and ``kept``) stays
-        g_matches, r_matches = g_matches[:, ::-1].copy(), r_matches[:, ::-1].copy()
+        g_matches = g_matches[:, ::-1].copy()
+        r_matches = g_matches if same else r_matches[:, ::-1].copy()
         for v in (out_ransac, out_rg):
             if v is not None and v.R_query_match is not None:
                 v.R_query_match = v.R_query_match.T
