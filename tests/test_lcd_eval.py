@@ -144,3 +144,21 @@ def test_cli_eval_lcd_bad_input(tmp_path, small_corridor, capsys):
     assert "missing.bmp" in err and "Traceback" not in err
     (tmp_path / "bad.npy").write_bytes(b"not numpy")
     assert main(["eval-lcd", str(folder), "--gt", str(tmp_path / "bad.npy"), "--out", str(tmp_path / "o")]) == 2
+
+
+def test_cli_eval_lcd_recall_per_place_with_a_gt_trajectory(tmp_path, capsys):
+    """--gt-max-dist: loops from GT poses, and the revisit places found per chain in the table and summary."""
+    from slam_lcd.sim import make_demo_log
+
+    make_demo_log(tmp_path / "log", "folder", frames=60, camera_rate=1.0, width=320, height=240)
+    out = tmp_path / "eval"
+    rc = main(["eval-lcd", str(tmp_path / "log" / "image"), "--gt", str(tmp_path / "log" / "groundtruth.txt"),
+               "--gt-max-dist", "1.0", "--features", "orb", "--exclude-recent", "20", "--no-feature-cache",
+               "--no-progress", "--out", str(out)])
+    assert rc == 0
+    assert "places" in capsys.readouterr().out
+    places = json.loads((out / "summary.json").read_text())["revisit_places"]
+    assert set(places) == {"none", "ransac", "graph", "graph+ransac"}
+    n = places["graph"]["places"]
+    assert n >= 5 and all(p["places"] == n and 0 <= p["found"] <= n for p in places.values())
+    assert places["graph+ransac"]["found"] >= 1
