@@ -95,6 +95,7 @@ RANGES: dict[str, str] = {
     "lcd.exclude_recent_n": "[0, inf)",
     "lcd.exclude_recent_s": "[0, inf)",
     "lcd.match_ratio": "(0, 1]",
+    "lcd.graph_match_ratio": "(0, 1]",
     "lcd.match_max_distance_sp": "(0, 2]",  # SuperPoint descriptors are unit vectors
     "lcd.match_max_distance_orb": "(0, 256]",  # Hamming distance of 256 bits
     "lcd.graph_min_matches": "[3, inf)",
@@ -106,6 +107,7 @@ RANGES: dict[str, str] = {
     "lcd.graph_remove_fraction": "(0, 1]",
     "lcd.graph_max_iterations": "[0, inf)",
     "lcd.graph_min_separation_px": "[0, inf)",
+    "lcd.graph_knn": "[0, inf)",
     "lcd.ransac_threshold_px": "(0, inf)",
     "lcd.ransac_confidence": "(0, 1)",
     "lcd.ransac_min_inliers": "[5, inf)",  # five-point essential matrix

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from slam_lcd.lcd import LcdConfig, LoopDetector
-from slam_lcd.lcd.evaluation import format_table, load_loop_matrix, precision_recall
+from slam_lcd.lcd.evaluation import (format_retrieval, format_table, load_loop_matrix, precision_recall,
+                                     retrieval_recall)
 from slam_lcd.types import Keyframe
 
 from lcd_corridor_cache import corridor_features  # tests/ is on sys.path (pytest rootdir import)
@@ -22,10 +23,11 @@ pytestmark = pytest.mark.slow
 def _run(folder, kind, weights):
     feats = corridor_features(str(folder), kind, str(weights) if weights else None)
     conf = LcdConfig(pose=False)
-    det = LoopDetector(conf, run_all_checks=True)
+    det = LoopDetector(conf, run_all_checks=True, retrieval_depth=10)
     for k, f in enumerate(feats):
         det.add(Keyframe(k, k * 1_000_000_000, np.eye(4), features=f))
     gt = load_loop_matrix(folder / "samples_GT.bmp", [f"{i}.jpg" for i in range(1, 85)])
+    det.recall_at = retrieval_recall(det.retrieved, gt, conf.exclude_recent_n)
     return {m: precision_recall(det.records, gt, m, conf.exclude_recent_n) for m in MODES}, det
 
 
@@ -49,6 +51,8 @@ def test_corridor_table(sp_results, orb_results, capsys):
         print("\n[lcd corridor] recall at 100% precision, precision / recall of all detections (44 loop queries)")
         print(format_table(list(sp_results[0].values()), "superpoint"))
         print(format_table(list(orb_results[0].values()), "orb").split("\n", 1)[1])
+        print(format_retrieval(sp_results[1].recall_at, "superpoint"))
+        print(format_retrieval(orb_results[1].recall_at, "orb"))
 
 
 def test_superpoint_graph_beats_ransac_at_full_precision(sp_results):

@@ -70,3 +70,22 @@ def test_every_candidate_recorded(demo_run):
         assert r.reason == "ok" if r.accepted else r.reason != "ok"
         row = r.row()
         assert {"bow_score", "n_matches", "graph_score", "ransac_inliers", "reason"} <= set(row)
+
+
+def test_demo_pairs_same_verdict_when_query_and_match_swap(demo_run):
+    """Every candidate pair of the demo run: graph, RANSAC and graph+RANSAC verdicts do not depend on the roles."""
+    from slam_lcd.lcd.pair import check_pair
+
+    det, *_ = demo_run
+    c = det.conf
+    kw = dict(graph=True, ransac=True, graph_ransac=True, match=det._match)
+    pairs = sorted({(r.query_id, r.match_id) for r in det.records})
+    assert len(pairs) > 30
+    for q, m in pairs:
+        eq, em = det._entries[q], det._entries[m]
+        dq, dm = det._store.get(q), det._store.get(m)
+        ab = check_pair(eq.features, em.features, dq, dm, eq.camera, em.camera, c, **kw)
+        ba = check_pair(em.features, eq.features, dm, dq, em.camera, eq.camera, c, **kw)
+        for x, y in ((ab.graph, ba.graph), (ab.ransac, ba.ransac), (ab.ransac_on_graph, ba.ransac_on_graph)):
+            assert (x.accepted, x.reason) == (y.accepted, y.reason), (q, m)
+        assert ab.graph.n_nodes == ba.graph.n_nodes and ab.ransac_on_graph.inliers == ba.ransac_on_graph.inliers

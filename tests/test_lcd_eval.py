@@ -11,7 +11,8 @@ import pytest
 from slam_lcd.cli.main import main
 from slam_lcd.errors import InputError
 from slam_lcd.lcd import CandidateRecord, TemporalConsistency
-from slam_lcd.lcd.evaluation import load_loop_matrix, loops_from_poses, precision_recall
+from slam_lcd.lcd.evaluation import (average_precision, load_loop_matrix, loops_from_poses, place_recall,
+                                     precision_recall, retrieval_recall, revisit_places)
 
 
 def test_gt_formats_agree(tmp_path, shared_data):
@@ -54,6 +55,34 @@ def test_precision_recall_bookkeeping():
     assert res.n_positives == 3 and res.n_detections == 4 and res.n_true == 2
     assert res.recall_at_100p == pytest.approx(1 / 3)
     assert res.precision_all == pytest.approx(0.5) and res.recall_all == pytest.approx(2 / 3)
+    # sorted by score: 6 TP (P 1, R 1/3), 7 FP, 8 TP (P 2/3, R 2/3), 9 FP -> AP = 1/3 * 1 + 1/3 * 2/3
+    assert res.auc == pytest.approx(1 / 3 + 2 / 9)
+    assert average_precision(np.array([1.0, 1.0]), np.array([0.5, 1.0])) == pytest.approx(1.0)
+    assert average_precision(np.zeros(0), np.zeros(0)) == 0.0
+
+
+def test_retrieval_recall_at_n():
+    gt = np.zeros((10, 10), bool)
+    for q, m in [(6, 1), (7, 2), (8, 3)]:
+        gt[q, m] = gt[m, q] = True
+    retrieved = {6: [1, 0], 7: [0, 4, 2], 9: [1]}  # 8 retrieved nothing
+    r = retrieval_recall(retrieved, gt, exclude_recent_n=3, ns=(1, 2, 3))
+    assert r == {1: pytest.approx(1 / 3), 2: pytest.approx(1 / 3), 3: pytest.approx(2 / 3)}
+
+
+def test_recall_per_revisit_place():
+    # a straight line driven twice: keyframes 0-9 at x = 0..9 m, then 10-19 back at the same x
+    n = 20
+    pos = np.zeros((n, 3))
+    pos[:10, 0] = np.arange(10)
+    pos[10:, 0] = np.arange(10)
+    gt = np.zeros((n, n), bool)
+    for k in range(10):
+        gt[10 + k, k] = gt[k, 10 + k] = True
+    places = revisit_places(pos, gt, exclude_recent_n=5, place_size_m=2.5)
+    assert [p.tolist() for p in places] == [[10, 11, 12], [13, 14, 15], [16, 17, 18], [19]]
+    recs = [_rec(11, 1, 0.5), _rec(13, 9, 0.4), _rec(17, 7, 0.3)]  # 13 -> 9 is false
+    assert place_recall(recs, gt, "none", places) == (2, 4)
 
 
 def test_temporal_consistency():
@@ -96,6 +125,9 @@ def test_cli_eval_lcd_writes_outputs(small_corridor, tmp_path, capsys):
         assert (out / name).is_file(), name
     summary = json.loads((out / "summary.json").read_text())
     assert summary["frames"] == 12 and len(summary["results"]) == 4
+    assert "AUC" in text and "R@10" in text
+    assert set(summary["retrieval_recall_at"]) == {"1", "5", "10"}
+    assert all(0.0 <= r["pr_auc"] <= 1.0 for r in summary["results"])
     with open(out / "candidates.csv") as fh:
         rows = list(csv.DictReader(fh))
     assert rows and {"query", "match", "bow_score", "graph_score", "ransac_inliers", "gt_loop"} <= set(rows[0])
@@ -112,3 +144,21 @@ def test_cli_eval_lcd_bad_input(tmp_path, small_corridor, capsys):
     assert "missing.bmp" in err and "Traceback" not in err
     (tmp_path / "bad.npy").write_bytes(b"not numpy")
     assert main(["eval-lcd", str(folder), "--gt", str(tmp_path / "bad.npy"), "--out", str(tmp_path / "o")]) == 2
+
+
+def test_cli_eval_lcd_recall_per_place_with_a_gt_trajectory(tmp_path, capsys):
+    """--gt-max-dist: loops from GT poses, and the revisit places found per chain in the table and summary."""
+    from slam_lcd.sim import make_demo_log
+
+    make_demo_log(tmp_path / "log", "folder", frames=60, camera_rate=1.0, width=320, height=240)
+    out = tmp_path / "eval"
+    rc = main(["eval-lcd", str(tmp_path / "log" / "image"), "--gt", str(tmp_path / "log" / "groundtruth.txt"),
+               "--gt-max-dist", "1.0", "--features", "orb", "--exclude-recent", "20", "--no-feature-cache",
+               "--no-progress", "--out", str(out)])
+    assert rc == 0
+    assert "places" in capsys.readouterr().out
+    places = json.loads((out / "summary.json").read_text())["revisit_places"]
+    assert set(places) == {"none", "ransac", "graph", "graph+ransac"}
+    n = places["graph"]["places"]
+    assert n >= 5 and all(p["places"] == n and 0 <= p["found"] <= n for p in places.values())
+    assert places["graph+ransac"]["found"] >= 1

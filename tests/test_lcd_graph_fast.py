@@ -16,6 +16,11 @@ from slam_lcd.lcd.budget import select_matches
 from slam_lcd.lcd.segments import crosses_any, crossing_counts
 
 
+def DELAUNAY(**kw) -> LcdConfig:
+    """The reference scores a node's neighbourhood by its Delaunay neighbours (``graph_knn=0``)."""
+    return LcdConfig(graph_knn=0, **kw)
+
+
 def _assert_same_verdict(v, w):
     assert (w.accepted, w.reason, w.n_nodes, w.n_matches, w.iterations) == \
         (v.accepted, v.reason, v.n_nodes, v.n_matches, v.iterations)
@@ -93,12 +98,12 @@ def _scenes(rng, count):
 @pytest.fixture(scope="module")
 def random_cases():
     """Random scenes (0-100% wrong matches) with the reference's verdict, computed once."""
-    exact = LcdConfig(graph_early_exit=False)
+    exact = DELAUNAY(graph_early_exit=False)
     return [(pq, pm, m, ref.verify_graph(pq, pm, m, exact)) for pq, pm, m in _scenes(np.random.default_rng(10), 50)]
 
 
 def test_verify_graph_identical_to_reference_on_random_match_sets(random_cases):
-    exact = LcdConfig(graph_early_exit=False)
+    exact = DELAUNAY(graph_early_exit=False)
     for pq, pm, m, v in random_cases:
         _assert_same_verdict(v, verify_graph(pq, pm, m, exact))
     accepted = sum(v.accepted for *_, v in random_cases)
@@ -108,7 +113,7 @@ def test_verify_graph_identical_to_reference_on_random_match_sets(random_cases):
 def test_early_exit_keeps_every_decision(random_cases):
     exits = 0
     for pq, pm, m, v in random_cases:
-        w = verify_graph(pq, pm, m, LcdConfig(graph_early_exit=True))
+        w = verify_graph(pq, pm, m, DELAUNAY(graph_early_exit=True))
         assert w.accepted == v.accepted
         if v.accepted or not w.stopped_early:
             _assert_same_verdict(v, w)
@@ -134,9 +139,9 @@ def _corridor_pairs():
 
 
 def test_verify_graph_identical_to_reference_on_corridor_matches(corridor_sp):
-    conf = LcdConfig()
-    exact = LcdConfig(graph_early_exit=False)
-    loose = LcdConfig(graph_early_exit=False, match_max_distance_sp=1.0, match_ratio=None)  # many wrong matches
+    conf = DELAUNAY()
+    exact = DELAUNAY(graph_early_exit=False)
+    loose = DELAUNAY(graph_early_exit=False, match_max_distance_sp=1.0, match_ratio=None)  # many wrong matches
     seen = {True: 0, False: 0}
     for q, m in _corridor_pairs():
         fq, fm = corridor_sp[q], corridor_sp[m]

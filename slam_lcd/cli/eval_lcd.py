@@ -4,6 +4,8 @@ Runs the loop detector over an image folder (or an image topic of a log), scores
 candidate with every verification check, and writes, under ``--out``: ``candidates.csv``
 (every candidate with its evidence and ground truth), ``pr.csv`` (precision-recall per
 mode), ``pr.png`` (the curves), ``summary.json`` and the resolved ``config.yaml``.
+Besides recall at 100% precision it reports the area under each PR curve, Recall@1/5/10 of
+BoW retrieval and, when the ground truth is a trajectory, the revisit places found.
 """
 from __future__ import annotations
 
@@ -21,6 +23,7 @@ from .run import add_alias, add_config_args, config_from_args
 log = logging.getLogger(__name__)
 
 MODES = ("none", "ransac", "graph", "graph+ransac")
+RECALL_AT = (1, 5, 10)  # Recall@N of retrieval
 EVAL_OUTPUTS = ("candidates.csv", "pr.csv", "pr.png", "summary.json", "config.yaml")
 
 
@@ -62,7 +65,8 @@ def register(sub) -> None:
 def run(args) -> int:
     from ..config import validate_config
     from ..lcd import LoopDetector
-    from ..lcd.evaluation import format_table, load_loop_matrix, precision_recall
+    from ..lcd.evaluation import (format_retrieval, format_table, load_loop_matrix, place_recall, precision_recall,
+                                  retrieval_recall, revisit_places)
     from ..outputs.output_set import OutputSet
     from ..sensors.frames import folder_frames, frame_to_keyframe, log_frames
     from ..progress import progress_bar
@@ -94,8 +98,9 @@ def run(args) -> int:
             raise InputError("SOURCE is not an image folder: give the image topic with --image-topic", src)
         names, stamps, frames = log_frames(src, args.image_topic, args.camera_info_topic)
 
+    positions = None
     if args.gt_max_dist is not None:
-        gt = _gt_from_trajectory(args.gt, stamps, args)
+        gt, positions = _gt_from_trajectory(args.gt, stamps, args)
     else:
         gt = load_loop_matrix(args.gt, names)
 
@@ -107,7 +112,8 @@ def run(args) -> int:
         from ..vocab import Vocabulary
 
         vocab = Vocabulary.load(args.vocab)
-    det = LoopDetector(lcd, vocab=vocab, extractor=extractor, vocab_conf=cfg.vocab, run_all_checks=True)
+    det = LoopDetector(lcd, vocab=vocab, extractor=extractor, vocab_conf=cfg.vocab, run_all_checks=True,
+                       retrieval_depth=max(RECALL_AT))
     t0 = time.perf_counter()
     cache = None
     if cfg.features.feature_cache:
@@ -129,11 +135,16 @@ def run(args) -> int:
     elapsed = time.perf_counter() - t0
 
     results = [precision_recall(det.records, gt, m, lcd.exclude_recent_n) for m in modes]
+    recall_at = retrieval_recall(det.retrieved, gt, lcd.exclude_recent_n, RECALL_AT)
+    places = None
+    if positions is not None:
+        revisits = revisit_places(positions, gt, lcd.exclude_recent_n, args.gt_max_dist)
+        places = {m: place_recall(det.records, gt, m, revisits) for m in modes}
     kind = cfg.features.kind
-    table = format_table(results, kind)
-    print(table)
+    print(format_table(results, kind, places))
+    print(format_retrieval(recall_at, kind))
     try:
-        _write_set(outputs, cfg, det, gt, names, results, src, args, kind, elapsed)
+        _write_set(outputs, cfg, det, gt, names, results, src, args, kind, elapsed, recall_at, places)
     except OSError as e:
         outputs.discard()
         raise InputError(f"cannot write the outputs ({e.strerror or e}); nothing was written there", out) from None
@@ -144,7 +155,7 @@ def run(args) -> int:
     return 0
 
 
-def _write_set(outputs, cfg, det, gt, names, results, src, args, kind, elapsed) -> None:
+def _write_set(outputs, cfg, det, gt, names, results, src, args, kind, elapsed, recall_at, places) -> None:
     from ..atomic import write_text
     from ..config import save_config
     from ..lcd.evaluation import plot_pr, write_candidates_csv, write_pr_csv
@@ -157,14 +168,17 @@ def _write_set(outputs, cfg, det, gt, names, results, src, args, kind, elapsed) 
         "source": str(src), "ground_truth": str(args.gt), "features": kind, "frames": len(names),
         "candidates": len(det.records), "seconds": round(elapsed, 2),
         "results": [r.summary() for r in results],
+        "retrieval_recall_at": {str(n): round(v, 4) for n, v in recall_at.items()},
     }
+    if places is not None:
+        summary["revisit_places"] = {m: {"found": f, "places": n} for m, (f, n) in places.items()}
     write_text(out / "summary.json", json.dumps(summary, indent=2))
     save_config(cfg, out / "config.yaml")
     outputs.publish()
 
 
-def _gt_from_trajectory(path, stamps, args) -> np.ndarray:
-    """Loop matrix from a GT trajectory: poses associated to the frames by nearest stamp (within 50 ms)."""
+def _gt_from_trajectory(path, stamps, args) -> tuple[np.ndarray, np.ndarray]:
+    """Loop matrix and frame positions from a GT trajectory: poses associated to the frames by nearest stamp (within 50 ms)."""
     from ..io.trajectory_files import read_trajectory
     from ..lcd.evaluation import loops_from_poses
 
@@ -177,4 +191,5 @@ def _gt_from_trajectory(path, stamps, args) -> np.ndarray:
     pick = np.where(np.abs(traj.stamps[prev] - stamps) < np.abs(traj.stamps[idx] - stamps), prev, idx)
     if np.any(np.abs(traj.stamps[pick] - stamps) > 50_000_000):
         raise InputError("some frames have no GT pose within 50 ms (name frames by their timestamp in seconds)", path)
-    return loops_from_poses(traj.poses[pick], args.gt_max_dist, args.gt_max_angle)
+    poses = traj.poses[pick]
+    return loops_from_poses(poses, args.gt_max_dist, args.gt_max_angle), poses[:, :3, 3]

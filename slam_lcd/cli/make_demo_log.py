@@ -28,8 +28,9 @@ def register(sub) -> None:
     p.add_argument("--compressed", action="store_true",
                    help="write JPEG sensor_msgs/CompressedImage instead of raw images (default: raw)")
     p.add_argument("--color", action="store_true", help="RGB images (rgb8) instead of mono8 (default: mono8)")
-    p.add_argument("--trajectory", choices=["laps", "figure8"], default="laps",
-                   help="laps of block A or a figure eight (default: laps)")
+    p.add_argument("--trajectory", choices=["laps", "figure8", "laps-wide"], default="laps",
+                   help="laps of block A, a figure eight, or laps-wide: laps of block A with every second lap "
+                        "0.45 m to the side and the camera turned 30 deg (wide-baseline revisits) (default: laps)")
     p.add_argument("--laps", type=float, default=2.0, help="laps to drive when --frames is not given (default 2)")
     p.add_argument("--size", default="640x480", type=parse_size, help="image size WxH (default 640x480)")
     p.add_argument("--hfov", type=float, default=70.0, help="horizontal field of view in degrees (default 70: fx = 457 at 640 px)")

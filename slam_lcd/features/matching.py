@@ -131,3 +131,37 @@ def mutual_nn_match_bf(
         keep &= (best <= max_distance) if max_inclusive else (best < max_distance)
     m = np.stack([rows[keep], nn12[keep]], axis=1).astype(np.int64)
     return (m, best[keep]) if return_distances else m
+
+
+def mutual_nn_match_symmetric(d1: np.ndarray, d2: np.ndarray, max_distance: float | None = None,
+                              with_ratios: bool = True):
+    """Mutual nearest neighbours with a ratio that does not depend on which side is which.
+
+    Returns ``(matches (M, 2), distances (M,), ratios (M,))``: the one-to-one matches (mutual
+    nearest neighbours, ``distance < max_distance`` when given), their distances and, per
+    match, ``best / min(second best in its row, second best in its column)``, so a ratio test
+    ``ratios < r`` asks the match to be distinctive in *both* images: swapping ``d1`` and
+    ``d2`` gives the same matches (columns swapped) and the same ratios. A one-sided Lowe
+    test (:func:`mutual_nn_match_bf` with ``ratio``) keeps a pair in one direction and drops
+    it in the other. ``with_ratios=False``: no second-best search, ``ratios`` is None (cheaper).
+    """
+    empty = np.zeros((0, 2), np.int64)
+    n1, n2 = len(d1), len(d2)
+    if n1 == 0 or n2 == 0:
+        return empty, np.zeros(0), (np.zeros(0) if with_ratios else None)
+    nn12, best, second12, nn21 = _nearest_two(d1, d2, 2 if (n2 > 1 and with_ratios) else 1)
+    rows = np.arange(n1)
+    keep = nn21[nn12] == rows
+    if max_distance is not None:
+        keep &= best < max_distance
+    i, j = rows[keep], nn12[keep]
+    if not with_ratios:
+        return np.stack([i, j], axis=1).astype(np.int64), best[keep], None
+    if n1 > 1 and len(j):
+        _, _, second21, _ = _nearest_two(d2[j], d1, 2)  # second best of each matched column
+    else:
+        second21 = np.full(len(j), np.inf)
+    s12 = second12[keep] if second12 is not None else np.full(len(i), np.inf)
+    second = np.minimum(s12, second21)
+    ratios = best[keep] / np.maximum(second, 1e-12)
+    return np.stack([i, j], axis=1).astype(np.int64), best[keep], ratios

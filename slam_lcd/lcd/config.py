@@ -17,7 +17,9 @@ class LcdConfig:
     require_pose: bool = True  # reject a verified loop when no metric pose can be estimated (when pose=True)
 
     # --- matching ---
-    match_ratio: float | None = 0.9  # Lowe ratio on top of mutual nearest neighbours (None: off)
+    # one-to-one (mutual nearest neighbour) matches; the ratio test is symmetric (distinct in both images)
+    match_ratio: float | None = None  # ratio test for the RANSAC-only chain (None: off; 0.9 measured lower: docs/lcd.md)
+    graph_match_ratio: float | None = None  # ratio test for the graph chains: off, the graph rejects the outliers (paper III-E)
     match_max_distance_sp: float | None = 0.8  # max L2 distance between SuperPoint descriptors (None: off)
     match_max_distance_orb: float | None = 64.0  # max Hamming distance between ORB descriptors (None: off)
     # 'all': every top-K candidate is verified and the one with the most verified
@@ -45,6 +47,7 @@ class LcdConfig:
     graph_remove_fraction: float = 0.2  # at most this fraction of the violating nodes is removed per iteration
     graph_max_iterations: int = 50  # cap on pruning rounds
     graph_min_separation_px: float = 2.0  # merge matched points closer than this (duplicates break triangulation)
+    graph_knn: int = 8  # >0: a node's neighbourhood test is the overlap of its k nearest matched neighbours in both images (0: Delaunay neighbour Jaccard)
     graph_early_exit: bool = True  # stop pruning once the node ratio can no longer be reached (same decisions, less work)
 
     # --- geometric verification (essential matrix) ---

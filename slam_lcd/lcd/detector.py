@@ -18,13 +18,13 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError
-from ..features.matching import mutual_nn_match_bf
+from ..features.matching import mutual_nn_match_symmetric
 from ..types import CameraModel, Features, Keyframe, LoopClosure
 from ..vision.camera import default_camera
 from .config import LcdConfig, stops_at_first_accepted
 from .geometry import EpipolarVerdict, PoseVerdict, estimate_loop_pose, keyframe_points3d, verify_epipolar
-from .budget import select_matches
-from .graph import GraphVerdict, verify_graph
+from .graph import GraphVerdict
+from .pair import check_pair
 from .store import DESCRIPTOR_DTYPES, DescriptorStore, compact_descriptors
 from .temporal import TemporalConsistency
 from .user_keyframe import check_user_keyframe
@@ -163,10 +163,13 @@ class LoopDetector:
     vocabulary. ``extractor``: a :class:`slam_lcd.features.Extractor` used when a keyframe
     arrives without features. ``run_all_checks``: run graph and RANSAC verification on every
     candidate whatever ``conf.verify`` is (evaluation compares the modes on one run).
+    ``retrieval_depth``: keep, per query, the ids of the best ``max(top_k, retrieval_depth)``
+    BoW candidates in ``detector.retrieved`` (evaluation's Recall@N of retrieval; only the
+    first ``top_k`` are verified). 0: nothing kept.
     """
 
     def __init__(self, conf: LcdConfig | None = None, vocab=None, extractor=None, *, vocab_conf=None,
-                 run_all_checks: bool = False):
+                 run_all_checks: bool = False, retrieval_depth: int = 0):
         from ..vocab import BowDatabase
 
         self.conf = conf or LcdConfig()
@@ -179,6 +182,8 @@ class LoopDetector:
         self.db = BowDatabase(vocab, vocab_conf)
         self.extractor = extractor
         self.run_all_checks = run_all_checks
+        self.retrieval_depth = int(retrieval_depth)
+        self.retrieved: dict[int, list[int]] = {}  # query id -> BoW-ranked match ids (with retrieval_depth)
         self.records: list[CandidateRecord] = []
         self.last_part_seconds: dict[str, float] = {}  # seconds per part of the last add()
         self.closures: list[LoopClosure] = []
@@ -202,11 +207,13 @@ class LoopDetector:
         kf.features = self.extractor.extract(kf.image)
         return kf.features
 
-    def _match(self, dq: np.ndarray, dm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _match(self, dq: np.ndarray, dm: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """One-to-one matches, distances and symmetric ratios (None when no ratio test is on; ``mutual_nn_match_symmetric``)."""
         c = self.conf
         binary = dq.dtype == np.uint8
         max_d = c.match_max_distance_orb if binary else c.match_max_distance_sp
-        return mutual_nn_match_bf(dq, dm, ratio=c.match_ratio, max_distance=max_d, return_distances=True)
+        return mutual_nn_match_symmetric(dq, dm, max_distance=max_d,
+                                         with_ratios=c.match_ratio is not None or c.graph_match_ratio is not None)
 
     def memory_bytes(self) -> dict[str, int]:
         """Bytes the detector holds for its past keyframes: descriptors (RAM / file) and the rest."""
@@ -264,9 +271,12 @@ class LoopDetector:
         candidates = []
         if len(self.db) and len(feats):
             candidates = self.db.query(
-                feats.descriptors, top_k=c.top_k, exclude_recent_s=c.exclude_recent_s,
+                feats.descriptors, top_k=max(c.top_k, self.retrieval_depth), exclude_recent_s=c.exclude_recent_s,
                 exclude_recent_n=c.exclude_recent_n, query_id=kf.id, stamp_ns=int(kf.stamp),
             )
+        if self.retrieval_depth > 0:
+            self.retrieved[kf.id] = [cand.match_id for cand in candidates]
+        candidates = candidates[:c.top_k]
         clock.lap("bow_query")
         records = []
         stop = stops_at_first_accepted(c) and not self.run_all_checks
@@ -313,28 +323,15 @@ class LoopDetector:
             return rec
         m_desc = self._store.get(m.id)
         clock.lap("store")
-        matches, distances = self._match(q_desc, m_desc)
-        rec.n_matches = len(matches)
-        if 0 < c.verify_max_matches < len(matches):
-            keep = select_matches(matches, distances, q.features.keypoints, c.verify_max_matches,
-                                  q.features.image_size, c.verify_spread_cells)
-            matches = matches[keep]
-        rec.n_verified = len(matches)
-        clock.lap("matching")
         mode = c.verify
         need_graph = self.run_all_checks or mode in ("graph", "graph+ransac")
         need_ransac = self.run_all_checks or mode == "ransac"
-        kq, km = q.features.keypoints, m.features.keypoints
-        if need_graph:
-            rec.graph = verify_graph(kq, km, matches, c)
-            clock.lap("graph")
-            if rec.graph.accepted or self.run_all_checks:
-                kept = matches[rec.graph.kept] if rec.graph.accepted else matches[:0]
-                if self.run_all_checks or mode == "graph+ransac":
-                    rec.ransac_on_graph = verify_epipolar(kq, km, kept, q.camera, m.camera, c)
-        if need_ransac:
-            rec.ransac = verify_epipolar(kq, km, matches, q.camera, m.camera, c)
-        clock.lap("ransac")
+        checks = check_pair(q.features, m.features, q_desc, m_desc, q.camera, m.camera, c,
+                            graph=need_graph, ransac=need_ransac, graph_ransac=self.run_all_checks or mode == "graph+ransac",
+                            match=self._match, clock=clock)
+        rec.n_matches, rec.n_verified = checks.n_matches, checks.n_verified
+        rec.graph, rec.ransac, rec.ransac_on_graph = checks.graph, checks.ransac, checks.ransac_on_graph
+        matches = checks.graph_matches if need_graph else checks.ransac_matches
         if not rec.passes(mode):
             rec.reason = {
                 "ransac": lambda: f"ransac:{rec.ransac.reason}",
@@ -346,9 +343,9 @@ class LoopDetector:
         if c.pose:
             used = matches
             if mode in ("graph", "graph+ransac") and rec.graph is not None:
-                used = matches[rec.graph.kept]
+                used = checks.graph_matches[rec.graph.kept]
             if mode == "ransac" and rec.ransac is not None:
-                used = matches[rec.ransac.mask]
+                used = checks.ransac_matches[rec.ransac.mask]
             if mode == "graph+ransac" and rec.ransac_on_graph is not None:
                 used = used[rec.ransac_on_graph.mask]
             rec.pose = estimate_loop_pose(q.keyframe, m.keyframe, used, c, points3d_m=m.points3d,

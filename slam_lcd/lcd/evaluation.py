@@ -8,7 +8,14 @@ Protocol (documented in docs/lcd.md):
 - the positives are the queries that have at least one ground-truth loop with a keyframe
   old enough to be a candidate (outside the excluded recent window);
 - the precision-recall curve sweeps a threshold over the detection scores; recall at 100%
-  precision is the largest recall whose precision is exactly 1.
+  precision is the largest recall whose precision is exactly 1; the area under the curve is
+  the average precision (sum over thresholds of precision x recall gained), 1 for a
+  detector that finds every positive before its first false detection;
+- Recall@N of retrieval (the VPR measure): the share of the positives whose N best BoW
+  candidates include a true loop (before any verification);
+- with ground-truth poses, recall per revisit *place*: the positives are cut into places
+  (a run of consecutive positive keyframes, a new place every ``place_size_m`` of travel)
+  and a place is found when one of its keyframes has a true detection.
 """
 from __future__ import annotations
 
@@ -122,11 +129,13 @@ class PRResult:
     n_detections: int
     n_true: int
     n_positives: int
+    auc: float = 0.0  # area under the PR curve (average precision)
 
     def summary(self) -> dict:
         return {
             "mode": self.mode,
             "recall_at_100_precision": round(self.recall_at_100p, 4),
+            "pr_auc": round(self.auc, 4),
             "precision": round(self.precision_all, 4),
             "recall": round(self.recall_all, 4),
             "detections": self.n_detections,
@@ -174,6 +183,7 @@ def precision_recall(records: Sequence[CandidateRecord], gt: np.ndarray, mode: s
         valid[:-1] = scores[:-1] != scores[1:]
     perfect = valid & (precision >= 1.0)
     r100 = float(recall[perfect].max()) if perfect.any() else 0.0
+    auc = average_precision(precision[valid], recall[valid])
     return PRResult(
         mode=mode,
         precision=precision[valid],
@@ -185,21 +195,85 @@ def precision_recall(records: Sequence[CandidateRecord], gt: np.ndarray, mode: s
         n_detections=len(det),
         n_true=int(correct.sum()),
         n_positives=n_pos,
+        auc=auc,
     )
+
+
+def average_precision(precision: np.ndarray, recall: np.ndarray) -> float:
+    """Area under a PR curve given at its thresholds (recall ascending): sum of precision x recall step."""
+    if len(recall) == 0:
+        return 0.0
+    steps = np.diff(np.concatenate([[0.0], np.asarray(recall, np.float64)]))
+    return float(np.sum(steps * np.asarray(precision, np.float64)))
+
+
+def retrieval_recall(retrieved: dict[int, Sequence[int]], gt: np.ndarray, exclude_recent_n: int,
+                     ns: Sequence[int] = (1, 5, 10)) -> dict[int, float]:
+    """Recall@N of BoW retrieval: share of the positives with a true loop among their N best candidates.
+
+    ``retrieved`` maps a query position to its BoW-ranked candidate positions (the detector's
+    ``retrieved`` with ``retrieval_depth >= max(ns)``); a positive absent from it counts as missed.
+    """
+    pos = np.flatnonzero(positives(gt, exclude_recent_n))
+    out = {}
+    for n in ns:
+        hit = sum(1 for q in pos if any(gt[q, m] for m in list(retrieved.get(int(q), ()))[:n]))
+        out[int(n)] = hit / len(pos) if len(pos) else 0.0
+    return out
+
+
+def revisit_places(positions: np.ndarray, gt: np.ndarray, exclude_recent_n: int,
+                   place_size_m: float = 1.0) -> list[np.ndarray]:
+    """Positive queries grouped into revisit places (see the module note), in keyframe order.
+
+    ``positions`` (N, 3): ground-truth positions of the keyframes. A place is a run of
+    consecutive positive keyframes no longer than ``place_size_m`` from its first keyframe.
+    """
+    pos = np.flatnonzero(positives(gt, exclude_recent_n))
+    places: list[list[int]] = []
+    for q in pos:
+        cur = places[-1] if places else None
+        if cur is not None and q == cur[-1] + 1 and \
+                np.linalg.norm(positions[q] - positions[cur[0]]) <= place_size_m:
+            cur.append(int(q))
+        else:
+            places.append([int(q)])
+    return [np.array(p, np.int64) for p in places]
+
+
+def place_recall(records: Iterable[CandidateRecord], gt: np.ndarray, mode: str,
+                 places: Sequence[np.ndarray]) -> tuple[int, int]:
+    """(places found, places): a place is found when one of its keyframes has a true detection under ``mode``."""
+    det = detections(records, mode)
+    found = 0
+    for place in places:
+        if any(int(q) in det and gt[int(q), det[int(q)].match_id] for q in place):
+            found += 1
+    return found, len(places)
 
 
 # ----------------------------------------------------------------------------- outputs
 
 
-def format_table(results: Sequence[PRResult], features: str) -> str:
-    lines = [f"{'features':<11} {'verification':<16} {'R@100P':>7} {'precision':>9} {'recall':>7} {'detections':>10}"]
+def format_table(results: Sequence[PRResult], features: str,
+                 places: dict[str, tuple[int, int]] | None = None) -> str:
+    """One line per mode: R@100P, PR AUC, precision / recall of all detections (and places found)."""
+    head = f"{'features':<11} {'verification':<16} {'R@100P':>7} {'AUC':>6} {'precision':>9} {'recall':>7} {'detections':>10}"
+    lines = [head + (f" {'places':>8}" if places else "")]
     for r in results:
-        label = "BoW only" if r.mode == "none" else f"BoW+{r.mode.replace('+', '+')}"
-        lines.append(
-            f"{features:<11} {label:<16} {r.recall_at_100p:7.3f} {r.precision_all:9.3f} {r.recall_all:7.3f} "
-            f"{r.n_true:>4}/{r.n_detections:<5}"
-        )
+        label = "BoW only" if r.mode == "none" else f"BoW+{r.mode}"
+        line = (f"{features:<11} {label:<16} {r.recall_at_100p:7.3f} {r.auc:6.3f} {r.precision_all:9.3f} "
+                f"{r.recall_all:7.3f} {r.n_true:>4}/{r.n_detections:<5}")
+        if places and r.mode in places:
+            f, n = places[r.mode]
+            line += f" {f:>3}/{n:<4}"
+        lines.append(line)
     return "\n".join(lines)
+
+
+def format_retrieval(recall_at: dict[int, float], features: str) -> str:
+    """One line: Recall@N of BoW retrieval."""
+    return f"{features:<11} retrieval        " + "  ".join(f"R@{n} {v:.3f}" for n, v in sorted(recall_at.items()))
 
 
 def write_candidates_csv(path: str | Path, records: Sequence[CandidateRecord], gt: np.ndarray | None,

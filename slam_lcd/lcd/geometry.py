@@ -18,7 +18,7 @@ import numpy as np
 from ..geometry import adjoint, inv
 from ..types import CameraModel, Keyframe
 from ..vision.camera import undistort_points
-from ..vision.epipolar import essential_ransac
+from ..vision.epipolar import cheirality_mask, choose_decomposition, essential_ransac
 from ..vision.pnp import pnp_ransac, refine_pose_reprojection
 from ..vision.points import backproject, dense_disparity, sample_nearest, unit_rays
 from .config import LcdConfig
@@ -69,10 +69,11 @@ def verify_epipolar(
     E, mask = essential_ransac(xm, xq, thr, conf.ransac_confidence, cv2.USAC_DEFAULT)
     if E is None:
         return EpipolarVerdict(False, 0, n, "ransac_failed", np.zeros(n, bool))
-    # recoverPose's cheirality check removes inliers that lie behind a camera
-    _, R, _, pose_mask = cv2.recoverPose(E, xm[mask], xq[mask], np.eye(3))
+    # cheirality: inliers clearly behind a camera go, points too far to tell stay (cv2.recoverPose
+    # drops every point beyond 50 baselines, which emptied small-baseline revisits: docs/lcd.md)
+    R, t, _ = choose_decomposition(E, xm[mask], xq[mask])
+    good = cheirality_mask(R, t, xm[mask], xq[mask])
     inl = np.flatnonzero(mask)
-    good = pose_mask.reshape(-1) > 0
     mask = np.zeros(n, bool)
     mask[inl[good]] = True
     k = int(mask.sum())

@@ -172,8 +172,35 @@ def _directional(src: np.ndarray, dst: np.ndarray, tri: np.ndarray, edges: np.nd
     return flip_frac, cross_frac, tri_count > 0, orient, free
 
 
-def compare_graphs(pq: np.ndarray, pm: np.ndarray, max_edge_factor: float) -> _Comparison:
-    """Build a graph on each side, carry it to the other side and score every node."""
+def knn_overlap(pq: np.ndarray, pm: np.ndarray, k: int) -> np.ndarray:
+    """Per node: share of its ``k`` nearest matched neighbours in one image that are also among its ``k`` nearest in the other.
+
+    Symmetric in the two images. Unlike the neighbours of a Delaunay graph, which change
+    wherever four points are nearly cocircular (any perspective change flips such edges),
+    a node's nearest neighbours survive a moderate viewpoint change; matches scattered by
+    aliasing share almost none.
+    """
+    n = len(pq)
+    k = min(int(k), n - 1)
+    if k < 1:
+        return np.zeros(n)
+    from scipy.spatial import cKDTree
+
+    a = cKDTree(pq).query(pq, k + 1)[1][:, 1:]
+    b = cKDTree(pm).query(pm, k + 1)[1][:, 1:]
+    rows = np.repeat(np.arange(n), k)
+    code_a = np.sort(rows * n + a.ravel())
+    code_b = rows * n + b.ravel()
+    shared = np.isin(code_b, code_a, assume_unique=False)
+    return np.bincount(rows, shared.astype(np.float64), minlength=n) / k
+
+
+def compare_graphs(pq: np.ndarray, pm: np.ndarray, max_edge_factor: float, knn: int = 0) -> _Comparison:
+    """Build a graph on each side, carry it to the other side and score every node.
+
+    ``knn`` > 0: the neighbourhood term of a node's violation is its k-nearest-neighbour
+    overlap (:func:`knn_overlap`) instead of the Jaccard overlap of its Delaunay neighbours.
+    """
     n = len(pq)
     tri_q, e_q = planar_graph(pq, max_edge_factor)
     tri_m, e_m = planar_graph(pm, max_edge_factor)
@@ -187,7 +214,8 @@ def compare_graphs(pq: np.ndarray, pm: np.ndarray, max_edge_factor: float) -> _C
     union = deg_q + deg_m - inter
     jac = np.divide(inter, union, out=np.zeros(n), where=union > 0)
     edge_jac = float(inter.sum() / union.sum()) if union.sum() else 0.0
-    badness = (0.5 * (fq + fm) + 0.5 * (cq + cm) + (1.0 - jac)) / 3.0
+    neighbours = knn_overlap(pq, pm, knn) if knn > 0 else jac
+    badness = (0.5 * (fq + fm) + 0.5 * (cq + cm) + (1.0 - neighbours)) / 3.0
     return _Comparison(
         badness=badness,
         isolated=~(in_q | in_m),
@@ -249,7 +277,7 @@ def verify_graph(
         if conf.graph_early_exit and len(alive) / n_matches < conf.graph_min_node_ratio:
             return GraphVerdict(False, 0.0, len(alive), "low_node_ratio", n_matches=n_matches, kept=alive,
                                 iterations=it, stopped_early=True)
-        comp = compare_graphs(pq_all[alive], pm_all[alive], conf.graph_max_edge_factor)
+        comp = compare_graphs(pq_all[alive], pm_all[alive], conf.graph_max_edge_factor, conf.graph_knn)
         drop = comp.isolated.copy()
         violating = np.flatnonzero((comp.badness > conf.graph_node_threshold) & ~comp.isolated)
         if len(violating) == 0 and not drop.any():

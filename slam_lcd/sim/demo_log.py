@@ -202,8 +202,10 @@ def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int =
     out = Path(out)
     if fmt not in FORMATS:
         raise InputError(f"unknown demo-log format {fmt!r}; use one of {list(FORMATS)}", out)
-    if kind not in ("laps", "figure8"):
-        raise InputError(f"unknown trajectory kind {kind!r}; use 'laps' or 'figure8'")
+    from .trajectory import KINDS
+
+    if kind not in KINDS:
+        raise InputError(f"unknown trajectory kind {kind!r}; use one of {', '.join(KINDS)}")
     sc = _scenario(frames, seed, kind, laps, width, height, camera_rate, odom_rate, stereo, hfov_deg)
     if workers is None:
         workers = 1 if (os.cpu_count() or 1) >= 2 else 0

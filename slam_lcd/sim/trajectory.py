@@ -27,6 +27,13 @@ WAYPOINTS = {
     "figure8": [(12.5, 1.5), (12.5, 12.5), (1.5, 12.5), (1.5, 1.5), (12.5, 1.5), (12.5, 12.5), (23.5, 12.5), (23.5, 1.5)],
 }
 START_AT = {"laps": 3.0, "figure8": 2.0}  # arc length of the start point along the centre line (m)
+# 'laps-wide': the laps of block A, every second lap driven 0.45 m to the side with the body
+# (and camera) turned 30 deg off the direction of travel, so revisits are wide-baseline:
+# lateral offset and a heading difference in the 20-45 deg of loop closure's hard cases
+WIDE_OFFSET_M = 0.45
+WIDE_YAW_DEG = 30.0
+WIDE_RAMP_M = 0.8  # the change of lane and heading is smoothed over about this length (sigma)
+KINDS = ("laps", "figure8", "laps-wide")
 
 
 def _centre_line(waypoints, radius: float):
@@ -113,23 +120,32 @@ class DemoPath:
 def make_path(kind: str = "laps", laps: float = 2.0, seed: int = 0, speed: float = 1.1,
               turn_speed: float = 0.7, weave: float = 0.18) -> DemoPath:
     """Build the continuous path for ``laps`` laps of ``kind`` ('laps' or 'figure8')."""
-    if kind not in WAYPOINTS:
-        raise ValueError(f"unknown trajectory kind {kind!r}; use one of {sorted(WAYPOINTS)}")
+    if kind not in KINDS:
+        raise ValueError(f"unknown trajectory kind {kind!r}; use one of {list(KINDS)}")
+    wide = kind == "laps-wide"
+    kind_path = "laps" if wide else kind
     if not laps > 0:
         raise ValueError("laps must be positive")
     rng = np.random.default_rng(np.random.SeedSequence([seed, 0x7EA7]))
-    pos, tan, kappa, s_c, L = _centre_line(WAYPOINTS[kind], TURN_RADIUS)
+    pos, tan, kappa, s_c, L = _centre_line(WAYPOINTS[kind_path], TURN_RADIUS)
     total = laps * L
     S = np.arange(0.0, total + STEP, STEP)
-    s_mod = np.mod(S + START_AT[kind], L)
+    s_mod = np.mod(S + START_AT[kind_path], L)
     idx = np.searchsorted(s_c, s_mod, side="right") - 1
     c = pos[idx] + tan[idx] * (s_mod - s_c[idx])[:, None]
     left = np.column_stack([-tan[idx, 1], tan[idx, 0]])
     ph = rng.uniform(0, 2 * np.pi, size=2)
     offset = weave * np.sin(2 * np.pi * S / 9.7 + ph[0]) + 0.6 * weave * np.sin(2 * np.pi * S / 23.3 + ph[1])
+    side = np.zeros_like(S)
+    if wide:  # 0 on even laps, 1 on odd ones, smoothed
+        square = (np.floor(S / L) % 2 == 1).astype(np.float64)
+        sw = int(WIDE_RAMP_M / STEP)
+        kw = np.exp(-0.5 * (np.arange(-3 * sw, 3 * sw + 1) / sw) ** 2)
+        side = np.convolve(np.pad(square, 3 * sw, mode="edge"), kw / kw.sum(), mode="valid")
+        offset = offset + WIDE_OFFSET_M * side
     xy = c + offset[:, None] * left
     d = np.gradient(xy, axis=0)
-    yaw = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
+    yaw = np.unwrap(np.arctan2(d[:, 1], d[:, 0])) + np.radians(WIDE_YAW_DEG) * side
     # speed: slow in turns (curvature smoothed over ~0.8 m), ramp up over the first 1.5 m
     k = np.abs(kappa[idx]) * TURN_RADIUS
     sig = int(0.8 / STEP)

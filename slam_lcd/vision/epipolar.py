@@ -27,7 +27,7 @@ def essential_ransac(x1: np.ndarray, x2: np.ndarray, threshold: float, confidenc
     return E[:3], mask.reshape(-1) > 0
 
 
-def _triangulate_depths(R, t, n1, n2):
+def triangulate_depths(R, t, n1, n2):
     """Depths of each correspondence in both cameras (midpoint-free linear DLT on normalised points)."""
     P1 = np.hstack([np.eye(3), np.zeros((3, 1))])
     P2 = np.hstack([R, t.reshape(3, 1)])
@@ -38,18 +38,36 @@ def _triangulate_depths(R, t, n1, n2):
     return z1, z2
 
 
-def _choose_decomposition(E, n1, n2):
-    """The (R, t) of the four E decompositions with most points in front of both cameras."""
+def choose_decomposition(E, n1, n2):
+    """``(R, t, in_front)``: of the four E decompositions the one with most points in front of both cameras.
+
+    No far-point cut-off (unlike ``cv2.recoverPose``, which drops points farther than 50
+    baselines and so empties the inlier set of a small-baseline pair: a revisit seen from
+    nearly the same pose, or a loop candidate under a guessed focal length).
+    """
     R1, R2, t = cv2.decomposeEssentialMat(E)
     t = t.reshape(3)
     best = None
     for R in (R1, R2):
         for tt in (t, -t):
-            z1, z2 = _triangulate_depths(R, tt, n1, n2)
+            z1, z2 = triangulate_depths(R, tt, n1, n2)
             good = (z1 > 0) & (z2 > 0)
             if best is None or good.sum() > best[2].sum():
                 best = (R, tt, good)
     return best
+
+
+def cheirality_mask(R, t, n1, n2, far_baselines: float = 50.0) -> np.ndarray:
+    """Correspondences not contradicting ``(R, t)``: in front of both cameras, or too far to tell.
+
+    A point triangulated beyond ``far_baselines`` (unit baseline) has under ~1 deg of parallax:
+    noise decides the sign of its depth, so it is kept rather than counted as behind (the
+    opposite of ``cv2.recoverPose``, which drops every far point).
+    """
+    z1, z2 = triangulate_depths(R, t, n1, n2)
+    front = (z1 > 0) & (z2 > 0)
+    far = ~np.isfinite(z1) | (np.abs(z1) > far_baselines) | (np.abs(z2) > far_baselines)
+    return front | far
 
 
 def sampson_errors(R, t, n1, n2):
@@ -109,11 +127,11 @@ def relative_pose_from_points(camera: CameraModel, pts1: np.ndarray, pts2: np.nd
     E, inl = essential_ransac(n1, n2, threshold_px / f, confidence, cv2.USAC_ACCURATE)
     if E is None:
         return None, None, np.zeros(len(n1), bool)
-    R, t, front = _choose_decomposition(E, n1[inl], n2[inl])
+    R, t, front = choose_decomposition(E, n1[inl], n2[inl])
     if refine and inl.sum() >= 8:
         R, t = refine_relative_pose(R, t, n1[inl], n2[inl], scale=f / threshold_px)
         err = np.abs(sampson_errors(R, t, n1, n2)) * f
         inl = err < threshold_px
-    z1, z2 = _triangulate_depths(R, t, n1, n2)
+    z1, z2 = triangulate_depths(R, t, n1, n2)
     inl &= (z1 > 0) & (z2 > 0) | ~np.isfinite(z1)
     return R, t, inl
