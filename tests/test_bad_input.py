@@ -219,7 +219,7 @@ def _inject(monkeypatch, owner, name, at, when):
 
 def _targets():
     import slam_lcd.io.trajectory_files as trajectory_files
-    import slam_lcd.lcd.detector as detector
+    import slam_lcd.lcd.pair as pair
     import slam_lcd.outputs.corrected_log as corrected_log
     from slam_lcd.backend.pose_graph import PoseGraph
     from slam_lcd.features.extract import OrbExtractor
@@ -229,7 +229,7 @@ def _targets():
         "features": (OrbExtractor, "extract", 6),
         "bow_query": (BowDatabase, "query", 5),
         "bow_add": (BowDatabase, "add", 5),
-        "verification": (detector, "verify_graph", 3),
+        "verification": (pair, "verify_graph", 3),  # the detector verifies a pair through lcd/pair.py
         "backend_keyframe": (PoseGraph, "add_keyframe", 6),
         "backend_loop": (PoseGraph, "add_loop", 3),
         "backend_isam2": (PoseGraph, "_isam_apply", 3),
