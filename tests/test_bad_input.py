@@ -396,11 +396,23 @@ def test_atomic_writers_leave_no_temporary_files_when_interrupted(demo, tmp_path
 def test_real_ctrl_c_waits_for_a_critical_step(tmp_path, monkeypatch):
     """Item 3 with a real SIGINT: publishing an output set (and other critical steps) finishes
     first, then the interrupt is raised; the folder then holds the complete new set."""
-    import os
     import signal
 
     from slam_lcd.interrupts import defer_sigint
     from slam_lcd.outputs.output_set import OutputSet
+
+    # as in a terminal: Python's own Ctrl-C handler (a shell that starts the tests in the
+    # background hands them SIGINT ignored, and Python then keeps it ignored)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        _real_ctrl_c_checks(tmp_path, monkeypatch, defer_sigint, OutputSet)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _real_ctrl_c_checks(tmp_path, monkeypatch, defer_sigint, OutputSet):
+    import os
+    import signal
 
     with pytest.raises(KeyboardInterrupt):
         with defer_sigint():

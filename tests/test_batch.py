@@ -236,8 +236,10 @@ def test_cli_exit_status_and_real_ctrl_c(batch_inputs, tmp_path, workers):
     out = tmp_path / "out"
     argv = [sys.executable, "-m", "slam_lcd", "batch", str(log_path(logs, "demo_mcap")), str(log_path(logs, "demo_ros1")),
             str(log_path(logs, "demo_ros2")), "--out", str(out), "--workers", str(workers), "--no-progress", *sets]
+    # SIG_DFL in the child, as a terminal gives it: a shell that starts the tests in the background
+    # hands them SIGINT ignored, which Python would keep
     proc = subprocess.Popen(argv, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
+                            start_new_session=True, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     first = proc.stdout.readline()
     assert first.startswith("[1/3] ok"), (first, proc.stderr.read() if proc.poll() is not None else "")
     os.killpg(proc.pid, signal.SIGINT)
