@@ -4,34 +4,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from slam_lcd.lcd import LcdConfig, LoopDetector
-from slam_lcd.types import Keyframe
-
-
-def _rel_error(T, T_gt):
-    D = np.linalg.inv(T_gt) @ T
-    ang = np.degrees(np.arccos(np.clip((np.trace(D[:3, :3]) - 1) / 2, -1, 1)))
-    return float(np.linalg.norm(D[:3, 3])), float(ang)
+from support.demo_world_loops import detect_on_rendered_keyframes, relative_error
 
 
 @pytest.fixture(scope="module")
 def demo_run(superpoint_weights):
-    sim = pytest.importorskip("slam_lcd.sim")
-    from slam_lcd.features import FeaturesConfig, load_extractor
-
-    world = sim.build_world(0)
-    traj = sim.make_trajectory("laps", laps=1.3, rate_hz=1.0)  # keyframes at 1 Hz (~1.1 m apart), one revisit
-    cam = sim.demo_camera(320, 240)
-    T_bc = sim.T_body_camera()
-    ex = load_extractor(FeaturesConfig(kind="superpoint", feature_cache=False), weights=superpoint_weights,
-                        device="cpu")
-    det = LoopDetector(LcdConfig(verify="graph+ransac", exclude_recent_s=20.0, exclude_recent_n=0), extractor=ex)
-    for k in range(len(traj)):
-        img, depth = sim.render(world, cam, traj.poses[k] @ T_bc)
-        det.add(Keyframe(k, int(traj.stamps[k]), traj.poses[k], image=img, camera=cam, T_body_camera=T_bc,
-                         depth=depth))
-    pairs = sim.gt_loop_pairs(traj, T_body_camera=T_bc)
-    return det, traj, pairs, T_bc
+    pytest.importorskip("slam_lcd.sim")
+    return detect_on_rendered_keyframes(superpoint_weights, "laps", 1.3)
 
 
 def test_demo_world_loops(demo_run, capsys):
@@ -44,10 +23,10 @@ def test_demo_world_loops(demo_run, capsys):
     for c in det.closures:
         # a true loop: the cameras are close with overlapping views (looser than the GT list's 1 m / 20 deg),
         # and the metric relative pose below agrees with ground truth
-        t_cam, a_cam = _rel_error(cams[c.match_id], cams[c.query_id])
+        t_cam, a_cam = relative_error(cams[c.match_id], cams[c.query_id])
         assert t_cam < 2.0 and a_cam < 45.0, (c.query_id, c.match_id, t_cam, a_cam)
         T_gt = np.linalg.inv(traj.poses[c.match_id]) @ traj.poses[c.query_id]
-        errs.append(_rel_error(c.T_match_query, T_gt))
+        errs.append(relative_error(c.T_match_query, T_gt))
         assert np.all(np.linalg.eigvalsh(c.information) > 0)
         if c.query_id in set(queries.tolist()):
             found.add(c.query_id)

@@ -9,42 +9,21 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from slam_lcd.lcd import LcdConfig, LoopDetector
-from slam_lcd.types import Keyframe
+from support.demo_world_loops import detect_on_rendered_keyframes, relative_error
 
 pytestmark = pytest.mark.slow
 
 
-def _rel_error(T, T_gt):
-    D = np.linalg.inv(T_gt) @ T
-    ang = np.degrees(np.arccos(np.clip((np.trace(D[:3, :3]) - 1) / 2, -1, 1)))
-    return float(np.linalg.norm(D[:3, 3])), float(ang)
-
-
 @pytest.fixture(scope="module")
 def wide_run(superpoint_weights):
-    sim = pytest.importorskip("slam_lcd.sim")
-    from slam_lcd.features import FeaturesConfig, load_extractor
-
-    world = sim.build_world(0)
-    traj = sim.make_trajectory("laps-wide", laps=2.3, rate_hz=1.0)  # keyframes ~1.1 m apart
-    cam = sim.demo_camera(320, 240)
-    T_bc = sim.T_body_camera()
-    ex = load_extractor(FeaturesConfig(kind="superpoint", feature_cache=False), weights=superpoint_weights,
-                        device="cpu")
-    det = LoopDetector(LcdConfig(verify="graph+ransac", exclude_recent_s=20.0, exclude_recent_n=0), extractor=ex)
-    for k in range(len(traj)):
-        img, depth = sim.render(world, cam, traj.poses[k] @ T_bc)
-        det.add(Keyframe(k, int(traj.stamps[k]), traj.poses[k], image=img, camera=cam, T_body_camera=T_bc,
-                         depth=depth))
-    pairs = sim.gt_loop_pairs(traj, max_dist=1.0, max_angle_deg=45.0, T_body_camera=T_bc)
-    return det, traj, pairs, T_bc
+    pytest.importorskip("slam_lcd.sim")
+    return detect_on_rendered_keyframes(superpoint_weights, "laps-wide", 2.3, max_dist=1.0, max_angle_deg=45.0)
 
 
 def test_trajectory_revisits_with_offset_and_heading_difference(wide_run):
     _, traj, pairs, T_bc = wide_run
     cams = traj.poses @ T_bc
-    angles = np.array([_rel_error(cams[i], cams[j])[1] for i, j in pairs])
+    angles = np.array([relative_error(cams[i], cams[j])[1] for i, j in pairs])
     assert len(pairs) > 50 and np.sum(angles >= 20.0) > 20 and angles.max() <= 45.0
 
 
@@ -52,12 +31,12 @@ def test_wide_baseline_loops(wide_run, capsys):
     det, traj, pairs, T_bc = wide_run
     cams = traj.poses @ T_bc
     queries = set(np.unique(pairs[:, 0]).tolist())
-    wide = {int(i) for i, j in pairs if _rel_error(cams[i], cams[j])[1] >= 20.0}
+    wide = {int(i) for i, j in pairs if relative_error(cams[i], cams[j])[1] >= 20.0}
     found, errs = set(), []
     for c in det.closures:
-        t_cam, a_cam = _rel_error(cams[c.match_id], cams[c.query_id])
+        t_cam, a_cam = relative_error(cams[c.match_id], cams[c.query_id])
         assert t_cam < 2.0 and a_cam < 60.0, (c.query_id, c.match_id, t_cam, a_cam)  # no false loop
-        errs.append(_rel_error(c.T_match_query, np.linalg.inv(traj.poses[c.match_id]) @ traj.poses[c.query_id]))
+        errs.append(relative_error(c.T_match_query, np.linalg.inv(traj.poses[c.match_id]) @ traj.poses[c.query_id]))
         if c.query_id in queries:
             found.add(c.query_id)
     errs = np.array(errs)
