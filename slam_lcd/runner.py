@@ -26,7 +26,7 @@ from .io import open_log
 from .io.trajectory_files import read_trajectory
 from .outputs.output_set import OutputSet
 from .outputs.result import RunResult
-from .outputs.write import RUN_OUTPUTS, write_outputs, write_set
+from .outputs.write import RUN_OUTPUTS, write_set
 from .progress import progress_bar
 from .sensors.messages import at_message, check_first_messages, decode_camera_of, decode_depth, decode_gray, decode_pose_of
 from .sensors.mounting import body_frame_of, calibrated_mounting, mounting_from_camera_info, static_transforms

@@ -15,7 +15,8 @@ import contextlib
 _CONTROLLER = None
 
 
-def _blas_limit(n: int):
+def blas_limit(n: int):
+    """Context with at most ``n`` threads in numpy's BLAS (its thread pools are looked up once per process)."""
     global _CONTROLLER
     try:
         from threadpoolctl import ThreadpoolController
@@ -40,7 +41,7 @@ def limited_threads(n: int):
     if faiss is not None:
         faiss.omp_set_num_threads(min(n, before))
     try:
-        with _blas_limit(n):
+        with blas_limit(n):
             yield
     finally:
         if faiss is not None:

@@ -17,7 +17,7 @@ import cv2
 import numpy as np
 import torch
 
-from ..errors import ConfigError, InputError
+from ..errors import ConfigError
 from ..types import Features
 from ..vision.gray import to_gray_float, to_gray_uint8
 from .allocator import retain_freed_memory

@@ -22,7 +22,7 @@ from ..features.matching import mutual_nn_match_symmetric
 from ..types import CameraModel, Features, Keyframe, LoopClosure
 from ..vision.camera import default_camera
 from .config import LcdConfig, stops_at_first_accepted
-from .geometry import EpipolarVerdict, PoseVerdict, estimate_loop_pose, keyframe_points3d, verify_epipolar
+from .geometry import EpipolarVerdict, PoseVerdict, estimate_loop_pose, keyframe_points3d
 from .graph import GraphVerdict
 from .pair import check_pair
 from .store import DESCRIPTOR_DTYPES, DescriptorStore, compact_descriptors

@@ -141,7 +141,7 @@ def write_html_report(out_dir: Path, facts: dict, summary_lines: list[str], rows
     """``report.html`` in ``out_dir`` (see the module docstring)."""
     inp = facts["input"]
     loops = facts["loops"]
-    body = [f"<h1>slam-lcd run report</h1>",
+    body = ["<h1>slam-lcd run report</h1>",
             "<ul id='summary'>" + "".join(f"<li>{_e(s)}</li>" for s in summary_lines) + "</ul>",
             "<h2>Run</h2><table id='provenance'>"]
     for k, v in (("input log", inp["log"]), ("ground truth", inp["gt_source"] or "none"),

@@ -8,21 +8,9 @@ both kinds alike.
 """
 from __future__ import annotations
 
-import contextlib
-
 import numpy as np
 
 from ..errors import InputError
-
-
-def single_threaded_blas():
-    """Context limiting BLAS to one thread: training runs thousands of tiny products, for which
-    thread start-up costs more than it saves (3-5x slower on a busy 2-core machine)."""
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - threadpoolctl comes with scikit-learn
-        return contextlib.nullcontext()
-    return threadpool_limits(limits=1, user_api="blas")
 
 
 def descriptor_kind(desc: np.ndarray) -> str:

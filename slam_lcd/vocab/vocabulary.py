@@ -17,7 +17,8 @@ import numpy as np
 from ..atomic import atomic_write
 from ..errors import InputError, VocabularyError
 from .config import VocabConfig
-from .descriptors import as_unit_vectors, descriptor_kind, single_threaded_blas
+from ..thread_limits import blas_limit
+from .descriptors import as_unit_vectors, descriptor_kind
 from .dp_tree import build_dp_tree
 from .hkmeans import build_hkmeans_tree
 from .tree import VocabTree
@@ -146,7 +147,7 @@ def train_vocabulary(descriptor_sets: Iterable[np.ndarray], conf: VocabConfig | 
     sets, kind, dim = _check_sets(descriptor_sets)
     units = [as_unit_vectors(d) for d in sets]
     words = IncrementalWords(units[0].shape[1], conf.match_ratio, conf.match_max_distance, kind)
-    with single_threaded_blas():
+    with blas_limit(1):  # thousands of tiny products: thread start-up costs more than it saves
         for u in units:
             words.add_image(u)
         tree, order = build_dp_tree(words.centres, words.counts.astype(np.float32), conf)
@@ -167,7 +168,7 @@ def train_hkmeans(descriptors, k: int = 10, L: int = 4, seed: int = 0, features:
     per_image = isinstance(descriptors, (list, tuple))
     sets, kind, dim = _check_sets(descriptors if per_image else [descriptors])
     x = np.concatenate([as_unit_vectors(d) for d in sets])
-    with single_threaded_blas():
+    with blas_limit(1):  # thousands of tiny products: thread start-up costs more than it saves
         tree, leaf = build_hkmeans_tree(x, k, L, seed)
     counts = np.bincount(leaf, minlength=tree.n_words)
     image_of = np.repeat(np.arange(len(sets)), [len(d) for d in sets])
