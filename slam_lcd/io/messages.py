@@ -16,7 +16,7 @@ import numpy as np
 from ..errors import InvalidPoseError, MessageEncodingError
 from ..types import CameraModel, Trajectory
 from .decode import IMAGE_ENCODINGS
-from .transforms import gtsam_cov_to_ros, tq_from_pose
+from .transforms import gtsam_cov_to_ros, tq_from_pose, tq_from_poses
 from .typestores import ros2_store
 
 _T = ros2_store().types
@@ -59,6 +59,30 @@ def pose_msg(T: np.ndarray, what: str = "pose"):
     """geometry_msgs/Pose of a 4x4 pose (refuses NaN and non-rotations)."""
     t, q = tq_from_pose(T, what)
     return Pose(position=Point(x=t[0], y=t[1], z=t[2]), orientation=Quaternion(x=q[0], y=q[1], z=q[2], w=q[3]))
+
+
+def _pose_from(t, q):
+    return Pose(position=Point(x=float(t[0]), y=float(t[1]), z=float(t[2])),
+                orientation=Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])))
+
+
+def pose_stamped_msgs(Ts: np.ndarray, stamps_ns, frame_id: str) -> list:
+    """:func:`pose_stamped_msg` of a stack of poses (one vectorised conversion)."""
+    t, q = tq_from_poses(Ts)
+    return [PoseStamped(header=header(int(s), frame_id), pose=_pose_from(t[i], q[i]))
+            for i, s in enumerate(np.asarray(stamps_ns).tolist())]
+
+
+def tf_messages(Ts: np.ndarray, stamps_ns, parent: str, child: str) -> list:
+    """One single-transform :func:`tf_message` per pose of the stack ``T_parent_child`` (vectorised conversion)."""
+    t, q = tq_from_poses(Ts, "transform")
+    out = []
+    for i, s in enumerate(np.asarray(stamps_ns).tolist()):
+        tr = Transform(translation=Vector3(x=float(t[i, 0]), y=float(t[i, 1]), z=float(t[i, 2])),
+                       rotation=Quaternion(x=float(q[i, 0]), y=float(q[i, 1]), z=float(q[i, 2]), w=float(q[i, 3])))
+        out.append(TFMessage(transforms=[TransformStamped(header=header(int(s), parent), child_frame_id=str(child),
+                                                          transform=tr)]))
+    return out
 
 
 def transform_msg(T: np.ndarray, what: str = "transform"):
@@ -205,9 +229,16 @@ def tf_message(transforms: Iterable[tuple[np.ndarray, int, str, str]]):
 def path_msg(traj: Trajectory, frame_id: str | None = None):
     """nav_msgs/Path of a trajectory; header stamp is the last pose's stamp (0 when empty)."""
     frame = str(frame_id if frame_id is not None else traj.frame_id)
-    poses = [pose_stamped_msg(T, s, frame) for s, T in zip(traj.stamps.tolist(), traj.poses)]
+    poses = pose_stamped_msgs(traj.poses, traj.stamps, frame) if len(traj) else []
     last = int(traj.stamps[-1]) if len(traj) else 0
     return Path(header=header(last, frame), poses=poses)
+
+
+def growing_path_msgs(traj: Trajectory, ends, frame_id: str) -> list:
+    """nav_msgs/Path of the first ``e`` poses for each ``e`` in ``ends``; the poses are converted once and shared."""
+    frame = str(frame_id)
+    poses = pose_stamped_msgs(traj.poses, traj.stamps, frame) if len(traj) else []
+    return [Path(header=header(int(traj.stamps[e - 1]), frame), poses=poses[:e]) for e in ends]
 
 
 # ---- visualisation ------------------------------------------------------------------------

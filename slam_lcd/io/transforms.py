@@ -55,6 +55,28 @@ def tq_from_pose(T: np.ndarray, what: str = "pose") -> tuple[tuple[float, float,
     return (float(T[0, 3]), float(T[1, 3]), float(T[2, 3])), (qx, qy, qz, qw)
 
 
+def tq_from_poses(Ts: np.ndarray, what: str = "pose") -> tuple[np.ndarray, np.ndarray]:
+    """:func:`tq_from_pose` of a stack (N, 4, 4) at once: translations (N, 3), quaternions (N, 4) x y z w.
+
+    Same checks and the same numbers, vectorised: writing a log's worth of poses (tens of
+    thousands) one matrix at a time costs seconds of Python per output file.
+    """
+    T = np.asarray(Ts, dtype=np.float64)
+    if T.ndim != 3 or T.shape[1:] != (4, 4):
+        raise InvalidPoseError(f"{what}s must be an (N, 4, 4) stack, got shape {T.shape}")
+    if len(T) == 0:
+        return np.zeros((0, 3)), np.zeros((0, 4))
+    finite = np.isfinite(T).all(axis=(1, 2))
+    if not finite.all():
+        raise InvalidPoseError(f"{what} {int(np.flatnonzero(~finite)[0])} has NaN/inf values")
+    R = T[:, :3, :3]
+    err = np.abs(np.swapaxes(R, 1, 2) @ R - np.eye(3)).max(axis=(1, 2))
+    bad = (err > 1e-3) | (np.linalg.det(R) < 0)
+    if bad.any():
+        raise InvalidPoseError(f"{what} {int(np.flatnonzero(bad)[0])}: rotation block is not a rotation matrix")
+    return T[:, :3, 3].copy(), rot_to_quat(R, w_nonnegative=True).reshape(-1, 4)
+
+
 def ros_cov_to_gtsam(cov36, R: np.ndarray) -> np.ndarray | None:
     """ROS 6x6 pose covariance (parent axes, [x y z rx ry rz]) -> GTSAM tangent order in body frame.
 

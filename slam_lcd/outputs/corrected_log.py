@@ -127,7 +127,7 @@ def _keyframe_paths(kf: Trajectory, frame: str):
     if n == 0:
         return []
     ends = np.unique(np.round(np.linspace(1, n, min(n, MAX_PATH_MESSAGES))).astype(int))
-    return [(int(kf.stamps[e - 1]), M.path_msg(Trajectory(kf.stamps[:e], kf.poses[:e]), frame)) for e in ends]
+    return [(int(kf.stamps[e - 1]), msg) for e, msg in zip(ends, M.growing_path_msgs(kf, ends, frame))]
 
 
 def write_corrected_log(path: Path, *, odom: Trajectory, corrected: Trajectory, kf_ids: list[int],
@@ -157,17 +157,20 @@ def write_corrected_log(path: Path, *, odom: Trajectory, corrected: Trajectory, 
             own.append((int(stamp), len(own), topic, msg))
 
         cs, cp = corrected.stamps, corrected.poses
-        odom_at = interpolate_poses(odom.stamps, odom.poses, cs) if len(odom) else None
-        for i, s in enumerate(cs.tolist()):
-            add(s, POSE_TOPIC, M.pose_stamped_msg(cp[i], s, plan.corrected_frame))
+        if len(cs):  # per stamp: the corrected pose, then its /tf (one vectorised conversion each)
+            poses = M.pose_stamped_msgs(cp, cs, plan.corrected_frame)
             if plan.publish_map_odom:
-                T_map_odom = cp[i] @ inv(odom_at[i])
-                add(s, "/tf", M.tf_message([(T_map_odom, s, plan.map_frame, plan.odom_frame)]))
+                odom_at = interpolate_poses(odom.stamps, odom.poses, cs)
+                tfs = M.tf_messages(cp @ inv(odom_at), cs, plan.map_frame, plan.odom_frame)
             else:
-                add(s, "/tf", M.tf_message([(cp[i], s, plan.odom_frame, plan.corrected_body)]))
-        if plan.publish_odom_body:
-            for s, T in zip(odom.stamps.tolist(), odom.poses):
-                add(s, "/tf", M.tf_message([(T, s, plan.odom_frame, plan.body_frame)]))
+                tfs = M.tf_messages(cp, cs, plan.odom_frame, plan.corrected_body)
+            for s, pose, tf in zip(cs.tolist(), poses, tfs):
+                add(s, POSE_TOPIC, pose)
+                add(s, "/tf", tf)
+        if plan.publish_odom_body and len(odom):
+            for s, tf in zip(odom.stamps.tolist(), M.tf_messages(odom.poses, odom.stamps, plan.odom_frame,
+                                                                 plan.body_frame)):
+                add(s, "/tf", tf)
         s0 = int(cs[0]) if len(cs) else 0
         if plan.link_gt and gt_alignment is not None:
             T_gt_c = np.eye(4)  # the corrected trajectory's frame seen from the ground truth's (the ATE alignment)
@@ -176,8 +179,9 @@ def write_corrected_log(path: Path, *, odom: Trajectory, corrected: Trajectory, 
                     (inv(T_gt_c), s0, plan.corrected_frame, plan.gt_frame))
             add(s0, "/tf_static", M.tf_message([link]))
         if gt_poses is not None:  # ground truth from a file: written here so that it can be overlaid
-            for s, T in zip(gt_poses.stamps.tolist(), gt_poses.poses):
-                add(s, GT_TOPIC, M.pose_stamped_msg(T, s, plan.gt_frame))
+            for s, msg in zip(gt_poses.stamps.tolist(), M.pose_stamped_msgs(gt_poses.poses, gt_poses.stamps,
+                                                                            plan.gt_frame) if len(gt_poses) else []):
+                add(s, GT_TOPIC, msg)
         for s, msg in _keyframe_paths(kf_corrected, plan.corrected_frame):
             add(s, PATH_TOPIC, msg)
         pos = {k: kf_corrected.poses[i][:3, 3] for i, k in enumerate(kf_ids) if i < len(kf_corrected)}
