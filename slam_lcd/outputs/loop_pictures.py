@@ -117,6 +117,13 @@ def _recompute(rec_row: dict, q, m, conf):
     return matches, kept, edges, notes
 
 
+def _segments(img: np.ndarray, a: np.ndarray, b: np.ndarray, colour) -> None:
+    """Anti-aliased 1-px segments a[i]-b[i], in one call (per-segment calls cost more in Python than in drawing)."""
+    if len(a):
+        pts = np.stack([np.round(a), np.round(b)], axis=1).astype(np.int32)  # (n, 2, 2)
+        cv2.polylines(img, list(pts), False, colour, 1, cv2.LINE_AA)
+
+
 def draw_loop(q, m, matches, kept, edges, lines: list[str], colour: tuple[int, int, int]) -> np.ndarray:
     """Query (left) and match (right) side by side: discarded matches thin red, surviving matches
     green, the graph on the surviving query keypoints and the same edges on their matches (yellow)."""
@@ -132,17 +139,14 @@ def draw_loop(q, m, matches, kept, edges, lines: list[str], colour: tuple[int, i
     survived = np.zeros(len(matches), bool)
     survived[kept] = True
     overlay = canvas.copy()
-    for a, b in zip(pq[~survived], pm[~survived]):
-        cv2.line(overlay, tuple(np.round(a).astype(int)), tuple(np.round(b).astype(int)), (60, 60, 220), 1, cv2.LINE_AA)
+    _segments(overlay, pq[~survived], pm[~survived], (60, 60, 220))
     canvas = cv2.addWeighted(overlay, 0.5, canvas, 0.5, 0)
     gq, gm = pq[kept], pm[kept]
-    for i, j in edges:
+    if len(edges):
         for P in (gq, gm):
-            cv2.line(canvas, tuple(np.round(P[i]).astype(int)), tuple(np.round(P[j]).astype(int)), (0, 220, 255), 1,
-                     cv2.LINE_AA)
-    for a, b in zip(gq, gm):
-        a, b = tuple(np.round(a).astype(int)), tuple(np.round(b).astype(int))
-        cv2.line(canvas, a, b, (80, 200, 80), 1, cv2.LINE_AA)
+            _segments(canvas, P[edges[:, 0]], P[edges[:, 1]], (0, 220, 255))
+    _segments(canvas, gq, gm, (80, 200, 80))
+    for a, b in zip(np.round(gq).astype(int).tolist(), np.round(gm).astype(int).tolist()):
         cv2.circle(canvas, a, 2, (80, 255, 80), -1, cv2.LINE_AA)
         cv2.circle(canvas, b, 2, (80, 255, 80), -1, cv2.LINE_AA)
     per_line = max(20, (canvas.shape[1] - 20) // 8)  # characters that fit at this font size
