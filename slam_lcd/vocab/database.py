@@ -157,6 +157,7 @@ class BowDatabase:
         self._last_gather: tuple | None = None  # (keyframes then, words, kf, tf, pos) of the last scores()
         self._bow_words: list[np.ndarray] = []  # int32 word ids per keyframe (BowVector on access)
         self._bow_counts: list[np.ndarray] = []
+        self._last_unit: tuple | None = None  # (descriptors, key, result) of the last conversion (_once)
 
     def __len__(self) -> int:
         return len(self.kf_ids)
@@ -195,16 +196,34 @@ class BowDatabase:
                              f"({self._desc_kind}, {self._desc_dim} columns)")
         return d
 
+    def _once(self, d: np.ndarray, what: str, compute):
+        """``compute(d)``, kept for the same array: the loop detector transforms a keyframe, then adds
+        the same descriptors, so their conversion (online: unit vectors, and the word search keyed
+        on them; with a vocabulary: the tree descent) is done once."""
+        key = (what, id(d), d.shape, float(np.sum(d, dtype=np.float64)))  # the sum catches a buffer refilled in place
+        c = self._last_unit
+        if c is not None and c[0] is d and c[1] == key:
+            return c[2]
+        out = compute(d)
+        self._last_unit = (d, key, out)
+        return out
+
+    def _unit(self, d: np.ndarray) -> np.ndarray:
+        return self._once(d, "unit", as_unit_vectors)
+
+    def _quantized(self, d: np.ndarray) -> np.ndarray:
+        return self._once(d, "words", self.vocab.quantize)
+
     def transform(self, descriptors: np.ndarray) -> BowVector:
         """Bag of words of descriptors without adding them (online mode: nearest existing word)."""
         d = self._check(descriptors)
         if self.vocab is not None:
-            return BowVector.from_word_ids(self.vocab.quantize(d))
+            return BowVector.from_word_ids(self._quantized(d))
         if self.words is None or self.words.n_words == 0 or len(d) == 0:
             return BowVector.from_word_ids(np.zeros(0, dtype=np.int64))
         # online: nearest existing word, as add() would assign it; a feature farther than the word
         # radius would found a new word that no keyframe holds yet, so it is left out
-        best, sim = self.words.nearest(as_unit_vectors(d))
+        best, sim = self.words.nearest(self._unit(d))
         dist = np.sqrt(np.maximum(2.0 - 2.0 * sim, 0.0))
         return BowVector.from_word_ids(best[dist < self.conf.online_word_radius])
 
@@ -217,9 +236,9 @@ class BowDatabase:
             raise InputError(f"keyframe {kf_id}: stamp {stamp_ns} is older than the previous keyframe's")
         d = self._check(descriptors)
         if self.vocab is not None:
-            bow = BowVector.from_word_ids(self.vocab.quantize(d))
+            bow = BowVector.from_word_ids(self._quantized(d))
         else:
-            u = as_unit_vectors(d)
+            u = self._unit(d)
             if self.words is None:
                 self.words = IncrementalWords(u.shape[1], self.conf.match_ratio, self.conf.match_max_distance,
                                               self._desc_kind, radius=self.conf.online_word_radius,
