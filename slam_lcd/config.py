@@ -92,6 +92,11 @@ class RunConfig:
     # keyframe's features are being extracted in the background, so that the extraction keeps a
     # core (slam_lcd/thread_limits.py); 0 = the libraries' defaults
     lcd_threads: int = 1
+    # with extract_ahead > 0: threads extracting keyframes side by side. 1: one keyframe at a time
+    # on torch's whole thread pool. N > 1 (SuperPoint on CPU): N keyframes at once, each forward
+    # on one thread (no per-operator barriers between cores; needs extract_ahead >= N to keep
+    # them busy). 0 = as many as the CPU cores torch uses, at most extract_ahead
+    extract_workers: int = 1
 
 
 @dataclass

@@ -151,6 +151,7 @@ RANGES: dict[str, str] = {
     "run.loop_true_max_distance": "(0, inf)",
     "run.extract_ahead": "[0, 64]",
     "run.lcd_threads": "[0, 64]",
+    "run.extract_workers": "[0, 64]",
     # batch
     "batch.cpus_per_task": "(0, inf)",
     "batch.gpus_per_task": "[0, inf)",

@@ -112,6 +112,8 @@ class Pipeline:
         self._unsubmitted: list[Keyframe] = []
         self._ahead = max(0, int(self.config.run.extract_ahead))
         self._lcd_threads = int(self.config.run.lcd_threads) if self._ahead else 0  # leave a core to extraction
+        self._workers = self._extract_workers()
+        self._torch_threads_before: int | None = None  # torch's thread count, while the workers run single-threaded
         self._inflight: deque[tuple[Keyframe, Future | None]] = deque()
         self._executor: ThreadPoolExecutor | None = None
         # per keyframe: seconds of loop detection (and its parts), of the back end, resident kB after it
@@ -178,9 +180,26 @@ class Pipeline:
         self._n_submitted += 1  # queued: an interrupt before this line hands the keyframe over again
         return self._drain(keep=self._ahead)
 
+    def _extract_workers(self) -> int:
+        """Extraction threads (``run.extract_workers``): several only for a torch model on the CPU."""
+        n = int(self.config.run.extract_workers)
+        device = getattr(getattr(self.extractor, "device", None), "type", None)
+        if self._ahead == 0 or device != "cpu":
+            return 1
+        if n == 0:
+            import torch
+
+            n = torch.get_num_threads()
+        return max(1, min(n, self._ahead))
+
     def _worker(self) -> ThreadPoolExecutor:
         if self._executor is None:
-            self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="slam-lcd-features")
+            if self._workers > 1:  # each keyframe's forward on one thread, N keyframes at once
+                import torch
+
+                self._torch_threads_before = torch.get_num_threads()
+                torch.set_num_threads(1)
+            self._executor = ThreadPoolExecutor(max_workers=self._workers, thread_name_prefix="slam-lcd-features")
         return self._executor
 
     def _drain(self, keep: int) -> list[LoopClosure]:
@@ -280,6 +299,11 @@ class Pipeline:
         if self._executor is not None:
             self._executor.shutdown(wait=True, cancel_futures=True)
             self._executor = None
+        if self._torch_threads_before is not None:
+            import torch
+
+            torch.set_num_threads(self._torch_threads_before)
+            self._torch_threads_before = None
 
     # ------------------------------------------------------------------ internals
     def _extract(self, stamp: int, image: np.ndarray):

@@ -73,3 +73,26 @@ def test_plugin_reports_every_loop_once_with_lookahead():
         assert len(pipe.graph) == len(frames)
         counts[ahead] = [(c.query_id, c.match_id) for c in seen]
     assert counts[0] == counts[2] and counts[0]
+
+
+def test_parallel_extraction_workers_give_the_same_run(short_log, tmp_path, superpoint_weights):
+    """run.extract_workers=2: two SuperPoint keyframes at once, each forward on one thread; the
+    same keyframes, loops and trajectory as one worker, and torch's thread count is restored."""
+    import torch
+
+    from slam_lcd.runner import run_log
+
+    before = torch.get_num_threads()
+    out = {}
+    for workers in (1, 2):
+        cfg = load_config("default", [f"features.weights={superpoint_weights}", "features.feature_cache=false",
+                                      "features.device=cpu", "run.extract_ahead=2", f"run.extract_workers={workers}",
+                                      "run.plots=false", "run.write_mcap=false", "run.loop_pictures=false"])
+        d = tmp_path / f"w{workers}"
+        out[workers] = (run_log(short_log, d, cfg, progress=False), d)
+        assert torch.get_num_threads() == before
+    (r1, d1), (r2, d2) = out[1], out[2]
+    assert r2.n_keyframes == r1.n_keyframes and r2.loops_accepted == r1.loops_accepted
+    assert r1.loops_accepted >= 1
+    t1, t2 = read_tum(d1 / "corrected.tum"), read_tum(d2 / "corrected.tum")
+    assert np.array_equal(t1.stamps, t2.stamps) and np.allclose(t1.poses, t2.poses, atol=1e-6)
