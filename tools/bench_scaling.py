@@ -22,6 +22,11 @@ descriptors.
 
     python tools/bench_scaling.py database [--keyframes 10000] [--baseline-keyframes 1000]
 
+With ``--trained K`` the database quantises with a vocabulary trained beforehand, as in the
+paper (and DBoW2): incremental words from K consecutive keyframes of *another* place stream
+(other landmarks: the vocabulary never saw the test's world), their DP tree, idf from the
+training images; then the same 10,000-keyframe test, quantising by tree descent.
+
 Section ``log``: a long demo log (``--laps 10``: ~4,200 frames, ~835 keyframes) run twice
 through ``run_log`` with the default config; the first pass fills the feature cache, the
 second is measured: loop detection per keyframe and per part (BoW query/insert, matching,
@@ -174,15 +179,24 @@ def _agreement(db, u: np.ndarray) -> tuple[float, float, float]:
     return float((assign(ids, sims) == assign(ids_ex, sims_ex)).mean()), float((ids == ids_ex).mean()), t_ex
 
 
+def _tree_agreement(vocab, u: np.ndarray) -> tuple[float, float, float]:
+    """Trained vocabulary: (tree word = exhaustive word, the same, exhaustive ms) on descriptors ``u``."""
+    t = time.perf_counter()
+    ex = vocab.quantize_exhaustive(u)
+    t_ex = (time.perf_counter() - t) * 1e3
+    same = float((vocab.quantize(u) == ex).mean())
+    return same, same, t_ex
+
+
 def grow(stream: PlaceStream, n: int, conf, checkpoints: list[int], label: str, measure_recall: bool,
-         window: int = 100) -> list[dict]:
+         window: int = 100, vocab=None) -> list[dict]:
     """Grow one database to ``n`` keyframes; one row of figures per checkpoint."""
     from slam_lcd.vocab import BowDatabase
     from slam_lcd.vocab.descriptors import as_unit_vectors
 
     rss0 = rss_prev = rss_bytes()
     kf_prev = 0
-    db = BowDatabase(None, conf)
+    db = BowDatabase(vocab, conf)
     times = np.zeros((n, 3))
     hits = []
     rows = []
@@ -209,9 +223,12 @@ def grow(stream: PlaceStream, n: int, conf, checkpoints: list[int], label: str, 
                    "insert": times[lo:k + 1, 2].mean() * 1e3, "rss_kb_per_kf": (rss_bytes() - rss0) / (k + 1) / 1024,
                    "rss_kb_marginal": (rss_bytes() - rss_prev) / (k + 1 - kf_prev) / 1024,
                    "revisit_top1": float(np.mean(hits)) if hits else float("nan"), "agree": float("nan"),
-                   "exhaustive_ms": float("nan"), "index": db.words.index.stats()}
+                   "exhaustive_ms": float("nan"),
+                   "index": db.words.index.stats() if vocab is None else {"active": False, "tree": vocab.depth}}
             row["total"] = row["quantise"] + row["query"] + row["insert"]
-            if measure_recall:
+            if measure_recall and vocab is not None:
+                row["agree"], row["nearest_recall"], row["exhaustive_ms"] = _tree_agreement(vocab, next_desc)
+            elif measure_recall:
                 row["agree"], row["nearest_recall"], row["exhaustive_ms"] = _agreement(db, as_unit_vectors(next_desc))
             rows.append(row)
             rss_prev, kf_prev = rss_bytes(), k + 1
@@ -225,8 +242,9 @@ _HEAD = (f"{'path':10s} {'kf':>6s} {'words':>8s} {'quant':>7s} {'query':>7s} {'i
 
 def _fmt(r: dict) -> str:
     ix = r["index"]
-    share = ix["hinted"] / max(1, ix["hinted"] + ix["searched"])
-    ixs = f"graph: {ix['indexed']} words, {share:.0%} of lookups by track hints" if ix["active"] else "exact"
+    share = ix.get("hinted", 0) / max(1, ix.get("hinted", 0) + ix.get("searched", 0))
+    ixs = f"graph: {ix['indexed']} words, {share:.0%} of lookups by track hints" if ix["active"] else \
+        (f"trained tree, depth {ix['tree']}" if "tree" in ix else "exact")
     return (f"{r['path']:10s} {r['keyframes']:6d} {r['words']:8d} {r['quantise']:7.2f} {r['query']:7.2f} "
             f"{r['insert']:7.2f} {r['total']:7.2f}       {r['rss_kb_per_kf']:6.1f} {r['rss_kb_marginal']:6.1f} "
             f"{r['agree']:6.3f} "
@@ -245,6 +263,9 @@ def bench_database(args) -> None:
     base_n = min(args.baseline_keyframes, n)
     base_checks = sorted({c for c in (100, 1000) if c <= base_n} | {base_n}) if base_n > 0 else []
     overrides = dict(kv.split("=", 1) for kv in args.set)
+    if args.trained:
+        _bench_trained(args, table, real, n, checkpoints, overrides)
+        return
     conf = VocabConfig(idf_source="database", **{k: type(getattr(VocabConfig, k))(v) for k, v in overrides.items()})
     exhaustive = VocabConfig(idf_source="database", ann_min_words=2**62)
     print(f"== BoW database, online vocabulary: {n} keyframes of ~{int(1250 * 0.8)} x {DIM}-D descriptors "
@@ -288,6 +309,31 @@ def bench_database(args) -> None:
     print(f"target at {late['keyframes']} keyframes: quantise+query+insert {late['total']:.1f} ms <= 20 ms "
           f"{'OK' if ok_t else 'MISSED'}; memory {late['rss_kb_per_kf']:.0f} kB/kf <= 150 "
           f"{'OK' if ok_m else 'MISSED'}")
+
+
+def _bench_trained(args, table, real, n: int, checkpoints: list[int], overrides: dict) -> None:
+    """The database with a vocabulary trained beforehand on another place stream (the paper's setting)."""
+    from slam_lcd.vocab import VocabConfig, train_vocabulary
+
+    conf = VocabConfig(**{k: type(getattr(VocabConfig, k))(v) for k, v in overrides.items()})
+    other = PlaceStream(args.trained, args.seed + 101, landmarks=LandmarkTable(args.seed + 101, real=real))
+    t = time.perf_counter()
+    vocab = train_vocabulary([other.keyframe(k) for k in range(args.trained)], conf)
+    print(f"== BoW database, trained vocabulary: {len(vocab)} words (incremental words + {conf.tree} tree, depth "
+          f"{vocab.depth}) from {args.trained} keyframes of another place stream in {time.perf_counter() - t:.0f} s; "
+          f"{n} keyframes of ~{int(1250 * 0.8)} x {DIM}-D descriptors, idf from the {conf.idf_source} ==")
+    print("agree = tree word equal to the exhaustive nearest word of the same vocabulary (next keyframe)")
+    print(_HEAD)
+    t = time.perf_counter()
+    rows = grow(PlaceStream(n, args.seed, landmarks=table), n, conf, checkpoints, "trained", True, vocab=vocab)
+    print(f"wall: {time.perf_counter() - t:.0f} s for {n} keyframes")
+    early = next((r for r in rows if r["keyframes"] == 1000), rows[0])
+    late = rows[-1]
+    print(f"growth late/early (total ms/kf at {late['keyframes']} / at {early['keyframes']} keyframes): "
+          f"x{late['total'] / early['total']:.2f}")
+    print(f"target at {late['keyframes']} keyframes: quantise+query+insert {late['total']:.1f} ms <= 20 ms "
+          f"{'OK' if late['total'] <= 20.0 else 'MISSED'}; memory {late['rss_kb_per_kf']:.0f} kB/kf <= 150 "
+          f"{'OK' if late['rss_kb_per_kf'] <= 150.0 else 'MISSED'}")
 
 
 # ----------------------------------------------------------------------------- whole-log benchmarks
@@ -422,6 +468,8 @@ def main(argv=None) -> None:
     db.add_argument("--baseline-keyframes", type=int, default=300,
                     help="the exhaustive-search baseline grows to this many keyframes (0: none)")
     db.add_argument("--landmarks", help=".npz with an array 'desc' of real descriptors used as landmarks")
+    db.add_argument("--trained", type=int, default=0, metavar="K",
+                    help="quantise with a vocabulary trained on K keyframes of another place stream (0: online mode)")
     db.add_argument("--seed", type=int, default=0)
     db.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="VocabConfig override, e.g. ann_nprobe=4")
     db.set_defaults(func=bench_database)
