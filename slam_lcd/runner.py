@@ -31,7 +31,7 @@ from .progress import progress_bar
 from .sensors.messages import at_message, check_first_messages, decode_camera_of, decode_depth, decode_gray, decode_pose_of
 from .sensors.mounting import body_frame_of, calibrated_mounting, mounting_from_camera_info, static_transforms
 from .sensors.ground_truth import POSITION_ONLY_NOTE, decode_ground_truth, ground_truth_from_tf
-from .sensors.topics import Topics, choose_right_topic, choose_topics, copyable_topics, static_tf_topics
+from .sensors.topics import Topics, choose_right_topic, choose_topics, configured_topics, copyable_topics, static_tf_topics
 from .types import Trajectory
 
 log = logging.getLogger(__name__)
@@ -111,7 +111,9 @@ def run_log(
         with open_log(log_path, conf=cfg.io) as reader:
             if reader.message_count == 0:
                 raise PipelineError("log holds no messages", log_path)
-            topics = choose_topics(reader, image_topic, odom_topic, gt_topic, depth_topic)
+            flags = configured_topics(reader, cfg.sensors, image_topic, odom_topic, gt_topic, depth_topic, right_topic)
+            right_topic = flags.pop("right_topic")
+            topics = choose_topics(reader, **flags)
             calibrated = _calibrated_camera(calibration, topics, log_path)
             first = check_first_messages(reader, topics)
             result.topics = {k: v for k, v in vars(topics).items() if v}
@@ -127,16 +129,20 @@ def run_log(
             mcap_wanted = write_mcap and cfg.run.write_mcap
             copy_topics = copyable_topics(reader, cfg.run.copy_images, log_path) if mcap_wanted else []
             vo_odometry = None
+            right, rectifier, partner, stereo = None, None, None, None
+            if topics.depth is None:  # a stereo pair instead: the VO (without odometry) and the loop poses' depth
+                partner = calibration.stereo_partner(calibrated) if calibrated is not None else None
+                right = choose_right_topic(reader, topics.image, right_topic,
+                                           partner[0].rostopic if partner is not None else None)
+                if right is None and topics.odom is None:
+                    raise PipelineError(_no_odometry_reason(topics.image), log_path)
+                if right is not None and (partner is not None or topics.odom is None):
+                    rectifier = _rectifier(calibration, calibrated, log_path)
             if topics.odom is None:
-                right = None
-                if topics.depth is None:
-                    partner = calibration.stereo_partner(calibrated) if calibrated is not None else None
-                    right = choose_right_topic(reader, topics.image, right_topic,
-                                               partner[0].rostopic if partner is not None else None)
-                    if right is None:
-                        raise PipelineError(_no_odometry_reason(topics.image), log_path)
-                rectifier = _rectifier(calibration, calibrated, log_path) if right is not None else None
                 vo_odometry = _visual_odometry(log_path, topics, cfg, calibrated, right, rectifier)
+            if right is not None:
+                stereo = _stereo_frames(reader, right, calibrated, rectifier, vo_odometry)
+                topics.right = right if stereo is not None else None
             tf = static_transforms(reader, log_path)
             if cfg.run.loop_pictures:  # a working folder inside the staging folder: discarded with it on failure
                 from .outputs.loop_pictures import KeyframeAlbum
@@ -151,7 +157,7 @@ def run_log(
                 for stamp, T, cov, segment_start in vo_odometry.odometry_samples():
                     pipe.add_odometry(stamp, T, cov, segment_start=segment_start)
             gt_traj_from_log = _drive(reader, topics, pipe, result, cfg, tf, body_frame_of(first.get(topics.odom)),
-                                      vo_odometry, log_path, progress)
+                                      vo_odometry, log_path, progress, stereo)
             result.log_duration_s = reader.duration_ns * 1e-9
             if gt_from_tf is not None:
                 gt_traj_from_log = gt_from_tf
@@ -213,10 +219,12 @@ def _make_pipeline(cfg, extractor, vocab, log_path, topics: Topics, keyframe_sin
 
 
 def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame, vo_odometry, log_path,
-           progress: bool) -> Trajectory | None:
+           progress: bool, stereo=None) -> Trajectory | None:
     """Stream the chosen topics into ``pipe`` in log order; returns the ground truth read on the way.
 
     A Ctrl-C stops the stream (``result.interrupted``); a damaged image is skipped and counted.
+    ``stereo`` (a :class:`~slam_lcd.sensors.stereo_depth.StereoFrames`): each left image waits for
+    its right one and goes in with the pair's depth (computed for keyframes only).
     """
     gt_st, gt_T = [], []
     camera_set = False
@@ -237,10 +245,12 @@ def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame,
                             mounting_from_camera_info(cfg.frontend, tf, m, body_frame))
                 pipe.set_camera(cam, T_bc)
                 camera_set = True
+                if stereo is not None and stereo.camera is None:
+                    stereo.camera = cam
             elif m.topic == topics.depth:
                 try:
                     with pipe.timer("decode"), at_message(m, log_path):
-                        d = decode_depth(m)
+                        d = decode_depth(m, cfg.sensors.depth_unit_m)
                 except DamagedImageError as e:
                     damaged.append(e)
                     continue
@@ -254,19 +264,39 @@ def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame,
                     damaged.append(e)
                     continue
                 with at_message(m, log_path, decoding=False):
-                    pipe.add_image(m.stamp, gray)
+                    if stereo is None:
+                        pipe.add_image(m.stamp, gray)
+                    else:
+                        for stamp, left, depth in stereo.add_left(m.stamp, gray):
+                            pipe.add_image(stamp, left, depth=depth)
                 result.n_frames += 1
                 bar.update(1)
+            elif stereo is not None and m.topic == topics.right:
+                try:
+                    with pipe.timer("decode"), at_message(m, log_path):
+                        right = decode_gray(m)
+                except DamagedImageError as e:
+                    damaged.append(e)
+                    continue
+                with at_message(m, log_path, decoding=False):
+                    for stamp, left, depth in stereo.add_right(m.stamp, right):
+                        pipe.add_image(stamp, left, depth=depth)
             elif m.topic == topics.gt:
                 with at_message(m, log_path):
                     T = decode_ground_truth(m)
                 gt_st.append(m.stamp)
                 gt_T.append(T)
+        if stereo is not None:
+            for stamp, left, depth in stereo.flush():
+                pipe.add_image(stamp, left, depth=depth)
     except KeyboardInterrupt:
         result.interrupted = True
         log.warning("interrupted: writing the partial result")
     finally:
         bar.close()
+    if stereo is not None and stereo.unpaired:
+        log.warning("%s: %d image(s) of %s had no %s partner within %.0f ms: no stereo depth for them", log_path,
+                    stereo.unpaired, topics.image, topics.right, stereo.tolerance_ns * 1e-6)
     if damaged:
         log.warning("%s: %d damaged image message(s) skipped; the first: %s", log_path, len(damaged),
                     damaged[0].problem)
@@ -298,7 +328,7 @@ def _visual_odometry(log_path, topics: Topics, cfg, calibrated=None, right_topic
     T_bc = calibrated.T_body_camera if calibrated is not None else None
     return visual_odometry_from_log(log_path, cfg.frontend, image_topic=topics.image, depth_topic=topics.depth,
                                     right_topic=right_topic, camera_info_topic=topics.camera_info, camera=cam,
-                                    T_body_camera=T_bc, rectifier=rectifier)
+                                    T_body_camera=T_bc, rectifier=rectifier, depth_unit_m=cfg.sensors.depth_unit_m)
 
 
 def _no_odometry_reason(image_topic: str) -> str:
@@ -307,6 +337,26 @@ def _no_odometry_reason(image_topic: str) -> str:
             f"beside {image_topic}, and one camera alone gives no metric odometry; pass --odom-topic TOPIC (an "
             f"odometry or pose topic of the log), --depth-topic TOPIC (RGB-D visual odometry) or --right-topic TOPIC "
             f"(a second camera: stereo visual odometry; a raw pair is rectified with --calib)")
+
+
+def _stereo_frames(reader, right: str, calibrated, rectifier, vo_odometry):
+    """The pairing of left and right images that gives the loop poses depth, or None (said) when the
+    baseline of the pair is unknown."""
+    from .sensors.stereo_depth import StereoFrames, right_camera_info_baseline
+
+    camera = calibrated.camera if calibrated is not None else None
+    baseline = None
+    if rectifier is None:
+        baseline = ((camera.baseline if camera is not None else None)
+                    or (vo_odometry.camera.baseline if vo_odometry is not None else None)
+                    or right_camera_info_baseline(reader, right))
+        if not baseline:
+            log.warning("%s: stereo pair %s has no baseline (no right CameraInfo projection, no calibration): "
+                        "loop poses get no stereo depth", reader.path, right)
+            return None
+    log.info("%s: loop poses take depth from the stereo pair (+ %s)%s", reader.path, right,
+             ", rectified" if rectifier is not None else "")
+    return StereoFrames(right, camera=camera, baseline=baseline, rectifier=rectifier)
 
 
 def _rectifier(calibration, calibrated, log_path):
