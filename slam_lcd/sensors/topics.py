@@ -90,6 +90,8 @@ def choose_topics(reader, image_topic=None, odom_topic=None, gt_topic=None, dept
         _check_type(reader, "--depth-topic", depth_topic, IMAGE_TYPES, "a depth image")
     else:
         depths = [t for t in images if "depth" in t.lower() and (_ns(t) == ns or _ns(_ns(t)) == ns)]
+        if not depths:  # a sibling namespace (TUM: /camera/rgb/image_color beside /camera/depth_registered/image_raw)
+            depths = sorted(t for t in images if "depth" in t.lower() and _ns(_ns(t)) == _ns(ns) and _ns(ns))
         depth_topic = depths[0] if depths else None
     gt_frames = None
     if gt_topic is not None:
