@@ -143,6 +143,8 @@ def run_log(
             if right is not None:
                 stereo = _stereo_frames(reader, right, calibrated, rectifier, vo_odometry)
                 topics.right = right if stereo is not None else None
+            if right is not None:
+                result.topics["right"] = right
             tf = static_transforms(reader, log_path)
             if cfg.run.loop_pictures:  # a working folder inside the staging folder: discarded with it on failure
                 from .outputs.loop_pictures import KeyframeAlbum
