@@ -130,7 +130,7 @@ def run_log(
             copy_topics = copyable_topics(reader, cfg.run.copy_images, log_path) if mcap_wanted else []
             vo_odometry = None
             right, rectifier, partner, stereo = None, None, None, None
-            if topics.depth is None:  # a stereo pair instead: the VO (without odometry) and the loop poses' depth
+            if topics.depth is None:  # a stereo pair instead: the VO (without odometry) and the loop poses' points
                 partner = calibration.stereo_partner(calibrated) if calibrated is not None else None
                 right = choose_right_topic(reader, topics.image, right_topic,
                                            partner[0].rostopic if partner is not None else None)
@@ -150,11 +150,15 @@ def run_log(
                 from .outputs.loop_pictures import KeyframeAlbum
 
                 album = KeyframeAlbum(outputs.staging / ".loop_keyframes", cfg.lcd.descriptor_dtype)
-            pipe = _make_pipeline(cfg, extractor, vocab, log_path, topics, album)
+            pipe = _make_pipeline(cfg, extractor, vocab, log_path, topics, album,
+                                  rectified=stereo is not None and stereo.rectifier is not None)
             if calibrated is not None:  # the calibration file's camera (CameraInfo is not read then)
                 T_bc = (vo_odometry.T_body_camera if vo_odometry is not None else
                         calibrated_mounting(cfg.frontend, calibrated, tf, body_frame_of(first.get(topics.odom))))
-                pipe.set_camera(calibrated.camera, T_bc)
+                if stereo is not None and stereo.rectifier is not None:  # the main pass sees the rectified pair
+                    pipe.set_camera(stereo.rectifier.camera, T_bc @ stereo.rectifier.T_cam0_rect)
+                else:
+                    pipe.set_camera(calibrated.camera, T_bc)
             if vo_odometry is not None:  # built-in VO ran first: its poses are the odometry
                 for stamp, T, cov, segment_start in vo_odometry.odometry_samples():
                     pipe.add_odometry(stamp, T, cov, segment_start=segment_start)
@@ -200,9 +204,10 @@ def _log_frames(first: dict, topics: Topics) -> dict:
     return {k: v for k, v in frames.items() if v}
 
 
-def _make_pipeline(cfg, extractor, vocab, log_path, topics: Topics, keyframe_sink=None):
+def _make_pipeline(cfg, extractor, vocab, log_path, topics: Topics, keyframe_sink=None, rectified: bool = False):
     """The pipeline with its collaborators: the extractor, the vocabulary (None: online), the feature
-    cache of this log, whether frames wait for depth, the loop pictures' keyframe album."""
+    cache of this log (``rectified``: the images are the rectified pair's, cached apart from the raw
+    ones), whether frames wait for depth, the loop pictures' keyframe album."""
     from .features import load_extractor
     from .pipeline import Pipeline  # imported late: topic errors need no model
 
@@ -213,8 +218,10 @@ def _make_pipeline(cfg, extractor, vocab, log_path, topics: Topics, keyframe_sin
 
         cache = FeatureCache(extractor)
 
+        cache_topic = f"{topics.image}#rectified" if rectified else topics.image
+
         def feature_source(stamp, img):
-            return cache.extract(log_path, topics.image, stamp, img)
+            return cache.extract(log_path, cache_topic, stamp, img)
 
     return Pipeline(cfg, extractor=extractor, vocab=vocab, feature_source=feature_source,
                     expect_depth=topics.depth is not None, keyframe_sink=keyframe_sink)
@@ -225,8 +232,8 @@ def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame,
     """Stream the chosen topics into ``pipe`` in log order; returns the ground truth read on the way.
 
     A Ctrl-C stops the stream (``result.interrupted``); a damaged image is skipped and counted.
-    ``stereo`` (a :class:`~slam_lcd.sensors.stereo_depth.StereoFrames`): each left image waits for
-    its right one and goes in with the pair's depth (computed for keyframes only).
+    ``stereo`` (a :class:`~slam_lcd.sensors.stereo_pairs.StereoFrames`): each left image waits for
+    its right one and goes in with it (the loop detector's stereo points, for keyframes only).
     """
     gt_st, gt_T = [], []
     camera_set = False
@@ -245,10 +252,10 @@ def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame,
                     # one camera-mounting rule for the VO pass and this one
                     T_bc = (vo_odometry.T_body_camera if vo_odometry is not None else
                             mounting_from_camera_info(cfg.frontend, tf, m, body_frame))
+                if stereo is not None and not cam.baseline:  # a rectified CameraInfo pair: the right one's baseline
+                    cam.baseline = stereo.baseline
                 pipe.set_camera(cam, T_bc)
                 camera_set = True
-                if stereo is not None and stereo.camera is None:
-                    stereo.camera = cam
             elif m.topic == topics.depth:
                 try:
                     with pipe.timer("decode"), at_message(m, log_path):
@@ -269,8 +276,8 @@ def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame,
                     if stereo is None:
                         pipe.add_image(m.stamp, gray)
                     else:
-                        for stamp, left, depth in stereo.add_left(m.stamp, gray):
-                            pipe.add_image(stamp, left, depth=depth)
+                        for stamp, left, right in stereo.add_left(m.stamp, gray):
+                            pipe.add_image(stamp, left, right_image=right)
                 result.n_frames += 1
                 bar.update(1)
             elif stereo is not None and m.topic == topics.right:
@@ -281,23 +288,23 @@ def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame,
                     damaged.append(e)
                     continue
                 with at_message(m, log_path, decoding=False):
-                    for stamp, left, depth in stereo.add_right(m.stamp, right):
-                        pipe.add_image(stamp, left, depth=depth)
+                    for stamp, left, right in stereo.add_right(m.stamp, right):
+                        pipe.add_image(stamp, left, right_image=right)
             elif m.topic == topics.gt:
                 with at_message(m, log_path):
                     T = decode_ground_truth(m)
                 gt_st.append(m.stamp)
                 gt_T.append(T)
         if stereo is not None:
-            for stamp, left, depth in stereo.flush():
-                pipe.add_image(stamp, left, depth=depth)
+            for stamp, left, right in stereo.flush():
+                pipe.add_image(stamp, left, right_image=right)
     except KeyboardInterrupt:
         result.interrupted = True
         log.warning("interrupted: writing the partial result")
     finally:
         bar.close()
     if stereo is not None and stereo.unpaired:
-        log.warning("%s: %d image(s) of %s had no %s partner within %.0f ms: no stereo depth for them", log_path,
+        log.warning("%s: %d image(s) of %s had no %s partner within %.0f ms: no stereo points for them", log_path,
                     stereo.unpaired, topics.image, topics.right, stereo.tolerance_ns * 1e-6)
     if damaged:
         log.warning("%s: %d damaged image message(s) skipped; the first: %s", log_path, len(damaged),
@@ -342,23 +349,23 @@ def _no_odometry_reason(image_topic: str) -> str:
 
 
 def _stereo_frames(reader, right: str, calibrated, rectifier, vo_odometry):
-    """The pairing of left and right images that gives the loop poses depth, or None (said) when the
-    baseline of the pair is unknown."""
-    from .sensors.stereo_depth import StereoFrames, right_camera_info_baseline
+    """The pairing of left and right images that gives the loop poses stereo points, or None (said)
+    when the baseline of the pair is unknown."""
+    from .sensors.stereo_pairs import StereoFrames, right_camera_info_baseline
 
-    camera = calibrated.camera if calibrated is not None else None
-    baseline = None
-    if rectifier is None:
-        baseline = ((camera.baseline if camera is not None else None)
+    if rectifier is not None:
+        baseline = rectifier.camera.baseline
+    else:
+        baseline = ((calibrated.camera.baseline if calibrated is not None else None)
                     or (vo_odometry.camera.baseline if vo_odometry is not None else None)
                     or right_camera_info_baseline(reader, right))
-        if not baseline:
-            log.warning("%s: stereo pair %s has no baseline (no right CameraInfo projection, no calibration): "
-                        "loop poses get no stereo depth", reader.path, right)
-            return None
-    log.info("%s: loop poses take depth from the stereo pair (+ %s)%s", reader.path, right,
-             ", rectified" if rectifier is not None else "")
-    return StereoFrames(right, camera=camera, baseline=baseline, rectifier=rectifier)
+    if not baseline:
+        log.warning("%s: stereo pair %s has no baseline (no right CameraInfo projection, no calibration): "
+                    "loop poses get no stereo points", reader.path, right)
+        return None
+    log.info("%s: loop poses take their 3-D points from the stereo pair (+ %s)%s", reader.path, right,
+             ", rectified for the main pass too" if rectifier is not None else "")
+    return StereoFrames(right, baseline=baseline, rectifier=rectifier)
 
 
 def _rectifier(calibration, calibrated, log_path):

@@ -4,7 +4,8 @@ Per layout one tiny log (60 frames, 320x240: the VO tracks from that size on) ru
 ``--config <preset>`` and no topic flag (ORB features keep each run at seconds): the topics
 the preset names are found, the calibration file is read (EuRoC), the ground truth is read
 from the layout's message (PointStamped, TF chain), the built-in VO is the odometry and
-its ATE is small; stereo layouts compute the loop poses' depth once per keyframe only.
+its ATE is small; stereo layouts give the loop detector each keyframe's pair (SGBM once per
+keyframe, never for the frames between).
 """
 from __future__ import annotations
 
@@ -16,7 +17,6 @@ import pytest
 from slam_lcd.config import load_config
 from slam_lcd.io import open_log
 from slam_lcd.runner import run_log
-from slam_lcd.sensors.stereo_depth import StereoDepthMap
 from slam_lcd.sim import make_demo_log
 
 FRAMES, W, H = 60, 320, 240
@@ -45,9 +45,11 @@ def test_layout_is_read_by_its_preset(layout, layout_logs, tmp_path, monkeypatch
         types = {t: i.msgtype for t, i in r.topics.items()}
     assert "nav_msgs/msg/Odometry" not in types.values() and types[gt] == gt_type
     assert (layout == "euroc") == ("sensor_msgs/msg/CameraInfo" not in types.values())
+    import slam_lcd.lcd.geometry as lcd_geometry
+
     calls = []
-    real_depth = StereoDepthMap.depth
-    monkeypatch.setattr(StereoDepthMap, "depth", lambda self, l, r: calls.append(1) or real_depth(self, l, r))
+    real_sgbm = lcd_geometry.dense_disparity
+    monkeypatch.setattr(lcd_geometry, "dense_disparity", lambda l, r: calls.append(1) or real_sgbm(l, r))
     cfg = load_config(preset, ["features.kind=orb", "features.feature_cache=false", "run.plots=false",
                                "run.loop_pictures=false"])
     calib = [info.calibration_path] if layout == "euroc" else None
