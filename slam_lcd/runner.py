@@ -13,6 +13,7 @@ its topic and stamp; nothing is written then, and an earlier run's folder is unt
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import os
 import time
@@ -143,7 +144,6 @@ def run_log(
             if right is not None:
                 stereo = _stereo_frames(reader, right, calibrated, rectifier, vo_odometry)
                 topics.right = right if stereo is not None else None
-            if right is not None:
                 result.topics["right"] = right
             tf = static_transforms(reader, log_path)
             if cfg.run.loop_pictures:  # a working folder inside the staging folder: discarded with it on failure
@@ -157,6 +157,8 @@ def run_log(
                         calibrated_mounting(cfg.frontend, calibrated, tf, body_frame_of(first.get(topics.odom))))
                 if stereo is not None and stereo.rectifier is not None:  # the main pass sees the rectified pair
                     pipe.set_camera(stereo.rectifier.camera, T_bc @ stereo.rectifier.T_cam0_rect)
+                elif stereo is not None and not calibrated.camera.baseline:  # the baseline of the pair
+                    pipe.set_camera(dataclasses.replace(calibrated.camera, baseline=stereo.baseline), T_bc)
                 else:
                     pipe.set_camera(calibrated.camera, T_bc)
             if vo_odometry is not None:  # built-in VO ran first: its poses are the odometry

@@ -323,3 +323,17 @@ def test_raw_pair_without_rectification_tracks_worse(tiny_log, tmp_path):
     assert err_good < 0.05, err_good
     unrectified = bad.result.trajectory()  # rows do not match: tracking fails, or drifts far more
     assert len(unrectified) < len(good.result.trajectory()) / 2 or ate(gt, unrectified, "se3").rmse > 2 * err_good
+
+
+def test_stereo_log_with_odometry_gives_the_loop_detector_the_pair(tiny_log, tmp_path, monkeypatch):
+    """Odometry, a rectified CameraInfo pair, no depth: each keyframe's pair reaches loop detection
+    (SGBM once per keyframe) and the camera carries the right CameraInfo's baseline."""
+    import slam_lcd.lcd.geometry as lcd_geometry
+
+    log = _variant(tiny_log, tmp_path / "stereo_odom.mcap", drop=("/camera/depth",))
+    calls = []
+    real = lcd_geometry.dense_disparity
+    monkeypatch.setattr(lcd_geometry, "dense_disparity", lambda l, r: calls.append(r.shape) or real(l, r))
+    res = run_log(log, tmp_path / "out", _orb_config(), progress=False, write_mcap=False)
+    assert res.topics["odom"] == "/odom" and res.topics["right"] == "/camera/right/image_raw"
+    assert len(calls) == res.n_keyframes >= 2
