@@ -57,14 +57,14 @@ def run_one(work: Path, layout: str, log: Path, path_m: float, overrides: list[s
     wall = time.perf_counter() - t0
     if proc.returncode != 0:
         return {"layout": layout, "error": (proc.stderr.strip().splitlines() or ["?"])[-1], "wall": wall,
-                "command": " ".join(map(str, cmd[2:]))}
+                "command": " ".join(map(str, cmd[3:]))}
     rep = json.loads((out / "report.json").read_text())
     ate = rep["eval"]["ate"]
     return {"layout": layout, "preset": PRESETS[layout], "path_m": path_m,
             "vo_ate": ate["before"]["translation_m"]["rmse"], "after_ate": ate["after"]["translation_m"]["rmse"],
             "loops": rep["loops"]["accepted"], "false": rep["loops"]["false_accepted"], "keyframes": rep["keyframes"],
             "frames": rep["frames"], "wall": wall, "alignment": rep["eval"]["alignment"],
-            "command": " ".join(map(str, cmd[2:]))}
+            "command": " ".join(map(str, cmd[3:]))}
 
 
 def main() -> int:
