@@ -27,6 +27,7 @@ from .features.config import FeaturesConfig
 from .frontend.config import FrontendConfig
 from .io.config import IOConfig
 from .lcd.config import LcdConfig
+from .sensors.config import SensorsConfig
 from .vocab.config import VocabConfig
 
 # presets are package data (slam_lcd/data/configs/*.yaml): found through importlib.resources,
@@ -102,6 +103,7 @@ class RunConfig:
 @dataclass
 class Config:
     io: IOConfig = field(default_factory=IOConfig)
+    sensors: SensorsConfig = field(default_factory=SensorsConfig)
     frontend: FrontendConfig = field(default_factory=FrontendConfig)
     features: FeaturesConfig = field(default_factory=FeaturesConfig)
     vocab: VocabConfig = field(default_factory=VocabConfig)

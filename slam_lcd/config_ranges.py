@@ -18,6 +18,8 @@ RANGES: dict[str, str] = {
     "io.jpeg_quality": "[0, 100]",
     "io.tf_extrapolation_s": "[0, inf)",
     "io.rosbag1_chunk_cache_mb": "[1, inf)",
+    # sensors
+    "sensors.depth_unit_m": "(0, inf)",
     # frontend: keyframe selection
     "frontend.kf_min_translation": "[0, inf)",
     "frontend.kf_min_rotation_deg": "[0, 360]",

@@ -13,6 +13,7 @@ its topic and stamp; nothing is written then, and an earlier run's folder is unt
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import os
 import time
@@ -31,7 +32,7 @@ from .progress import progress_bar
 from .sensors.messages import at_message, check_first_messages, decode_camera_of, decode_depth, decode_gray, decode_pose_of
 from .sensors.mounting import body_frame_of, calibrated_mounting, mounting_from_camera_info, static_transforms
 from .sensors.ground_truth import POSITION_ONLY_NOTE, decode_ground_truth, ground_truth_from_tf
-from .sensors.topics import Topics, choose_right_topic, choose_topics, copyable_topics, static_tf_topics
+from .sensors.topics import Topics, choose_right_topic, choose_topics, configured_topics, copyable_topics, static_tf_topics
 from .types import Trajectory
 
 log = logging.getLogger(__name__)
@@ -111,7 +112,9 @@ def run_log(
         with open_log(log_path, conf=cfg.io) as reader:
             if reader.message_count == 0:
                 raise PipelineError("log holds no messages", log_path)
-            topics = choose_topics(reader, image_topic, odom_topic, gt_topic, depth_topic)
+            flags = configured_topics(reader, cfg.sensors, image_topic, odom_topic, gt_topic, depth_topic, right_topic)
+            right_topic = flags.pop("right_topic")
+            topics = choose_topics(reader, **flags)
             calibrated = _calibrated_camera(calibration, topics, log_path)
             first = check_first_messages(reader, topics)
             result.topics = {k: v for k, v in vars(topics).items() if v}
@@ -127,31 +130,42 @@ def run_log(
             mcap_wanted = write_mcap and cfg.run.write_mcap
             copy_topics = copyable_topics(reader, cfg.run.copy_images, log_path) if mcap_wanted else []
             vo_odometry = None
+            right, rectifier, partner, stereo = None, None, None, None
+            if topics.depth is None:  # a stereo pair instead: the VO (without odometry) and the loop poses' points
+                partner = calibration.stereo_partner(calibrated) if calibrated is not None else None
+                right = choose_right_topic(reader, topics.image, right_topic,
+                                           partner[0].rostopic if partner is not None else None)
+                if right is None and topics.odom is None:
+                    raise PipelineError(_no_odometry_reason(topics.image), log_path)
+                if right is not None and (partner is not None or topics.odom is None):
+                    rectifier = _rectifier(calibration, calibrated, log_path)
             if topics.odom is None:
-                right = None
-                if topics.depth is None:
-                    partner = calibration.stereo_partner(calibrated) if calibrated is not None else None
-                    right = choose_right_topic(reader, topics.image, right_topic,
-                                               partner[0].rostopic if partner is not None else None)
-                    if right is None:
-                        raise PipelineError(_no_odometry_reason(topics.image), log_path)
-                rectifier = _rectifier(calibration, calibrated, log_path) if right is not None else None
                 vo_odometry = _visual_odometry(log_path, topics, cfg, calibrated, right, rectifier)
+            if right is not None:
+                stereo = _stereo_frames(reader, right, calibrated, rectifier, vo_odometry)
+                topics.right = right if stereo is not None else None
+                result.topics["right"] = right
             tf = static_transforms(reader, log_path)
             if cfg.run.loop_pictures:  # a working folder inside the staging folder: discarded with it on failure
                 from .outputs.loop_pictures import KeyframeAlbum
 
                 album = KeyframeAlbum(outputs.staging / ".loop_keyframes", cfg.lcd.descriptor_dtype)
-            pipe = _make_pipeline(cfg, extractor, vocab, log_path, topics, album)
+            pipe = _make_pipeline(cfg, extractor, vocab, log_path, topics, album,
+                                  rectified=stereo is not None and stereo.rectifier is not None)
             if calibrated is not None:  # the calibration file's camera (CameraInfo is not read then)
                 T_bc = (vo_odometry.T_body_camera if vo_odometry is not None else
                         calibrated_mounting(cfg.frontend, calibrated, tf, body_frame_of(first.get(topics.odom))))
-                pipe.set_camera(calibrated.camera, T_bc)
+                if stereo is not None and stereo.rectifier is not None:  # the main pass sees the rectified pair
+                    pipe.set_camera(stereo.rectifier.camera, T_bc @ stereo.rectifier.T_cam0_rect)
+                elif stereo is not None and not calibrated.camera.baseline:  # the baseline of the pair
+                    pipe.set_camera(dataclasses.replace(calibrated.camera, baseline=stereo.baseline), T_bc)
+                else:
+                    pipe.set_camera(calibrated.camera, T_bc)
             if vo_odometry is not None:  # built-in VO ran first: its poses are the odometry
                 for stamp, T, cov, segment_start in vo_odometry.odometry_samples():
                     pipe.add_odometry(stamp, T, cov, segment_start=segment_start)
             gt_traj_from_log = _drive(reader, topics, pipe, result, cfg, tf, body_frame_of(first.get(topics.odom)),
-                                      vo_odometry, log_path, progress)
+                                      vo_odometry, log_path, progress, stereo)
             result.log_duration_s = reader.duration_ns * 1e-9
             if gt_from_tf is not None:
                 gt_traj_from_log = gt_from_tf
@@ -192,9 +206,10 @@ def _log_frames(first: dict, topics: Topics) -> dict:
     return {k: v for k, v in frames.items() if v}
 
 
-def _make_pipeline(cfg, extractor, vocab, log_path, topics: Topics, keyframe_sink=None):
+def _make_pipeline(cfg, extractor, vocab, log_path, topics: Topics, keyframe_sink=None, rectified: bool = False):
     """The pipeline with its collaborators: the extractor, the vocabulary (None: online), the feature
-    cache of this log, whether frames wait for depth, the loop pictures' keyframe album."""
+    cache of this log (``rectified``: the images are the rectified pair's, cached apart from the raw
+    ones), whether frames wait for depth, the loop pictures' keyframe album."""
     from .features import load_extractor
     from .pipeline import Pipeline  # imported late: topic errors need no model
 
@@ -205,18 +220,22 @@ def _make_pipeline(cfg, extractor, vocab, log_path, topics: Topics, keyframe_sin
 
         cache = FeatureCache(extractor)
 
+        cache_topic = f"{topics.image}#rectified" if rectified else topics.image
+
         def feature_source(stamp, img):
-            return cache.extract(log_path, topics.image, stamp, img)
+            return cache.extract(log_path, cache_topic, stamp, img)
 
     return Pipeline(cfg, extractor=extractor, vocab=vocab, feature_source=feature_source,
                     expect_depth=topics.depth is not None, keyframe_sink=keyframe_sink)
 
 
 def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame, vo_odometry, log_path,
-           progress: bool) -> Trajectory | None:
+           progress: bool, stereo=None) -> Trajectory | None:
     """Stream the chosen topics into ``pipe`` in log order; returns the ground truth read on the way.
 
     A Ctrl-C stops the stream (``result.interrupted``); a damaged image is skipped and counted.
+    ``stereo`` (a :class:`~slam_lcd.sensors.stereo_pairs.StereoFrames`): each left image waits for
+    its right one and goes in with it (the loop detector's stereo points, for keyframes only).
     """
     gt_st, gt_T = [], []
     camera_set = False
@@ -235,12 +254,14 @@ def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame,
                     # one camera-mounting rule for the VO pass and this one
                     T_bc = (vo_odometry.T_body_camera if vo_odometry is not None else
                             mounting_from_camera_info(cfg.frontend, tf, m, body_frame))
+                if stereo is not None and not cam.baseline:  # a rectified CameraInfo pair: the right one's baseline
+                    cam.baseline = stereo.baseline
                 pipe.set_camera(cam, T_bc)
                 camera_set = True
             elif m.topic == topics.depth:
                 try:
                     with pipe.timer("decode"), at_message(m, log_path):
-                        d = decode_depth(m)
+                        d = decode_depth(m, cfg.sensors.depth_unit_m)
                 except DamagedImageError as e:
                     damaged.append(e)
                     continue
@@ -254,19 +275,39 @@ def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame,
                     damaged.append(e)
                     continue
                 with at_message(m, log_path, decoding=False):
-                    pipe.add_image(m.stamp, gray)
+                    if stereo is None:
+                        pipe.add_image(m.stamp, gray)
+                    else:
+                        for stamp, left, right in stereo.add_left(m.stamp, gray):
+                            pipe.add_image(stamp, left, right_image=right)
                 result.n_frames += 1
                 bar.update(1)
+            elif stereo is not None and m.topic == topics.right:
+                try:
+                    with pipe.timer("decode"), at_message(m, log_path):
+                        right = decode_gray(m)
+                except DamagedImageError as e:
+                    damaged.append(e)
+                    continue
+                with at_message(m, log_path, decoding=False):
+                    for stamp, left, right in stereo.add_right(m.stamp, right):
+                        pipe.add_image(stamp, left, right_image=right)
             elif m.topic == topics.gt:
                 with at_message(m, log_path):
                     T = decode_ground_truth(m)
                 gt_st.append(m.stamp)
                 gt_T.append(T)
+        if stereo is not None:
+            for stamp, left, right in stereo.flush():
+                pipe.add_image(stamp, left, right_image=right)
     except KeyboardInterrupt:
         result.interrupted = True
         log.warning("interrupted: writing the partial result")
     finally:
         bar.close()
+    if stereo is not None and stereo.unpaired:
+        log.warning("%s: %d image(s) of %s had no %s partner within %.0f ms: no stereo points for them", log_path,
+                    stereo.unpaired, topics.image, topics.right, stereo.tolerance_ns * 1e-6)
     if damaged:
         log.warning("%s: %d damaged image message(s) skipped; the first: %s", log_path, len(damaged),
                     damaged[0].problem)
@@ -298,7 +339,7 @@ def _visual_odometry(log_path, topics: Topics, cfg, calibrated=None, right_topic
     T_bc = calibrated.T_body_camera if calibrated is not None else None
     return visual_odometry_from_log(log_path, cfg.frontend, image_topic=topics.image, depth_topic=topics.depth,
                                     right_topic=right_topic, camera_info_topic=topics.camera_info, camera=cam,
-                                    T_body_camera=T_bc, rectifier=rectifier)
+                                    T_body_camera=T_bc, rectifier=rectifier, depth_unit_m=cfg.sensors.depth_unit_m)
 
 
 def _no_odometry_reason(image_topic: str) -> str:
@@ -307,6 +348,26 @@ def _no_odometry_reason(image_topic: str) -> str:
             f"beside {image_topic}, and one camera alone gives no metric odometry; pass --odom-topic TOPIC (an "
             f"odometry or pose topic of the log), --depth-topic TOPIC (RGB-D visual odometry) or --right-topic TOPIC "
             f"(a second camera: stereo visual odometry; a raw pair is rectified with --calib)")
+
+
+def _stereo_frames(reader, right: str, calibrated, rectifier, vo_odometry):
+    """The pairing of left and right images that gives the loop poses stereo points, or None (said)
+    when the baseline of the pair is unknown."""
+    from .sensors.stereo_pairs import StereoFrames, right_camera_info_baseline
+
+    if rectifier is not None:
+        baseline = rectifier.camera.baseline
+    else:
+        baseline = ((calibrated.camera.baseline if calibrated is not None else None)
+                    or (vo_odometry.camera.baseline if vo_odometry is not None else None)
+                    or right_camera_info_baseline(reader, right))
+    if not baseline:
+        log.warning("%s: stereo pair %s has no baseline (no right CameraInfo projection, no calibration): "
+                    "loop poses get no stereo points", reader.path, right)
+        return None
+    log.info("%s: loop poses take their 3-D points from the stereo pair (+ %s)%s", reader.path, right,
+             ", rectified for the main pass too" if rectifier is not None else "")
+    return StereoFrames(right, baseline=baseline, rectifier=rectifier)
 
 
 def _rectifier(calibration, calibrated, log_path):

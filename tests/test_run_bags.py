@@ -289,8 +289,18 @@ def test_raw_calibrated_stereo_pair_is_rectified_for_the_vo(tiny_log, tmp_path, 
         res = run_log(log, tmp_path / "out", _orb_config(), calib=[calib], gt_topic="/ground_truth/pose",
                       progress=False, write_mcap=False)
     assert any("not a rectified pair: the stereo VO rectifies them" in r.getMessage() for r in caplog.records)
-    used, T_used = camera_spy[0]  # the main pass: the raw cam0 with its distortion, mounted as the file says
-    assert used.distortion_model == "plumb_bob" and np.allclose(T_used, T_b_raw0, atol=1e-6)
+    # the main pass sees the pair rectified (its loop poses take stereo points): the rectified cam0, mounted
+    # as the file says turned by the rectification
+    from slam_lcd.sensors.calibration import load_calibration
+    from slam_lcd.sensors.rectify import stereo_rectifier
+
+    c = load_calibration([calib])
+    c0 = c.camera_for("/camera/image_raw")
+    c1, T_c1_c0 = c.stereo_partner(c0)
+    rect = stereo_rectifier(c0.camera, c1.camera, T_c1_c0)
+    used, T_used = camera_spy[0]
+    assert used.distortion_model == "none" and used.baseline and abs(used.fx - rect.camera.fx) < 1e-9
+    assert np.allclose(T_used, T_b_raw0 @ rect.T_cam0_rect, atol=1e-6)
     assert res.ate_before is not None and res.ate_before < 0.05, res.ate_before
 
 
@@ -313,3 +323,17 @@ def test_raw_pair_without_rectification_tracks_worse(tiny_log, tmp_path):
     assert err_good < 0.05, err_good
     unrectified = bad.result.trajectory()  # rows do not match: tracking fails, or drifts far more
     assert len(unrectified) < len(good.result.trajectory()) / 2 or ate(gt, unrectified, "se3").rmse > 2 * err_good
+
+
+def test_stereo_log_with_odometry_gives_the_loop_detector_the_pair(tiny_log, tmp_path, monkeypatch):
+    """Odometry, a rectified CameraInfo pair, no depth: each keyframe's pair reaches loop detection
+    (SGBM once per keyframe) and the camera carries the right CameraInfo's baseline."""
+    import slam_lcd.lcd.geometry as lcd_geometry
+
+    log = _variant(tiny_log, tmp_path / "stereo_odom.mcap", drop=("/camera/depth",))
+    calls = []
+    real = lcd_geometry.dense_disparity
+    monkeypatch.setattr(lcd_geometry, "dense_disparity", lambda l, r: calls.append(r.shape) or real(l, r))
+    res = run_log(log, tmp_path / "out", _orb_config(), progress=False, write_mcap=False)
+    assert res.topics["odom"] == "/odom" and res.topics["right"] == "/camera/right/image_raw"
+    assert len(calls) == res.n_keyframes >= 2

@@ -34,7 +34,14 @@ def register(sub) -> None:
     p.add_argument("--laps", type=float, default=2.0, help="laps to drive when --frames is not given (default 2)")
     p.add_argument("--size", default="640x480", type=parse_size, help="image size WxH (default 640x480)")
     p.add_argument("--hfov", type=float, default=70.0, help="horizontal field of view in degrees (default 70: fx = 457 at 640 px)")
-    p.add_argument("--rate", type=float, default=10.0, help="camera rate in Hz (default 10; odometry is 50 Hz)")
+    p.add_argument("--rate", type=float, default=None,
+                   help="camera rate in Hz (default 10, odometry 50 Hz; with --layout the dataset's: EuRoC 20, TUM 30, KITTI 10)")
+    p.add_argument("--layout", choices=["demo", "euroc", "tum", "kitti"], default="demo",
+                   help="topics, encodings, rates, ground truth and calibration as that dataset's bags: euroc = raw "
+                        "distorted /cam0 /cam1 mono8 20 Hz, /leica/position, camchain-<name>.yaml beside the log; "
+                        "tum = /camera/rgb/image_color rgb8 + /camera/depth_registered/image_raw 16UC1 mm 30 Hz, "
+                        "/tf /world -> /kinect; kitti = /kitti/camera_gray_left|right/image_raw + camera_info 10 Hz, "
+                        "/tf world -> base_link; none has odometry (default: demo, the topics of --help's description)")
     p.add_argument("--loops-csv", default=None,
                    help="where to write the ground-truth loop pairs (default: <name>_loops.csv beside OUT; "
                         "loop_pairs.csv inside OUT with --format folder)")
@@ -64,6 +71,6 @@ def run(args) -> int:
         info = make_demo_log(args.out, fmt=fmt, frames=args.frames, seed=args.seed, stereo=args.stereo,
                              depth=args.depth, compressed=args.compressed, color=args.color, kind=args.trajectory,
                              laps=args.laps, width=w, height=h, hfov_deg=args.hfov, camera_rate=args.rate,
-                             loops_csv=args.loops_csv, progress=not args.no_progress)
+                             loops_csv=args.loops_csv, progress=not args.no_progress, layout=args.layout)
     print(info.summary())
     return 0

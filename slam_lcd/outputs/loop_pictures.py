@@ -188,7 +188,8 @@ def _caption(row: dict, verdict: str) -> list[str]:
                  f"graph nodes {row['graph_nodes'] or '-'}, pose inliers {row['pose_inliers'] or '-'}")
     if row["gt_distance_m"] != "":
         lines.append(f"ground truth: keyframes {float(row['gt_distance_m']):.2f} m apart"
-                     + (f", loop pose error {float(row['err_trans_m']):.3f} m / {float(row['err_rot_deg']):.2f} deg"
+                     + (f", loop pose error {float(row['err_trans_m']):.3f} m"
+                        + (f" / {float(row['err_rot_deg']):.2f} deg" if row["err_rot_deg"] != "" else "")
                         if row["err_trans_m"] != "" else ""))
     return lines
 

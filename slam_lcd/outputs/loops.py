@@ -6,6 +6,14 @@ evidence, ``verdict`` = verified or not) with the back end's record of the same
 distance between the two keyframes' true poses and the error of the loop's metric pose
 are added; an accepted loop whose keyframes are further apart than
 ``run.loop_true_max_distance`` is counted as false.
+
+Position-only ground truth (a ``PointStamped``: EuRoC's Leica) has no rotation, and its
+frame is not the estimate's: ``gt_distance_m`` (and so the false-loop count) stays exact;
+``err_trans_m`` compares the loop's translation with the true displacement expressed in
+the match keyframe's frame through its *corrected* rotation, turned into the ground
+truth's frame by the Umeyama rotation between corrected and true keyframe positions
+(exact up to the corrected rotation's error, a degree or so: 2 cm at 1 m); ``err_rot_deg``
+is left empty.
 """
 from __future__ import annotations
 
@@ -45,11 +53,37 @@ def gt_at_keyframes(gt: Trajectory, kf_stamp: dict[int, int]) -> dict[int, np.nd
     return dict(zip(ids, P))
 
 
-def loop_rows(candidate_records, loop_records, keyframes, gt: Trajectory | None) -> list[dict]:
-    """One row per candidate (see the module docstring), in the detector's order."""
+def _position_only_frames(gt_pose: dict, keyframe_poses: Trajectory | None, kf_stamp: dict) -> dict | None:
+    """Per keyframe id, the rotation of its body in the ground truth's frame (corrected rotation, aligned)."""
+    from ..eval.align import umeyama
+    from ..eval.errors import AlignmentError
+
+    if keyframe_poses is None or len(keyframe_poses) < 3:
+        return None
+    by_stamp = {int(s): T for s, T in zip(keyframe_poses.stamps, keyframe_poses.poses)}
+    ids = [i for i in gt_pose if kf_stamp[i] in by_stamp]
+    if len(ids) < 3:
+        return None
+    est = np.array([by_stamp[kf_stamp[i]][:3, 3] for i in ids])
+    true = np.array([gt_pose[i][:3, 3] for i in ids])
+    try:
+        R, _, _ = umeyama(est, true, with_scale=False)
+    except AlignmentError:  # degenerate (all keyframes in one spot): no frame, no error figure
+        return None
+    return {i: R @ by_stamp[kf_stamp[i]][:3, :3] for i in ids}
+
+
+def loop_rows(candidate_records, loop_records, keyframes, gt: Trajectory | None, *, position_only: bool = False,
+              keyframe_poses: Trajectory | None = None) -> list[dict]:
+    """One row per candidate (see the module docstring), in the detector's order.
+
+    ``position_only``: ``gt`` carries positions only; ``keyframe_poses`` (the corrected
+    keyframe trajectory) then give the rotations of the translation error.
+    """
     backend = {(r.query_id, r.match_id): r for r in loop_records}
     kf_stamp = {k.id: k.stamp for k in keyframes}
     gt_pose = gt_at_keyframes(gt, kf_stamp) if gt is not None else {}
+    R_gt_body = _position_only_frames(gt_pose, keyframe_poses, kf_stamp) if position_only else None
     rows = []
     for rec in candidate_records:
         q, mt = int(rec.query_id), int(rec.match_id)
@@ -60,7 +94,13 @@ def loop_rows(candidate_records, loop_records, keyframes, gt: Trajectory | None)
         row["backend_verdict"] = b.verdict if b is not None else ""
         row["backend_reason"] = b.reason if b is not None else ""
         row.update({"gt_distance_m": "", "err_trans_m": "", "err_rot_deg": ""})
-        if q in gt_pose and mt in gt_pose:
+        if q in gt_pose and mt in gt_pose and position_only:
+            d = gt_pose[q][:3, 3] - gt_pose[mt][:3, 3]
+            row["gt_distance_m"] = _fmt(float(np.linalg.norm(d)))
+            if rec.pose is not None and rec.pose.ok and R_gt_body is not None and mt in R_gt_body:
+                t_true = R_gt_body[mt].T @ d  # the true displacement in the match body's frame
+                row["err_trans_m"] = _fmt(float(np.linalg.norm(np.asarray(rec.pose.T_match_query)[:3, 3] - t_true)))
+        elif q in gt_pose and mt in gt_pose:
             T_gt = inv(gt_pose[mt]) @ gt_pose[q]  # ground-truth T_match_query (body frames)
             row["gt_distance_m"] = _fmt(float(np.linalg.norm(T_gt[:3, 3])))
             if rec.pose is not None and rec.pose.ok:

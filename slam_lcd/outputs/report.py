@@ -109,7 +109,8 @@ def write_report(out_dir: Path, facts: dict, summary_lines: list[str]) -> None:
         md += ["", "## Accepted loops", "", "| query | match | inliers | GT distance (m) | error (m / deg) |",
                "|---|---|---|---|---|"]
         for lp in facts["accepted_loops"]:
-            err = (f"{lp['err_trans_m']:.3f} / {lp['err_rot_deg']:.2f}" if lp["err_trans_m"] is not None else "")
+            err = "" if lp["err_trans_m"] is None else (  # position-only ground truth: no rotation error
+                f"{lp['err_trans_m']:.3f} / " + (f"{lp['err_rot_deg']:.2f}" if lp["err_rot_deg"] is not None else "-"))
             gd = f"{lp['gt_distance_m']:.2f}" if lp["gt_distance_m"] is not None else ""
             md.append(f"| {lp['query_id']} | {lp['match_id']} | {lp['pose_inliers'] or ''} | {gd} | {err} |")
     md += ["", "## Time per stage", "", "| stage | seconds | calls |", "|---|---|---|"]

@@ -118,7 +118,8 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
     else:
         skipped.append("graph.g2o: not written (no keyframe yet)")
 
-    rows = loop_rows(pipe.candidate_records, pipe.loop_records, pipe.keyframes, gt)
+    rows = loop_rows(pipe.candidate_records, pipe.loop_records, pipe.keyframes, gt,
+                     position_only="position-only" in (result.alignment or ""), keyframe_poses=kf_corr)
     write_loops_csv(out_dir / "loops.csv", rows)
     outputs.append("loops.csv")
 

@@ -19,7 +19,7 @@ from ..frontend.vo import RgbdOdometry, StereoOdometry, VoResult
 from ..io import open_log
 from ..io.tf import TfBuffer
 from ..types import CameraModel
-from .messages import at_message, camera_from_camera_info, decode_any_image, decode_gray
+from .messages import at_message, camera_from_camera_info, decode_depth, decode_gray
 from .mounting import camera_mounting
 
 log = logging.getLogger(__name__)
@@ -44,7 +44,8 @@ class LogVo:
             yield int(traj.stamps[k]), traj.poses[k], cov, bool(breaks[k]) and k > 0
 
 
-def _info_topic(image_topic: str) -> str:
+def camera_info_topic_of(image_topic: str) -> str:
+    """The CameraInfo topic beside an image topic (``/cam/image_raw`` -> ``/cam/camera_info``)."""
     base = image_topic.rsplit("/", 1)[0] if image_topic.count("/") > 1 else ""
     if base.endswith("/image_raw"):
         base = base.rsplit("/", 1)[0]
@@ -55,7 +56,8 @@ def visual_odometry_from_log(path, conf: FrontendConfig | None = None, *, image_
                              depth_topic: str | None = None, right_topic: str | None = None,
                              camera_info_topic: str | None = None, right_camera_info_topic: str | None = None,
                              extractor=None, max_frames: int | None = None, camera: CameraModel | None = None,
-                             T_body_camera: np.ndarray | None = None, rectifier=None) -> LogVo:
+                             T_body_camera: np.ndarray | None = None, rectifier=None,
+                             depth_unit_m: float = 1e-3) -> LogVo:
     """VO over a log: RGB-D when ``depth_topic`` is given, stereo when ``right_topic`` is.
 
     ``camera`` (e.g. from a calibration file, :mod:`slam_lcd.sensors.calibration`) replaces the
@@ -64,13 +66,14 @@ def visual_odometry_from_log(path, conf: FrontendConfig | None = None, *, image_
     ``rectifier`` (a :class:`~slam_lcd.sensors.rectify.StereoRectifier` of a raw calibrated pair):
     each pair is rectified first; the VO runs on the rectified camera, mounted at
     ``T_body_camera @ rectifier.T_cam0_rect``, so its poses are still of the body.
+    ``depth_unit_m``: metres per unit of a 16-bit depth image (RGB-D).
     """
     conf = conf or FrontendConfig()
     if (depth_topic is None) == (right_topic is None):
         raise PipelineError("visual odometry needs exactly one of a depth topic (RGB-D) or a right image topic (stereo)")
     mode = "rgbd" if depth_topic else "stereo"
     aux_topic = depth_topic or right_topic
-    info_topic = camera_info_topic or _info_topic(image_topic)
+    info_topic = camera_info_topic or camera_info_topic_of(image_topic)
     with open_log(path) as reader:
         topics = reader.topics
         for t in (image_topic, aux_topic) + ((info_topic,) if camera is None else ()):
@@ -87,7 +90,7 @@ def visual_odometry_from_log(path, conf: FrontendConfig | None = None, *, image_
             raise PipelineError(f"camera info topic {info_topic} has no messages; visual odometry needs the intrinsics",
                                 reader.path)
         if mode == "stereo" and not given_camera:
-            rinfo = right_camera_info_topic or _info_topic(right_topic)
+            rinfo = right_camera_info_topic or camera_info_topic_of(right_topic)
             if rinfo in topics:
                 for m in reader.messages([rinfo]):
                     rc = camera_from_camera_info(m.msg)
@@ -114,7 +117,7 @@ def visual_odometry_from_log(path, conf: FrontendConfig | None = None, *, image_
                 if m.topic == image_topic:
                     pending_img[m.stamp] = decode_gray(m)
                 else:
-                    pending_aux[m.stamp] = decode_any_image(m) if mode == "rgbd" else decode_gray(m)
+                    pending_aux[m.stamp] = decode_depth(m, depth_unit_m) if mode == "rgbd" else decode_gray(m)
             # pair the oldest image with an aux image within tolerance, in time order
             while pending_img and pending_aux:
                 si = min(pending_img)

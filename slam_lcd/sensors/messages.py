@@ -53,20 +53,20 @@ def decode_gray(m) -> np.ndarray:
     return image_to_gray(decode_any_image(m))
 
 
-def decode_depth(m) -> np.ndarray:
-    """Depth in metres (float32): 16-bit images are millimetres (ROS convention), 32FC1 metres."""
+def decode_depth(m, unit_m: float = 1e-3) -> np.ndarray:
+    """Depth in metres (float32): 16-bit images are ``unit_m`` per unit (ROS convention: millimetres), 32FC1 metres."""
     if m.msgtype.endswith("CompressedImage"):
         d = decode_compressed_image(m.msg)
         if d.ndim != 2 or d.dtype not in (np.uint16, np.float32):
             raise MessageEncodingError(f"compressed image ({m.msg.format!r}) is not a depth image "
                                        "(compressedDepth 16UC1 or 32FC1)")
-        return d.astype(np.float32) * (1e-3 if d.dtype == np.uint16 else 1.0)
+        return d.astype(np.float32) * (unit_m if d.dtype == np.uint16 else 1.0)
     enc = m.msg.encoding
     if enc not in DEPTH_ENCODINGS:
         raise MessageEncodingError(f"depth image encoding {enc!r} is not a depth encoding "
                                    f"({', '.join(DEPTH_ENCODINGS)}: 16-bit in millimetres, 32FC1 in metres)")
     d = decode_image(m.msg).astype(np.float32)
-    return d * 1e-3 if enc in ("16UC1", "mono16") else d
+    return d * np.float32(unit_m) if enc in ("16UC1", "mono16") else d
 
 
 def decode_pose_of(m):

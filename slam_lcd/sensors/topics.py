@@ -33,11 +33,12 @@ class Topics:
     gt: str | None = None
     gt_frames: tuple[str, str] | None = None  # (parent, child) when the ground truth is a TF chain on ``gt``
     gt_position_only: bool = False  # PointStamped ground truth
+    right: str | None = None  # second camera of a stereo pair (a log without depth): VO and loop-pose depth
 
     def wanted(self) -> list[str]:
         """The topics streamed, in the order they are listed here (each once; a TF ground truth is read first)."""
         gt = self.gt if self.gt_frames is None else None
-        return [t for t in (self.image, self.odom, self.camera_info, self.depth, gt) if t]
+        return [t for t in (self.image, self.odom, self.camera_info, self.depth, gt, self.right) if t]
 
 
 def _ns(topic: str) -> str:
@@ -89,6 +90,8 @@ def choose_topics(reader, image_topic=None, odom_topic=None, gt_topic=None, dept
         _check_type(reader, "--depth-topic", depth_topic, IMAGE_TYPES, "a depth image")
     else:
         depths = [t for t in images if "depth" in t.lower() and (_ns(t) == ns or _ns(_ns(t)) == ns)]
+        if not depths:  # a sibling namespace (TUM: /camera/rgb/image_color beside /camera/depth_registered/image_raw)
+            depths = sorted(t for t in images if "depth" in t.lower() and _ns(_ns(t)) == _ns(ns) and _ns(ns))
         depth_topic = depths[0] if depths else None
     gt_frames = None
     if gt_topic is not None:
@@ -154,4 +157,37 @@ def copyable_topics(reader, copy_images: bool, log_path) -> list[str]:
         kinds = ", ".join(f"{t} ({reader.topics[t].msgtype})" for t in skipped)
         log.warning("%s: topics with message types the log does not define are not copied into corrected.mcap: %s",
                     log_path, kinds)
+    return chosen
+
+
+def configured_topics(reader, conf, image_topic=None, odom_topic=None, gt_topic=None, depth_topic=None,
+                      right_topic=None) -> dict:
+    """The topic flags of a run, each flag given filled in from the config's `sensors` section.
+
+    A flag wins; a configured topic the log lacks is skipped with a warning (the automatic
+    choice is made then); of ``sensors.gt_topics`` the first the log has is taken (a TF chain
+    ``TOPIC:PARENT:CHILD`` by its topic).
+    """
+    have = set(reader.topics)
+
+    def present(spec):
+        topic = split_tf_spec(spec)[0]
+        return topic in have or "/" + topic.lstrip("/") in have or topic.lstrip("/") in have
+
+    chosen = {"image_topic": image_topic, "odom_topic": odom_topic, "depth_topic": depth_topic,
+              "right_topic": right_topic, "gt_topic": gt_topic}
+    for key in ("image_topic", "odom_topic", "depth_topic", "right_topic"):
+        want = getattr(conf, key)
+        if chosen[key] is None and want:
+            if present(want):
+                chosen[key] = want
+            else:
+                log.warning("%s: sensors.%s %s is not in the log; choosing automatically", reader.path, key, want)
+    if gt_topic is None and conf.gt_topics:
+        found = [g for g in conf.gt_topics if present(g)]
+        if found:
+            chosen["gt_topic"] = found[0]
+        else:
+            log.warning("%s: none of sensors.gt_topics %s is in the log; choosing automatically", reader.path,
+                        list(conf.gt_topics))
     return chosen

@@ -68,16 +68,21 @@ class DemoLogInfo:
     wall_s: float = 0.0
     seed: int = 0
     kind: str = "laps"
+    layout: str = "demo"
+    calibration_path: Path | None = None  # the Kalibr camchain written beside the log (layout euroc)
 
     def summary(self) -> str:
         lines = [
             f"wrote {self.path} ({self.format}): {self.frames} frames, {self.duration_s:.1f} s, "
             f"{self.path_length_m:.1f} m ({self.kind}, seed {self.seed}) in {self.wall_s:.1f} s",
-            f"odometry end drift {self.drift.get('end_error_m', float('nan')):.2f} m = "
-            f"{self.drift.get('drift_percent', float('nan')):.2f} % of the path "
-            f"(yaw {self.drift.get('end_yaw_error_deg', float('nan')):+.1f} deg)",
+            (f"odometry end drift {self.drift.get('end_error_m', float('nan')):.2f} m = "
+             f"{self.drift.get('drift_percent', float('nan')):.2f} % of the path "
+             f"(yaw {self.drift.get('end_yaw_error_deg', float('nan')):+.1f} deg)") if self.layout == "demo" else
+            f"layout {self.layout}: no odometry topic (the run's built-in visual odometry is the source)",
             f"ground-truth loop pairs: {self.n_loop_pairs} -> {self.loop_pairs_path}",
         ]
+        if self.calibration_path is not None:
+            lines.append(f"calibration (Kalibr camchain): {self.calibration_path}")
         for t, d in self.topics.items():
             lines.append(f"  {t:32s} {d['type']:30s} {d['count']:6d} msgs  {d['rate_hz']:5.1f} Hz")
         return "\n".join(lines)
@@ -145,21 +150,26 @@ def _render_one(sc: _Scenario, i: int, bank: np.ndarray, *, color: bool, depth: 
     return i, img, dep, right
 
 
-def render_frames(sc: _Scenario, *, color: bool, depth: bool, stereo: bool, seed: int, workers: int = 1):
+def render_frames(sc: _Scenario, *, color: bool, depth: bool, stereo: bool, seed: int, workers: int = 1,
+                  render_one=None):
     """Yield ``(index, image, depth | None, right | None)`` for every camera frame, in order.
 
     With ``workers >= 1`` frames are rendered ahead in that many threads (OpenCV and numpy
     release the GIL) while the caller serialises and compresses; the output is identical
     either way. Threads, not forked processes: forking after OpenCV started its thread pool
-    can deadlock the child.
+    can deadlock the child. ``render_one(i, bank)``: a dataset layout's own frame
+    (:func:`slam_lcd.sim.layouts.frame_renderer`) instead of the demo log's.
     """
     shape = (sc.camera.height, sc.camera.width) + ((3,) if color else ())
     bank = _noise_bank(seed, shape)
     flags = dict(color=color, depth=depth, stereo=stereo)
+    if render_one is None:
+        def render_one(i, bank):
+            return _render_one(sc, i, bank, **flags)
     n = len(sc.cam_stamps)
     if workers < 1 or n < 8:
         for i in range(n):
-            yield _render_one(sc, i, bank, **flags)
+            yield render_one(i, bank)
         return
     from collections import deque
     from concurrent.futures import ThreadPoolExecutor
@@ -171,7 +181,7 @@ def render_frames(sc: _Scenario, *, color: bool, depth: bool, stereo: bool, seed
         try:
             while nxt < n or pending:
                 while nxt < n and len(pending) < ahead:
-                    pending.append(pool.submit(_render_one, sc, nxt, bank, **flags))
+                    pending.append(pool.submit(render_one, nxt, bank))
                     nxt += 1
                 yield pending.popleft().result()
         finally:
@@ -188,14 +198,19 @@ def loops_path_for(out: Path) -> Path:
 
 def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int = 0, stereo: bool = False,
                   depth: bool = True, *, compressed: bool = False, color: bool = False, kind: str = "laps",
-                  laps: float = 2.0, width: int = 640, height: int = 480, camera_rate: float = 10.0,
-                  odom_rate: float = 50.0, loops_csv: str | Path | None = None, progress: bool = False,
-                  io_conf=None, workers: int | None = None, hfov_deg: float = 70.0) -> DemoLogInfo:
+                  laps: float = 2.0, width: int = 640, height: int = 480, camera_rate: float | None = None,
+                  odom_rate: float | None = None, loops_csv: str | Path | None = None, progress: bool = False,
+                  io_conf=None, workers: int | None = None, hfov_deg: float = 70.0,
+                  layout: str = "demo") -> DemoLogInfo:
     """Render the demo world along a trajectory and write it as ``fmt`` at ``out``.
 
     ``frames`` None means ``laps`` laps (default 2 laps of block A: ~850 frames at 10 Hz);
     otherwise exactly ``frames`` camera frames. ``workers``: render threads running ahead of
     the writer (default 1 on a machine with 2+ cores; 0 = render inline).
+    ``layout``: ``demo`` (the topics above), or ``euroc`` / ``tum`` / ``kitti``: the topics,
+    encodings, rates, ground truth and calibration file of that dataset's bags
+    (:mod:`slam_lcd.sim.layouts`; ``stereo``, ``depth``, ``color`` and ``compressed`` are the
+    layout's then). ``camera_rate`` / ``odom_rate`` (ground truth) None: the layout's rates.
     Returns a :class:`DemoLogInfo`.
     """
     t_start = time.perf_counter()
@@ -206,10 +221,27 @@ def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int =
 
     if kind not in KINDS:
         raise InputError(f"unknown trajectory kind {kind!r}; use one of {', '.join(KINDS)}")
+    from . import layouts as L
+
+    if layout not in L.LAYOUTS:
+        raise InputError(f"unknown demo-log layout {layout!r}; use one of {', '.join(L.LAYOUTS)}")
+    cam_rate, gt_rate = L.rates(layout)
+    camera_rate = cam_rate if camera_rate is None else camera_rate
+    odom_rate = gt_rate if odom_rate is None else odom_rate
+    if layout != "demo":
+        if fmt == "folder":
+            raise InputError(f"layout {layout} is a log layout: write it as mcap, rosbag2 or rosbag1, not a folder")
+        stereo, depth, color, compressed = layout in ("euroc", "kitti"), layout == "tum", layout == "tum", False
     sc = _scenario(frames, seed, kind, laps, width, height, camera_rate, odom_rate, stereo, hfov_deg)
     if workers is None:
         workers = 1 if (os.cpu_count() or 1) >= 2 else 0
-    frames_iter = render_frames(sc, color=color, depth=depth, stereo=stereo, seed=seed, workers=workers)
+    er = L.euroc_rig(sc.camera, sc.T_bc) if layout == "euroc" else None
+    render_one = None
+    if layout != "demo":
+        def render_one(i, bank):
+            return L.frame_renderer(layout, sc, bank, er)(i)
+    frames_iter = render_frames(sc, color=color, depth=depth, stereo=stereo, seed=seed, workers=workers,
+                                render_one=render_one)
     if progress:
         from ..progress import progress_bar
 
@@ -217,12 +249,18 @@ def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int =
     try:
         if fmt == "folder":
             counts = _write_folder(out, sc, frames_iter, color=color, depth=depth, stereo=stereo)
+        elif layout != "demo":
+            counts = L.write_layout_log(out, fmt, layout, sc, frames_iter, conf=_io_conf(io_conf), er=er)
         else:
             counts = _write_log(out, fmt, sc, frames_iter, depth=depth, stereo=stereo, compressed=compressed,
                                 color=color, io_conf=io_conf)
     finally:
         if progress:
             frames_iter.close()  # an error message must not be glued to a half-drawn bar
+    calib_path = None
+    if er is not None:
+        calib_path = L.camchain_path_for(out)
+        L.write_camchain(calib_path, er)
     pairs = gt_loop_pairs(sc.gt_cam, T_body_camera=sc.T_bc)
     lp = Path(loops_csv) if loops_csv is not None else (out / "loop_pairs.csv" if fmt == "folder" else loops_path_for(out))
     write_loop_pairs(lp, sc.gt_cam, pairs, T_body_camera=sc.T_bc)
@@ -233,19 +271,15 @@ def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int =
     return DemoLogInfo(path=out, format=fmt, frames=len(sc.cam_stamps), duration_s=float(duration),
                        path_length_m=sc.gt_odo.path_length(), topics=topics, loop_pairs_path=lp,
                        n_loop_pairs=len(pairs), drift=end_drift(sc.gt_odo, sc.odom), camera=sc.camera,
-                       T_body_camera=sc.T_bc, wall_s=time.perf_counter() - t_start, seed=seed, kind=kind)
+                       T_body_camera=sc.T_bc, wall_s=time.perf_counter() - t_start, seed=seed, kind=kind,
+                       layout=layout, calibration_path=calib_path)
 
 
 def _write_log(out, fmt, sc: _Scenario, frames_iter, *, depth, stereo, compressed, color, io_conf):
     from ..io import messages as M
-    from ..io.config import IOConfig
     from ..io.writers import open_writer
 
-    conf = io_conf
-    if conf is None:
-        conf = IOConfig()
-        if conf.rosbag1_compression == "none":
-            conf.rosbag1_compression = "lz4"  # 1 GB of raw depth otherwise
+    conf = _io_conf(io_conf)
     cam_frame, right_frame = rig.CAMERA_FRAME, rig.RIGHT_CAMERA_FRAME
     right_cam = CameraModel(**{**sc.camera.__dict__}) if stereo else None
     left_cam = CameraModel(**{**sc.camera.__dict__, "baseline": None})
@@ -291,6 +325,17 @@ def _write_log(out, fmt, sc: _Scenario, frames_iter, *, depth, stereo, compresse
                 put(w, "/ground_truth/pose", M.pose_stamped_msg(gt.poses[i], stamp, rig.WORLD_FRAME), stamp)
         counts = dict(w.counts)
     return {t: (types[t], n) for t, n in counts.items()}
+
+
+def _io_conf(io_conf):
+    from ..io.config import IOConfig
+
+    conf = io_conf
+    if conf is None:
+        conf = IOConfig()
+        if conf.rosbag1_compression == "none":
+            conf.rosbag1_compression = "lz4"  # 1 GB of raw depth otherwise
+    return conf
 
 
 def _stamp_name(stamp_ns: int) -> str:
