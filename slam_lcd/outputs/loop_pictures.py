@@ -195,12 +195,16 @@ def _caption(row: dict, verdict: str) -> list[str]:
 
 
 def write_loop_pictures(out_dir: Path, album: KeyframeAlbum, rows: list[dict], lcd_conf,
-                        n_rejected: int) -> list[str]:
-    """Draw the chosen loops into ``out_dir/loops``; returns the picture names written (contact sheet last)."""
+                        n_rejected: int, stop=None) -> list[str]:
+    """Draw the chosen loops into ``out_dir/loops``; returns the picture names written (contact sheet last).
+
+    ``stop``: a :class:`threading.Event` checked before each picture (the outputs are being abandoned)."""
     folder = out_dir / LOOPS_DIR
     folder.mkdir(exist_ok=True)
     written, thumbs, missing = [], [], 0
     for row, verdict in _pictured(rows, n_rejected):
+        if stop is not None and stop.is_set():
+            return written
         q, m = album.load(int(row["query_id"])), album.load(int(row["match_id"]))
         if q is None or m is None:
             missing += 1  # a keyframe the album did not keep (a write error, an interrupt mid-keyframe)

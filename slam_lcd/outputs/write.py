@@ -151,6 +151,73 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
         result.alignment = result.alignment or cfg.eval.align  # the runner may add a note (position-only ground truth)
         result.false_loops_accepted = count_false_accepted(rows, cfg.run.loop_true_max_distance)
 
+    # ---- loop pictures (need the verdicts and the ground-truth errors of the rows): drawn in a
+    # thread while the corrected MCAP and the plots are written (their image coding, drawing and
+    # file reads run outside the GIL; at this point no stage of the run holds a core)
+    result.loop_pictures = []
+    pictures = _PictureThread(out_dir, album, rows, cfg) if album is not None else None
+    try:
+        _write_mcap_and_plots(pipe, out_dir, result, gt, mcap_source, copy_topics, skipped, outputs, odom, corrected,
+                              kf_corr, ate_before, ate_after)
+    except BaseException:  # an error or Ctrl-C: the pictures stop between two, nothing is written after we leave
+        if pictures is not None:
+            pictures.join(stop=True)
+        raise
+    if pictures is not None:
+        result.loop_pictures = pictures.join()
+    if result.loop_pictures:  # listed where it always was: after corrected.mcap (or loops.csv), before the plots
+        after = "corrected.mcap" if "corrected.mcap" in outputs else "loops.csv"
+        outputs.insert(outputs.index(after) + 1, LOOPS_DIR + "/")
+    outputs += ["report.json", "report.md", "report.html"]
+    result.outputs = outputs
+    facts = report_facts(result, cfg, rows, ate_before, ate_after, rpe_before, rpe_after)
+    write_report(out_dir, facts, result.summary_lines())
+    try:
+        from .html_report import write_html_report
+
+        write_html_report(out_dir, facts, result.summary_lines(), rows,
+                          [f for f in outputs if f.endswith(".png")], result.loop_pictures,
+                          (out_dir / "config.yaml").read_text(encoding="utf-8"))
+    except OSError:
+        raise
+    except Exception as e:  # the page must never cost the user the numbers
+        outputs.remove("report.html")
+        log.warning("report.html not written: %s", e)
+        write_report(out_dir, facts, result.summary_lines())
+
+
+class _PictureThread:
+    """``write_loop_pictures`` in a background thread; :meth:`join` waits (an interrupt stops it between pictures)."""
+
+    def __init__(self, out_dir: Path, album, rows, cfg):
+        import threading
+
+        self.album, self.names, self.stop = album, [], threading.Event()
+        self.thread = threading.Thread(target=self._run, args=(out_dir, rows, cfg), name="slam-lcd-loop-pictures",
+                                       daemon=True)
+        self.thread.start()
+
+    def _run(self, out_dir, rows, cfg) -> None:
+        try:
+            from .loop_pictures import write_loop_pictures
+
+            self.names = write_loop_pictures(out_dir, self.album, rows, cfg.lcd, cfg.run.loop_pictures_rejected,
+                                             stop=self.stop)
+        except Exception as e:  # a picture must never cost the user the numbers
+            log.warning("loop pictures not written: %s", e)
+            self.names = []
+
+    def join(self, stop: bool = False) -> list[str]:
+        if stop:
+            self.stop.set()
+        self.thread.join()
+        self.album.close()
+        return [] if stop else self.names
+
+
+def _write_mcap_and_plots(pipe, out_dir, result, gt, mcap_source, copy_topics, skipped, outputs, odom, corrected,
+                          kf_corr, ate_before, ate_after) -> None:
+    cfg = pipe.config
     # ---- corrected MCAP (input topics + corrected trajectory)
     if mcap_source is not None and len(corrected) == 0 and skipped is not None:
         skipped.append("corrected.mcap: not written (no poses yet)")
@@ -170,20 +237,6 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
                             gt_alignment=ate_after.alignment if ate_after is not None else None)
         outputs.append("corrected.mcap")
 
-    # ---- loop pictures (need the verdicts and the ground-truth errors of the rows)
-    result.loop_pictures = []
-    if album is not None:
-        try:
-            from .loop_pictures import write_loop_pictures
-
-            result.loop_pictures = write_loop_pictures(out_dir, album, rows, cfg.lcd, cfg.run.loop_pictures_rejected)
-            if result.loop_pictures:
-                outputs.append(LOOPS_DIR + "/")
-        except Exception as e:  # a picture must never cost the user the numbers
-            log.warning("loop pictures not written: %s", e)
-        finally:
-            album.close()
-
     # ---- plots
     if cfg.run.plots:
         try:
@@ -192,19 +245,3 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
             outputs += ["trajectory.png", "ate_over_time.png"] if ate_before is not None else ["trajectory.png"]
         except Exception as e:  # a plot must never cost the user the numbers
             log.warning("plots not written: %s", e)
-    outputs += ["report.json", "report.md", "report.html"]
-    result.outputs = outputs
-    facts = report_facts(result, cfg, rows, ate_before, ate_after, rpe_before, rpe_after)
-    write_report(out_dir, facts, result.summary_lines())
-    try:
-        from .html_report import write_html_report
-
-        write_html_report(out_dir, facts, result.summary_lines(), rows,
-                          [f for f in outputs if f.endswith(".png")], result.loop_pictures,
-                          (out_dir / "config.yaml").read_text(encoding="utf-8"))
-    except OSError:
-        raise
-    except Exception as e:  # the page must never cost the user the numbers
-        outputs.remove("report.html")
-        log.warning("report.html not written: %s", e)
-        write_report(out_dir, facts, result.summary_lines())
