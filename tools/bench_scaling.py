@@ -349,16 +349,17 @@ def _demo_log(path: Path, laps: float, seed: int) -> Path:
 
 
 def _config(args, cache_dir: Path, extra: list[str] = ()):
+    """The default config, with the feature cache in ``cache_dir`` (and the weights given)."""
     from slam_lcd.config import load_config
 
-    sets = [f"features.cache_dir={cache_dir}", "run.plots=false", *extra, *args.set]
+    sets = [f"features.cache_dir={cache_dir}", *extra, *args.set]
     if args.weights:
         sets.append(f"features.weights={args.weights}")
     return load_config("default", sets)
 
 
-def _bare_forward_seconds(log: Path, stamps: np.ndarray, weights, sample: int) -> tuple[float, int]:
-    """Bare SuperPoint network time (forward_raw) over the keyframes' images (a sample, scaled)."""
+def _bare_forward_seconds(log: Path, stamps: np.ndarray, weights, sample: int) -> tuple[float, int, float]:
+    """Bare SuperPoint network time (forward_raw) and whole-model time over the keyframes' images (a sample, scaled)."""
     import torch
 
     from slam_lcd.features import FeaturesConfig, load_extractor
@@ -374,15 +375,18 @@ def _bare_forward_seconds(log: Path, stamps: np.ndarray, weights, sample: int) -
         for m in r.messages([topic]):
             if m.stamp in pick:
                 images.append(to_gray_float(image_to_gray(decode_image(m.msg))))
-    times = []
+    times, full = [], []
     with torch.inference_mode():
         for i, g in enumerate(images):
             x = torch.from_numpy(g)[None, None]
             t0 = time.perf_counter()
             ex.model.forward_raw(x)
+            t1 = time.perf_counter()
+            ex.model({"image": x})  # the whole model: network, softmax, NMS, descriptor sampling
             if i:  # the first call pays one-off set-up
-                times.append(time.perf_counter() - t0)
-    return float(np.mean(times)) * len(stamps), len(images)
+                times.append(t1 - t0)
+                full.append(time.perf_counter() - t1)
+    return float(np.mean(times)) * len(stamps), len(images), float(np.mean(full)) * len(stamps)
 
 
 def _keyframe_stamps(out_dir: Path) -> np.ndarray:
@@ -408,13 +412,18 @@ def bench_demo(args) -> None:
     out = work / "out_demo"
     res, wall = _run(log, out, _config(args, cache), "/ground_truth/pose")
     stamps = _keyframe_stamps(out)
-    sp, n = _bare_forward_seconds(log, stamps, args.weights, args.forward_sample)
+    sp, n, sp_full = _bare_forward_seconds(log, stamps, args.weights, args.forward_sample)
     print(f"\n2-lap demo, empty feature cache ({log.name}, {res.log_duration_s:.1f} s of log)")
     print(f"  keyframes {res.n_keyframes}, loops accepted {res.loops_accepted}, false {res.false_loops_accepted}, "
           f"ATE {res.ate_before:.3f} m -> {res.ate_after:.3f} m ({100 * res.ate_after / res.ate_before:.1f} %)")
     print(f"  wall {wall:.1f} s   real-time factor (wall / log) {wall / res.log_duration_s:.2f}")
     print(f"  bare SuperPoint forward of its {len(stamps)} keyframes {sp:.1f} s (mean of {n}, scaled)   "
           f"wall / forward {wall / sp:.2f}")
+    print(f"  whole SuperPoint model (network + NMS + descriptor sampling) of its keyframes {sp_full:.1f} s   "
+          f"wall / model {wall / sp_full:.2f}")
+    ext = res.stages.get("features", {}).get("seconds", float("nan"))
+    print(f"  SuperPoint share of the wall time: bare forward {sp / wall:.0%}; the extraction stage ran {ext:.1f} s "
+          f"(in the background: {ext / max(res.n_keyframes, 1) * 1e3:.0f} ms per keyframe)")
     for k, v in sorted(res.stages.items()):
         print(f"    stage {k:20s} {v['seconds']:8.2f} s  {v['calls']:6d} calls")
 
@@ -425,7 +434,7 @@ def bench_log(args) -> None:
     work.mkdir(parents=True, exist_ok=True)
     log = Path(args.log) if args.log else _demo_log(work / f"demo_{args.laps:g}laps.mcap", args.laps, args.seed)
     cache = work / "feature-cache"
-    cfg = _config(args, cache)
+    cfg = _config(args, cache, ["run.plots=false"])  # per-keyframe figures: the plots at the end do not matter
     out = work / "out_log"
     if not args.skip_warm:
         print("first pass (fills the feature cache) ...", flush=True)
