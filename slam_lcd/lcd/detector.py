@@ -24,6 +24,7 @@ from ..vision.camera import default_camera
 from .config import LcdConfig, stops_at_first_accepted
 from .geometry import EpipolarVerdict, PoseVerdict, estimate_loop_pose, keyframe_points3d
 from .graph import GraphVerdict
+from .islands import IslandMember, group_islands
 from .pair import check_pair
 from .store import DESCRIPTOR_DTYPES, DescriptorStore, compact_descriptors
 from .temporal import TemporalConsistency
@@ -270,24 +271,15 @@ class LoopDetector:
         closures: list[LoopClosure] = []
         candidates = []
         if len(self.db) and len(feats):
+            depth = max(c.top_k, self.retrieval_depth, c.island_pool if c.islands else 0)
             candidates = self.db.query(
-                feats.descriptors, top_k=max(c.top_k, self.retrieval_depth), exclude_recent_s=c.exclude_recent_s,
+                feats.descriptors, top_k=depth, exclude_recent_s=c.exclude_recent_s,
                 exclude_recent_n=c.exclude_recent_n, query_id=kf.id, stamp_ns=int(kf.stamp),
             )
         if self.retrieval_depth > 0:
-            self.retrieved[kf.id] = [cand.match_id for cand in candidates]
-        candidates = candidates[:c.top_k]
+            self.retrieved[kf.id] = [cand.match_id for cand in candidates[:max(c.top_k, self.retrieval_depth)]]
         clock.lap("bow_query")
-        records = []
-        stop = stops_at_first_accepted(c) and not self.run_all_checks
-        for rank, cand in enumerate(candidates):
-            if stop and any(r.accepted for r in records):
-                # bounded work per keyframe: the BoW ranking already put the likeliest first
-                records.append(CandidateRecord(kf.id, cand.match_id, rank, float(cand.bow_score),
-                                               reason="skipped_after_accept", query_stamp=int(kf.stamp),
-                                               match_stamp=self._entries[cand.match_id].stamp))
-                continue
-            records.append(self._verify(entry, desc, cand, rank, clock))
+        records = self._verify_candidates(entry, desc, candidates, clock)
         self.records.extend(records)
 
         accepted = [r for r in records if r.accepted]
@@ -312,6 +304,38 @@ class LoopDetector:
         clock.lap("store")
         self.last_part_seconds = clock.seconds
         return closures
+
+    def _verification_order(self, candidates) -> list[IslandMember]:
+        """What is verified, in order: the top-K in BoW order, or island by island (``lcd.islands``)."""
+        c = self.conf
+        if not c.islands:
+            return [IslandMember(cand, rank, rank, float(cand.bow_score)) for rank, cand in enumerate(candidates[:c.top_k])]
+        positions = {cand.match_id: self._entries[cand.match_id].position for cand in candidates}
+        return group_islands(candidates[:c.island_pool], positions, c.top_k, c.island_gap, c.island_tries)
+
+    def _verify_candidates(self, entry: _Entry, desc: np.ndarray, candidates, clock: PartClock) -> list[CandidateRecord]:
+        """Verify a query's candidates; stops at the first accepted one when ``verify_until`` says so.
+
+        With islands, an island whose member was accepted verifies none of its other members
+        (whatever ``verify_until``): they are neighbours of a loop already found.
+        """
+        c = self.conf
+        records: list[CandidateRecord] = []
+        stop = stops_at_first_accepted(c) and not self.run_all_checks
+        done_islands: set[int] = set()
+        for member in self._verification_order(candidates):
+            cand, rank = member.candidate, member.rank
+            if (stop and any(r.accepted for r in records)) or (member.island in done_islands and not self.run_all_checks):
+                # bounded work per keyframe: the BoW ranking already put the likeliest first
+                records.append(CandidateRecord(entry.id, cand.match_id, rank, float(cand.bow_score),
+                                               reason="skipped_after_accept", query_stamp=entry.stamp,
+                                               match_stamp=self._entries[cand.match_id].stamp))
+                continue
+            rec = self._verify(entry, desc, cand, rank, clock)
+            if rec.accepted:
+                done_islands.add(member.island)
+            records.append(rec)
+        return records
 
     def _verify(self, q: _Entry, q_desc: np.ndarray, cand, rank: int, clock: PartClock | None = None) -> CandidateRecord:
         c = self.conf
