@@ -126,6 +126,8 @@ RANGES: dict[str, str] = {
     "lcd.min_depth_m": "[0, inf)",
     "lcd.max_depth_m": "(0, inf)",
     "lcd.pixel_sigma_px": "(0, inf)",
+    "lcd.consistent_min_matches": "0 or [5, inf)",  # 0: off; five-point essential matrix
+    "lcd.consistent_window": "[0, inf)",
     "lcd.temporal_k": "[0, inf)",
     "lcd.temporal_window": "[0, inf)",
     # backend

@@ -73,13 +73,22 @@ class LcdConfig:
     # the inliers are at least pnp_tight_min_share of the matched 3-D points and the pose's 1-sigma
     # (from its information matrix: sqrt of the trace of each covariance block) is within both bounds
     # (0: off; measured on every demo-world candidate pair: docs/lcd.md)
-    pnp_min_inliers_tight: int = 0
+    pnp_min_inliers_tight: int = 15
     pnp_tight_min_share: float = 0.8
     pnp_tight_max_sigma_m: float = 0.04
     pnp_tight_max_sigma_deg: float = 0.6
     min_depth_m: float = 0.1  # depth values outside [min, max] are unknown
     max_depth_m: float = 20.0
     pixel_sigma_px: float = 1.0  # floor of the pixel noise used for the pose information matrix
+
+    # --- a loop that continues the previous keyframe's loop (iBoW-LCD's priority island) ---
+    # a candidate whose match lies within consistent_window keyframes of the match of the previous
+    # keyframe's loop (one accepted at the full thresholds) and that fails only on a count
+    # (too few matches, nodes or RANSAC inliers) is verified again with graph_min_matches,
+    # graph_min_nodes and ransac_min_inliers lowered to consistent_min_matches (0: off; the
+    # ratios, the structural score and the pose step keep their thresholds; docs/lcd.md)
+    consistent_min_matches: int = 12
+    consistent_window: int = 2
 
     # --- temporal consistency (DBoW2-style) ---
     temporal_k: int = 0  # accept only after k consecutive consistent detections (0: off)
