@@ -130,8 +130,9 @@ def test_epipolar_accepts_rigid_motion_and_rejects_random():
 
 
 def test_few_inliers_accepted_only_when_the_pose_is_tight():
-    """lcd.pnp_min_inliers_tight: 20 good points give a tight pose (accepted); 20 points crowded into a
-    small patch far away give a loose one, and 20 of 40 points (half outliers) a low share (rejected)."""
+    """lcd.pnp_min_inliers_tight: 20 good points give a tight pose (accepted, where 40 are required
+    otherwise); the same pose against a bound below its sigma, or 20 inliers among 40 matched points
+    (half of them wrong), are rejected."""
     from slam_lcd.lcd.geometry import pose_sigmas
 
     kf_q, kf_m, matches, T_gt = _rgbd_pair(seed=3)
