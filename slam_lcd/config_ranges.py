@@ -91,6 +91,9 @@ RANGES: dict[str, str] = {
     "vocab.ann_rebuild_growth": "0 or [1, inf)",  # 0: never
     # lcd
     "lcd.top_k": "[1, inf)",
+    "lcd.island_gap": "[0, inf)",
+    "lcd.island_pool": "[1, inf)",
+    "lcd.island_tries": "[1, inf)",
     "lcd.verify_max_matches": "0 or [3, inf)",  # 0: no budget
     "lcd.verify_spread_cells": "[0, 64]",  # 0: globally best
     "lcd.min_bow_score": "[0, inf)",
@@ -118,9 +121,15 @@ RANGES: dict[str, str] = {
     "lcd.pnp_threshold_px": "(0, inf)",
     "lcd.pnp_min_inliers": "[4, inf)",
     "lcd.pnp_max_rms_px": "(0, inf)",
+    "lcd.pnp_min_inliers_tight": "0 or [6, inf)",  # 0: off
+    "lcd.pnp_tight_min_share": "[0, 1]",
+    "lcd.pnp_tight_max_sigma_m": "(0, inf)",
+    "lcd.pnp_tight_max_sigma_deg": "(0, inf)",
     "lcd.min_depth_m": "[0, inf)",
     "lcd.max_depth_m": "(0, inf)",
     "lcd.pixel_sigma_px": "(0, inf)",
+    "lcd.consistent_min_matches": "0 or [5, inf)",  # 0: off; five-point essential matrix
+    "lcd.consistent_window": "[0, inf)",
     "lcd.temporal_k": "[0, inf)",
     "lcd.temporal_window": "[0, inf)",
     # backend

@@ -127,3 +127,46 @@ def test_epipolar_accepts_rigid_motion_and_rejects_random():
     shuffled[:, 1] = rng.permutation(shuffled[:, 1])
     v2 = verify_epipolar(kq, km, shuffled, CAM, CAM, LcdConfig())
     assert not v2.accepted and v2.reason in ("too_few_inliers", "low_inlier_ratio")
+
+
+def test_few_inliers_accepted_only_when_the_pose_is_tight():
+    """lcd.pnp_min_inliers_tight: 20 good points give a tight pose (accepted, where 40 are required
+    otherwise); the same pose against a bound below its sigma, or 20 inliers among 40 matched points
+    (half of them wrong), are rejected."""
+    from slam_lcd.lcd.geometry import pose_sigmas
+
+    kf_q, kf_m, matches, T_gt = _rgbd_pair(seed=3)
+    few = matches[:20]
+    conf = LcdConfig()
+    assert conf.pnp_min_inliers == 40 and conf.pnp_min_inliers_tight == 15
+    v = estimate_loop_pose(kf_q, kf_m, few, conf)
+    assert v.ok, v.reason
+    sigma_t, sigma_r = pose_sigmas(v.information)
+    assert sigma_t <= conf.pnp_tight_max_sigma_m and sigma_r <= conf.pnp_tight_max_sigma_deg
+    assert _pose_error(v.T_match_query, T_gt)[0] < 0.02
+    # the plain rule alone rejects the same points
+    off = estimate_loop_pose(kf_q, kf_m, few, LcdConfig(pnp_min_inliers_tight=0))
+    assert not off.ok and off.reason == "too_few_3d_points"
+    # a pose that the same points determine less well than the bound: rejected as loose
+    strict = estimate_loop_pose(kf_q, kf_m, few, LcdConfig(pnp_tight_max_sigma_m=0.1 * sigma_t))
+    assert not strict.ok and strict.reason == "few_inliers_loose_pose"
+    # 20 inliers among 40 points with depth (the other 20 matched wrongly): share 0.5 < 0.8
+    rng = np.random.default_rng(0)
+    half = matches[:40].copy()
+    half[20:, 1] = rng.permutation(matches[100:, 1])[:20]
+    mixed = estimate_loop_pose(kf_q, kf_m, half, conf)
+    assert not mixed.ok and mixed.reason in ("few_inliers_low_share", "too_few_pnp_inliers")
+
+
+def test_pose_sigmas_of_a_singular_information_are_infinite():
+    from slam_lcd.lcd.geometry import pose_sigmas, tight_pose_reason
+
+    assert pose_sigmas(np.zeros((6, 6))) == (float("inf"), float("inf"))
+    info = np.diag([1e4] * 3 + [1e6] * 3)  # 0.0173 rad, 1.7 mm
+    st, sr = pose_sigmas(info)
+    assert np.isclose(st, np.sqrt(3e-6)) and np.isclose(sr, np.degrees(np.sqrt(3e-4)))
+    conf = LcdConfig()
+    assert tight_pose_reason(info, 20, 22, conf) == "few_inliers_loose_pose"  # 0.99 deg > 0.6 deg
+    assert tight_pose_reason(np.diag([1e5] * 3 + [1e6] * 3), 20, 22, conf) == ""
+    assert tight_pose_reason(np.diag([1e5] * 3 + [1e6] * 3), 14, 15, conf) == "too_few_pnp_inliers"
+    assert tight_pose_reason(np.diag([1e5] * 3 + [1e6] * 3), 20, 30, conf) == "few_inliers_low_share"

@@ -2,6 +2,8 @@
 accepted and ``low_node_ratio`` when the roles swapped, because the ratio test was one-sided)."""
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -67,3 +69,10 @@ def test_corridor_pairs_same_verdict_when_query_and_match_swap(kind, shared_data
     pairs = {(r.query_id, r.match_id) for r in det.records}
     accepted = sum(_same_verdict(feats[q], feats[m], desc[q], desc[m], cam, conf) for q, m in sorted(pairs))
     assert len(pairs) > 250 and accepted > 30
+    # the relaxed thresholds of a loop that continues the previous one (lcd.consistent_min_matches)
+    k = conf.consistent_min_matches
+    low = dataclasses.replace(conf, graph_min_matches=k, graph_min_nodes=k, ransac_min_inliers=k)
+    few = sorted({(r.query_id, r.match_id) for r in det.records if k <= r.n_matches < conf.graph_min_matches})
+    assert len(few) >= 5  # SuperPoint 60+, ORB 6 (ORB pairs have many more matches)
+    for q, m in few:
+        _same_verdict(feats[q], feats[m], desc[q], desc[m], cam, low)

@@ -15,6 +15,14 @@ class LcdConfig:
     verify: Literal["none", "ransac", "graph", "graph+ransac"] = "graph+ransac"  # verification chain
     pose: bool = True  # estimate a metric T_match_query for accepted loops (needs camera + depth/stereo/landmarks)
     require_pose: bool = True  # reject a verified loop when no metric pose can be estimated (when pose=True)
+    # islands (DBoW2 / iBoW-LCD): the top-K and their temporal neighbours among the best
+    # ``island_pool`` BoW candidates, grouped by keyframe position (members <= ``island_gap`` apart),
+    # ranked by the sum of their members' scores and verified island by island: the best member,
+    # then the next best when it fails, at most ``island_tries`` per island (docs/lcd.md)
+    islands: bool = False
+    island_gap: int = 2  # keyframe positions between neighbouring members of one island
+    island_pool: int = 20  # BoW candidates grouped into islands (the top-K among them seed the islands)
+    island_tries: int = 2  # members of one island verified at most (best BoW score first)
 
     # --- matching ---
     # one-to-one (mutual nearest neighbour) matches; the ratio test is symmetric (distinct in both images)
@@ -61,9 +69,26 @@ class LcdConfig:
     pnp_threshold_px: float = 3.0  # PnP-RANSAC reprojection threshold in pixels
     pnp_min_inliers: int = 40  # PnP inliers required for a metric pose (ORB-SLAM accepts a loop at 40 matched points after Sim3 refinement; on the demo every true loop had >= 46, every false one <= 45)
     pnp_max_rms_px: float = 2.0  # reject a pose whose refined reprojection RMS exceeds this
+    # fewer PnP inliers than pnp_min_inliers are accepted down to this many when the pose is tight:
+    # the inliers are at least pnp_tight_min_share of the matched 3-D points and the pose's 1-sigma
+    # (from its information matrix: sqrt of the trace of each covariance block) is within both bounds
+    # (0: off; measured on every demo-world candidate pair: docs/lcd.md)
+    pnp_min_inliers_tight: int = 15
+    pnp_tight_min_share: float = 0.8
+    pnp_tight_max_sigma_m: float = 0.04
+    pnp_tight_max_sigma_deg: float = 0.6
     min_depth_m: float = 0.1  # depth values outside [min, max] are unknown
     max_depth_m: float = 20.0
     pixel_sigma_px: float = 1.0  # floor of the pixel noise used for the pose information matrix
+
+    # --- a loop that continues the previous keyframe's loop (iBoW-LCD's priority island) ---
+    # a candidate whose match lies within consistent_window keyframes of the match of the previous
+    # keyframe's loop (one accepted at the full thresholds) and that fails only on a count
+    # (too few matches, nodes or RANSAC inliers) is verified again with graph_min_matches,
+    # graph_min_nodes and ransac_min_inliers lowered to consistent_min_matches (0: off; the
+    # ratios, the structural score and the pose step keep their thresholds; docs/lcd.md)
+    consistent_min_matches: int = 12
+    consistent_window: int = 2
 
     # --- temporal consistency (DBoW2-style) ---
     temporal_k: int = 0  # accept only after k consecutive consistent detections (0: off)

@@ -10,6 +10,7 @@ evaluated (``slam-lcd eval-lcd``).
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from dataclasses import dataclass, field
@@ -24,6 +25,7 @@ from ..vision.camera import default_camera
 from .config import LcdConfig, stops_at_first_accepted
 from .geometry import EpipolarVerdict, PoseVerdict, estimate_loop_pose, keyframe_points3d
 from .graph import GraphVerdict
+from .islands import IslandMember, group_islands
 from .pair import check_pair
 from .store import DESCRIPTOR_DTYPES, DescriptorStore, compact_descriptors
 from .temporal import TemporalConsistency
@@ -75,6 +77,7 @@ class CandidateRecord:
     reason: str = "not_checked"
     query_stamp: int | None = None
     match_stamp: int | None = None
+    relaxed: bool = False  # verified at lcd.consistent_min_matches (continues the previous keyframe's loop)
 
     def passes(self, mode: str) -> bool:
         """Would this candidate pass verification ``mode`` (pose and temporal checks excluded)?"""
@@ -119,6 +122,7 @@ class CandidateRecord:
             "pose_inliers": self.pose.inliers if self.pose else "",
             "pose_rms_px": (round(self.pose.rms, 4) if self.pose and np.isfinite(self.pose.rms) else ""),
             "pose_reason": self.pose.reason if self.pose else "",
+            "relaxed": self.relaxed,
         }
         return out
 
@@ -150,6 +154,16 @@ class _Entry:
                 seen.add(id(a))
                 total += a.nbytes
         return total
+
+
+_COUNT_REASONS = ("too_few_matches", "too_few_nodes", "too_few_inliers")
+
+
+def _failed_on_a_count(rec: "CandidateRecord") -> bool:
+    """Did a candidate fail only because some count was below its minimum (not a ratio or the score)?"""
+    if rec.reason == "low_bow_score" or rec.reason.startswith("pose:"):
+        return False
+    return any(rec.reason.endswith(":" + r) for r in _COUNT_REASONS)
 
 
 def _float32_or_none(a) -> np.ndarray | None:
@@ -189,6 +203,7 @@ class LoopDetector:
         self.closures: list[LoopClosure] = []
         self._entries: dict[int, _Entry] = {}
         self._temporal = TemporalConsistency(self.conf.temporal_k, self.conf.temporal_window)
+        self._prior: tuple[int, int] | None = None  # (query position, match position) of the last full-threshold loop
         self._kind: str | None = None
 
     def __len__(self) -> int:
@@ -270,24 +285,15 @@ class LoopDetector:
         closures: list[LoopClosure] = []
         candidates = []
         if len(self.db) and len(feats):
+            depth = max(c.top_k, self.retrieval_depth, c.island_pool if c.islands else 0)
             candidates = self.db.query(
-                feats.descriptors, top_k=max(c.top_k, self.retrieval_depth), exclude_recent_s=c.exclude_recent_s,
+                feats.descriptors, top_k=depth, exclude_recent_s=c.exclude_recent_s,
                 exclude_recent_n=c.exclude_recent_n, query_id=kf.id, stamp_ns=int(kf.stamp),
             )
         if self.retrieval_depth > 0:
-            self.retrieved[kf.id] = [cand.match_id for cand in candidates]
-        candidates = candidates[:c.top_k]
+            self.retrieved[kf.id] = [cand.match_id for cand in candidates[:max(c.top_k, self.retrieval_depth)]]
         clock.lap("bow_query")
-        records = []
-        stop = stops_at_first_accepted(c) and not self.run_all_checks
-        for rank, cand in enumerate(candidates):
-            if stop and any(r.accepted for r in records):
-                # bounded work per keyframe: the BoW ranking already put the likeliest first
-                records.append(CandidateRecord(kf.id, cand.match_id, rank, float(cand.bow_score),
-                                               reason="skipped_after_accept", query_stamp=int(kf.stamp),
-                                               match_stamp=self._entries[cand.match_id].stamp))
-                continue
-            records.append(self._verify(entry, desc, cand, rank, clock))
+        records = self._verify_candidates(entry, desc, candidates, clock)
         self.records.extend(records)
 
         accepted = [r for r in records if r.accepted]
@@ -301,6 +307,8 @@ class LoopDetector:
             best.accepted, best.reason = False, f"temporal_pending({run}/{c.temporal_k})"
         elif best is not None:
             closures.append(self._closure(best))
+        strong = best is not None and best.accepted and not best.relaxed
+        self._prior = (position, self._entries[best.match_id].position) if strong else None
         self.closures.extend(closures)
         for r in records:
             _drop_arrays(r)
@@ -313,8 +321,59 @@ class LoopDetector:
         self.last_part_seconds = clock.seconds
         return closures
 
-    def _verify(self, q: _Entry, q_desc: np.ndarray, cand, rank: int, clock: PartClock | None = None) -> CandidateRecord:
+    def _verification_order(self, candidates) -> list[IslandMember]:
+        """What is verified, in order: the top-K in BoW order, or island by island (``lcd.islands``)."""
         c = self.conf
+        if not c.islands:
+            return [IslandMember(cand, rank, rank, float(cand.bow_score)) for rank, cand in enumerate(candidates[:c.top_k])]
+        positions = {cand.match_id: self._entries[cand.match_id].position for cand in candidates}
+        return group_islands(candidates[:c.island_pool], positions, c.top_k, c.island_gap, c.island_tries)
+
+    def _verify_candidates(self, entry: _Entry, desc: np.ndarray, candidates, clock: PartClock) -> list[CandidateRecord]:
+        """Verify a query's candidates; stops at the first accepted one when ``verify_until`` says so.
+
+        With islands, an island whose member was accepted verifies none of its other members
+        (whatever ``verify_until``): they are neighbours of a loop already found.
+        """
+        c = self.conf
+        records: list[CandidateRecord] = []
+        stop = stops_at_first_accepted(c) and not self.run_all_checks
+        done_islands: set[int] = set()
+        for member in self._verification_order(candidates):
+            cand, rank = member.candidate, member.rank
+            if (stop and any(r.accepted for r in records)) or (member.island in done_islands and not self.run_all_checks):
+                # bounded work per keyframe: the BoW ranking already put the likeliest first
+                records.append(CandidateRecord(entry.id, cand.match_id, rank, float(cand.bow_score),
+                                               reason="skipped_after_accept", query_stamp=entry.stamp,
+                                               match_stamp=self._entries[cand.match_id].stamp))
+                continue
+            rec = self._verify(entry, desc, cand, rank, clock, relax=self._continues_prior(entry, cand.match_id))
+            if rec.accepted:
+                done_islands.add(member.island)
+            records.append(rec)
+        return records
+
+    def _continues_prior(self, q: _Entry, match_id: int) -> bool:
+        """Does (q, match) continue the previous keyframe's full-threshold loop (``lcd.consistent_*``)?"""
+        c, prior = self.conf, self._prior
+        if c.consistent_min_matches <= 0 or prior is None or prior[0] != q.position - 1:
+            return False
+        return abs(self._entries[match_id].position - prior[1]) <= c.consistent_window
+
+    def _verify(self, q: _Entry, q_desc: np.ndarray, cand, rank: int, clock: PartClock | None = None,
+                relax: bool = False) -> CandidateRecord:
+        rec = self._verify_with(self.conf, q, q_desc, cand, rank, clock)
+        if relax and not rec.accepted and _failed_on_a_count(rec):
+            k = self.conf.consistent_min_matches
+            low = dataclasses.replace(self.conf, graph_min_matches=min(k, self.conf.graph_min_matches),
+                                      graph_min_nodes=min(k, self.conf.graph_min_nodes),
+                                      ransac_min_inliers=min(k, self.conf.ransac_min_inliers))
+            rec = self._verify_with(low, q, q_desc, cand, rank, clock)
+            rec.relaxed = True
+        return rec
+
+    def _verify_with(self, c: LcdConfig, q: _Entry, q_desc: np.ndarray, cand, rank: int,
+                     clock: PartClock | None = None) -> CandidateRecord:
         clock = clock or PartClock()
         m = self._entries[cand.match_id]
         rec = CandidateRecord(q.id, m.id, rank, float(cand.bow_score), query_stamp=q.stamp, match_stamp=m.stamp)

@@ -181,14 +181,15 @@ def estimate_loop_pose(
     X = points3d_m[matches[:, 1]]
     uv = np.asarray(kf_q.features.keypoints, dtype=np.float64)[matches[:, 0]]
     valid = np.all(np.isfinite(X), axis=1)
-    if valid.sum() < max(conf.pnp_min_inliers, 6):
+    min_inliers = min_pnp_inliers(conf)
+    if valid.sum() < max(min_inliers, 6):
         return PoseVerdict(False, None, None, int(valid.sum()), float("nan"), "too_few_3d_points", source)
     idx = np.flatnonzero(valid)
     xn = undistort_points(kf_q.camera, uv[idx], normalized=True)  # undistorted: PnP on an ideal pinhole
     f = 0.5 * (kf_q.camera.fx + kf_q.camera.fy)
     T_cq_cm, inl = pnp_ransac(X[idx], xn, np.eye(3), threshold=conf.pnp_threshold_px / f, iterations=500,
                               flags=cv2.SOLVEPNP_EPNP)
-    if T_cq_cm is None or len(inl) < conf.pnp_min_inliers:
+    if T_cq_cm is None or len(inl) < min_inliers:
         n_inl = 0 if inl is None else len(inl)
         return PoseVerdict(False, None, None, n_inl, float("nan"), "pnp_failed", source)
     T_cm_cq, info_cam, rms, keep = refine_pose_reprojection(inv(T_cq_cm), X[idx], xn, f, inl, conf.pnp_threshold_px,
@@ -198,7 +199,7 @@ def estimate_loop_pose(
     n_inl = int(keep.sum())
     mask = np.zeros(len(matches), bool)
     mask[idx[keep]] = True
-    if n_inl < conf.pnp_min_inliers:
+    if n_inl < min_inliers:
         return PoseVerdict(False, None, None, n_inl, rms, "too_few_pnp_inliers", source, mask)
     if rms > conf.pnp_max_rms_px:
         return PoseVerdict(False, None, None, n_inl, rms, "high_reprojection_rms", source, mask)
@@ -214,4 +215,46 @@ def estimate_loop_pose(
         info = A_inv.T @ info @ A_inv
         T_mq = inv(T_mq)
     info = 0.5 * (info + info.T)
+    if n_inl < conf.pnp_min_inliers:
+        # fewer points than the plain rule wants: accepted only when the pose itself is tight
+        reason = tight_pose_reason(info, n_inl, int(valid.sum()), conf)
+        if reason:
+            return PoseVerdict(False, None, None, n_inl, rms, reason, source, mask)
     return PoseVerdict(True, T_mq, info, n_inl, rms, "ok", source, mask)
+
+
+def min_pnp_inliers(conf: LcdConfig) -> int:
+    """The fewest PnP inliers any rule accepts (``pnp_min_inliers``, or the tight-pose minimum when on)."""
+    if conf.pnp_min_inliers_tight > 0:
+        return min(conf.pnp_min_inliers, conf.pnp_min_inliers_tight)
+    return conf.pnp_min_inliers
+
+
+def pose_sigmas(info: np.ndarray) -> tuple[float, float]:
+    """(translation m, rotation deg) 1-sigma of a pose: sqrt of the trace of each covariance block (GTSAM order)."""
+    try:
+        cov = np.linalg.inv(info)
+    except np.linalg.LinAlgError:
+        return float("inf"), float("inf")
+    tr_r, tr_t = float(np.trace(cov[:3, :3])), float(np.trace(cov[3:, 3:]))
+    if not (np.isfinite(tr_r) and np.isfinite(tr_t)) or tr_r < 0 or tr_t < 0:
+        return float("inf"), float("inf")
+    return float(np.sqrt(tr_t)), float(np.degrees(np.sqrt(tr_r)))
+
+
+def tight_pose_reason(info: np.ndarray, n_inliers: int, n_points: int, conf: LcdConfig) -> str:
+    """Why a pose with fewer than ``pnp_min_inliers`` inliers is not tight enough ('' when it is).
+
+    Why: few inliers are what ORB-SLAM's 40-point rule guards against (a pose resting on a few
+    points, or a look-alike place); a wide-baseline revisit also has few, yet its pose can be
+    as well determined. The information matrix says how well (NEES-calibrated, docs/plugin.md),
+    and a large inlier share says the matched 3-D points agree with one pose.
+    """
+    if conf.pnp_min_inliers_tight <= 0 or n_inliers < conf.pnp_min_inliers_tight:
+        return "too_few_pnp_inliers"
+    if n_inliers < conf.pnp_tight_min_share * max(n_points, 1):
+        return "few_inliers_low_share"
+    sigma_t, sigma_r = pose_sigmas(info)
+    if sigma_t > conf.pnp_tight_max_sigma_m or sigma_r > conf.pnp_tight_max_sigma_deg:
+        return "few_inliers_loose_pose"
+    return ""
