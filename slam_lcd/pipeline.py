@@ -61,7 +61,8 @@ class Pipeline:
     selector decides, loop detection runs on each keyframe and verified loops go to iSAM2.
     Or skip our front end and call :meth:`add_keyframe` directly.
 
-    ``on_loop(closure, record)`` is called for every loop the back end accepts;
+    ``on_loop(closure, record)`` is called for every loop the back end accepts; ``loop_sink(record)``
+    for every loop the detector hands on, with the matches its graph verified (before they are dropped);
     ``feature_source(stamp, image) -> Features`` replaces the extractor's own call (e.g. an
     on-disk cache keyed by log, topic and stamp); ``expect_depth``: see :meth:`_release`.
     """
@@ -78,6 +79,7 @@ class Pipeline:
         feature_source: Callable[[int, np.ndarray], object] | None = None,
         expect_depth: bool = False,
         keyframe_sink: Callable[[Keyframe], None] | None = None,
+        loop_sink: Callable[[object], None] | None = None,
     ):
         self.config = config or Config()
         self.camera = camera
@@ -90,6 +92,7 @@ class Pipeline:
         self.selector = KeyframeSelector(self.config.frontend, camera=camera, T_body_camera=self.T_body_camera,
                                          keep_images=False)
         self.detector = LoopDetector(self.config.lcd, vocab=vocab, extractor=extractor, vocab_conf=self.config.vocab)
+        self.detector.loop_sink = loop_sink  # sees each loop's verified matches (the loop pictures keep them)
         self.graph = PoseGraph(self.config.backend)
         self.on_loop = on_loop
         self.feature_source = feature_source

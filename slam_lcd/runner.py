@@ -226,7 +226,8 @@ def _make_pipeline(cfg, extractor, vocab, log_path, topics: Topics, keyframe_sin
             return cache.extract(log_path, cache_topic, stamp, img)
 
     return Pipeline(cfg, extractor=extractor, vocab=vocab, feature_source=feature_source,
-                    expect_depth=topics.depth is not None, keyframe_sink=keyframe_sink)
+                    expect_depth=topics.depth is not None, keyframe_sink=keyframe_sink,
+                    loop_sink=getattr(keyframe_sink, "keep_loop", None))
 
 
 def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame, vo_odometry, log_path,

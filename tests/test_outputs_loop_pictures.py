@@ -54,3 +54,23 @@ def test_folder_output_replaced_as_a_whole(tmp_path):
     s.publish()
     assert not (target / LOOPS_DIR).exists() and np.array_equal(sorted(p.name for p in target.iterdir()),
                                                                 ["mine.txt", "report.md"])
+
+
+def test_album_keeps_the_loops_the_detector_verified(tmp_path):
+    """A loop's picture uses the matches and kept rows the detector handed on, not a recomputation."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from slam_lcd.outputs.loop_pictures import KeyframeAlbum
+
+    album = KeyframeAlbum(tmp_path / "album")
+    matches = np.array([[0, 3], [1, 4], [2, 5], [7, 9]])
+    rec = SimpleNamespace(query_id=12, match_id=3, n_matches=4, graph_matches=matches,
+                          graph=SimpleNamespace(kept=np.array([0, 1, 3]), n_nodes=3))
+    album.keep_loop(rec)
+    m, kept, n, nodes = album.load_loop(12, 3)
+    assert np.array_equal(m, matches) and np.array_equal(kept, [0, 1, 3]) and (n, nodes) == (4, 3)
+    assert album.load_loop(3, 12) is None
+    album.keep_loop(SimpleNamespace(query_id=1, match_id=0, n_matches=0, graph_matches=None, graph=None))
+    assert album.load_loop(1, 0) is None

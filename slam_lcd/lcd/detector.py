@@ -14,7 +14,7 @@ import dataclasses
 import logging
 import time
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -54,6 +54,7 @@ def _drop_arrays(rec: "CandidateRecord") -> None:
     """A record kept for the run's report needs its figures, not its per-match arrays."""
     if rec.graph is not None:
         rec.graph.kept = rec.graph.kept[:0]
+    rec.graph_matches = None
     for v in (rec.ransac, rec.ransac_on_graph):
         if v is not None:
             v.mask = v.mask[:0]
@@ -78,6 +79,8 @@ class CandidateRecord:
     query_stamp: int | None = None
     match_stamp: int | None = None
     relaxed: bool = False  # verified at lcd.consistent_min_matches (continues the previous keyframe's loop)
+    # the matches the graph verified, (query, match) rows (graph.kept indexes them); dropped like the masks
+    graph_matches: np.ndarray | None = None
 
     def passes(self, mode: str) -> bool:
         """Would this candidate pass verification ``mode`` (pose and temporal checks excluded)?"""
@@ -205,6 +208,9 @@ class LoopDetector:
         self._temporal = TemporalConsistency(self.conf.temporal_k, self.conf.temporal_window)
         self._prior: tuple[int, int] | None = None  # (query position, match position) of the last full-threshold loop
         self._kind: str | None = None
+        # sees each loop the detector hands on (a record with its graph's matches and kept rows) before
+        # the arrays are dropped: the loop pictures draw exactly what was verified
+        self.loop_sink: Callable[[CandidateRecord], None] | None = None
 
     def __len__(self) -> int:
         return len(self._entries)
@@ -310,6 +316,8 @@ class LoopDetector:
         strong = best is not None and best.accepted and not best.relaxed
         self._prior = (position, self._entries[best.match_id].position) if strong else None
         self.closures.extend(closures)
+        if self.loop_sink is not None and closures:
+            self.loop_sink(best)
         for r in records:
             _drop_arrays(r)
         clock.lap("decision")
@@ -390,6 +398,7 @@ class LoopDetector:
                             match=self._match, clock=clock)
         rec.n_matches, rec.n_verified = checks.n_matches, checks.n_verified
         rec.graph, rec.ransac, rec.ransac_on_graph = checks.graph, checks.ransac, checks.ransac_on_graph
+        rec.graph_matches = checks.graph_matches if checks.graph is not None else None
         matches = checks.graph_matches if need_graph else checks.ransac_matches
         if not rec.passes(mode):
             rec.reason = {

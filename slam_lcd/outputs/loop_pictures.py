@@ -5,11 +5,14 @@ records keep figures, not per-match arrays (memory per keyframe stays small, iss
 The cheapest honest source is a :class:`KeyframeAlbum` filled while the run goes: each
 keyframe's image (JPEG), keypoints and descriptors (in the detector's stored precision)
 go to a working folder on disk as the keyframe leaves loop detection, so memory stays
-bounded. At output time, for the loops that are drawn, the one-to-one matches, the
-verification budget and the graph verification are recomputed with the loop detector's
-own functions and settings (they are deterministic), and the picture says so when the
-recomputed figures differ from the run's record. The album costs about as much disk as
-the detector's descriptor store and is removed when the outputs are written.
+bounded. Each loop the detector hands on also leaves its verified matches and the rows
+its graph kept there (:meth:`KeyframeAlbum.keep_loop`, a few kB), so its picture shows
+exactly what was verified and costs no second verification at output time. For the
+detector-rejected candidates that are drawn, the one-to-one matches, the verification
+budget and the graph verification are recomputed with the loop detector's own functions
+and settings (they are deterministic), and the picture says so when the recomputed
+figures differ from the run's record. The album costs about as much disk as the
+detector's descriptor store and is removed when the outputs are written.
 
 Drawn: every loop the back end accepted, every loop it rejected, and the
 ``run.loop_pictures_rejected`` detector-rejected candidates that came closest (most
@@ -74,6 +77,27 @@ class KeyframeAlbum:
                  image_size=np.asarray(f.image_size, np.int64), scale=np.float64(scale))
         self.ids.add(int(kf.id))
 
+    def keep_loop(self, rec) -> None:
+        """Keep a loop's verified matches and the graph's kept rows (the detector calls this before it drops them)."""
+        if rec.graph_matches is None or rec.graph is None or self.failed is not None:
+            return
+        try:
+            np.savez(self.folder / f"pair_{int(rec.query_id)}_{int(rec.match_id)}.npz",
+                     matches=np.asarray(rec.graph_matches, np.int32), kept=np.asarray(rec.graph.kept, np.int32),
+                     n_matches=np.int64(rec.n_matches), graph_nodes=np.int64(rec.graph.n_nodes))
+        except OSError as e:
+            self.failed = f"loop {rec.query_id}-{rec.match_id}: {e.strerror or e}"
+            log.info("loop pictures: keyframes no longer kept (%s)", self.failed)
+
+    def load_loop(self, query_id: int, match_id: int):
+        """(matches, kept, n_matches, graph nodes) kept by :meth:`keep_loop`, or None."""
+        p = self.folder / f"pair_{int(query_id)}_{int(match_id)}.npz"
+        if not p.is_file():
+            return None
+        with np.load(p, allow_pickle=False) as z:
+            return (z["matches"].astype(np.int64), z["kept"].astype(np.int64), int(z["n_matches"]),
+                    int(z["graph_nodes"]))
+
     def load(self, kf_id: int):
         """(image, keypoints in the stored image's pixels, descriptors, features image size) or None."""
         if kf_id not in self.ids:
@@ -91,11 +115,29 @@ def picture_name(query_id: int, match_id: int, verdict: str) -> str:
     return f"loop_q{int(query_id):05d}_m{int(match_id):05d}_{verdict}.png"
 
 
+def _graph_edges(kq: np.ndarray, matches: np.ndarray, kept: np.ndarray, conf) -> np.ndarray:
+    from ..lcd.graph import planar_graph
+
+    if len(kept) < 3:
+        return np.zeros((0, 2), np.int64)
+    return planar_graph(kq[matches[kept, 0]].astype(np.float64), conf.graph_max_edge_factor)[1]
+
+
+def _loop_arrays(rec_row: dict, q, m, conf, album: "KeyframeAlbum"):
+    """Matches, kept rows and graph edges: as the detector kept them for its loops, else recomputed."""
+    kept_loop = album.load_loop(int(rec_row["query_id"]), int(rec_row["match_id"]))
+    if kept_loop is None:
+        return _recompute(rec_row, q, m, conf)
+    matches, kept, _, _ = kept_loop
+    return matches, kept, _graph_edges(q[1], matches, kept, conf), []
+
+
 def _recompute(rec_row: dict, q, m, conf):
-    """Matches, the rows the graph kept and the graph's edges, as the detector computed them."""
+    """Matches, the rows the graph kept and the graph's edges, recomputed as the detector computes them
+    (for candidates the detector rejected, whose arrays it did not hand on)."""
     from ..features.matching import mutual_nn_match_bf
     from ..lcd.budget import select_matches
-    from ..lcd.graph import planar_graph, verify_graph
+    from ..lcd.graph import verify_graph
 
     _, kq, dq, size_q, _ = q
     _, km, dm, _, _ = m
@@ -107,8 +149,7 @@ def _recompute(rec_row: dict, q, m, conf):
         matches = matches[select_matches(matches, dist, kq, conf.verify_max_matches, size_q, conf.verify_spread_cells)]
     g = verify_graph(kq, km, matches, conf) if len(matches) else None
     kept = np.asarray(g.kept, np.int64) if g is not None else np.zeros(0, np.int64)
-    edges = planar_graph(kq[matches[kept, 0]].astype(np.float64), conf.graph_max_edge_factor)[1] if len(kept) >= 3 \
-        else np.zeros((0, 2), np.int64)
+    edges = _graph_edges(kq, matches, kept, conf)
     notes = []
     if str(rec_row.get("n_matches", "")) not in ("", str(n_found)):
         notes.append(f"recomputed {n_found} matches (run: {rec_row['n_matches']})")
@@ -209,7 +250,7 @@ def write_loop_pictures(out_dir: Path, album: KeyframeAlbum, rows: list[dict], l
         if q is None or m is None:
             missing += 1  # a keyframe the album did not keep (a write error, an interrupt mid-keyframe)
             continue
-        matches, kept, edges, notes = _recompute(row, q, m, lcd_conf)
+        matches, kept, edges, notes = _loop_arrays(row, q, m, lcd_conf, album)
         colour = (60, 170, 60) if verdict == "accepted" else (60, 60, 200)
         pic = draw_loop(q, m, matches, kept, edges, _caption(row, verdict) + notes, colour)
         name = picture_name(row["query_id"], row["match_id"], verdict)
