@@ -111,7 +111,7 @@ def _interest(r: dict, pictures: set[str]) -> int:
     return 2 if picture_name(r["query_id"], r["match_id"], "rejected") in pictures else 3
 
 
-def _loop_table(rows: list[dict], out_dir: Path, pictures: set[str]) -> list[str]:
+def _loop_table(rows: list[dict], out_dir: Path, pictures: set[str], thumbs: dict | None = None) -> list[str]:
     rows = sorted(rows, key=lambda r: _interest(r, pictures))  # stable: the detector's order within a group
     head = "".join(f"<th class={'t' if txt else 'n'}>{_e(h)}</th>" for h, _, txt in _LOOP_COLUMNS)
     out = [f"<table id='loops' class='sortable'><thead><tr>{head}</tr></thead><tbody>"]
@@ -123,7 +123,10 @@ def _loop_table(rows: list[dict], out_dir: Path, pictures: set[str]) -> list[str
             if key is None:
                 name = next((n for n in (picture_name(r["query_id"], r["match_id"], v) for v in ("accepted", "rejected"))
                              if n in pictures), None)
-                uri = data_uri(out_dir / LOOPS_DIR / name, THUMB_WIDTH) if name else None
+                if name and thumbs and name in thumbs:  # drawn this run: its thumbnail is at hand
+                    uri = "data:image/jpeg;base64," + base64.b64encode(thumbs[name]).decode()
+                else:
+                    uri = data_uri(out_dir / LOOPS_DIR / name, THUMB_WIDTH) if name else None
                 cells.append(f"<td class=t data-v='{0 if uri else 1}'>" + (
                     f"<a href='{LOOPS_DIR}/{_e(name)}'><img class=thumb src='{uri}' alt='{_e(name)}'></a>"
                     if uri else "") + "</td>")
@@ -137,8 +140,9 @@ def _loop_table(rows: list[dict], out_dir: Path, pictures: set[str]) -> list[str
 
 
 def write_html_report(out_dir: Path, facts: dict, summary_lines: list[str], rows: list[dict],
-                      figures: list[str], pictures: list[str], config_text: str) -> None:
-    """``report.html`` in ``out_dir`` (see the module docstring)."""
+                      figures: list[str], pictures: list[str], config_text: str, thumbs: dict | None = None) -> None:
+    """``report.html`` in ``out_dir`` (see the module docstring); ``thumbs``: name -> JPEG thumbnail of the
+    loop pictures drawn this run (others are read from ``loops/``)."""
     inp = facts["input"]
     loops = facts["loops"]
     body = ["<h1>slam-lcd run report</h1>",
@@ -164,7 +168,7 @@ def write_html_report(out_dir: Path, facts: dict, summary_lines: list[str], rows
                 f"{loops['rejected_by_backend']} rejected</span> by the back end"
                 + (f"; {n_bad} accepted loop(s) false by ground truth" if n_bad is not None else "")
                 + ". Click a header to sort; a thumbnail opens its picture in <code>loops/</code>.</p>")
-    body += _loop_table(rows, out_dir, set(pictures))
+    body += _loop_table(rows, out_dir, set(pictures), thumbs)
     body.append("<h2>Time per stage</h2><table id='stages'><tr><th class=t>stage</th><th>seconds</th><th>calls</th></tr>")
     body += [f"<tr><td class=t>{_e(k)}</td><td>{v['seconds']:.2f}</td><td>{v['calls']}</td></tr>"
              for k, v in facts["stages"].items()]

@@ -236,10 +236,12 @@ def _caption(row: dict, verdict: str) -> list[str]:
 
 
 def write_loop_pictures(out_dir: Path, album: KeyframeAlbum, rows: list[dict], lcd_conf,
-                        n_rejected: int, stop=None) -> list[str]:
+                        n_rejected: int, stop=None, thumbnails: dict | None = None, thumb_width: int = 240) -> list[str]:
     """Draw the chosen loops into ``out_dir/loops``; returns the picture names written (contact sheet last).
 
-    ``stop``: a :class:`threading.Event` checked before each picture (the outputs are being abandoned)."""
+    ``stop``: a :class:`threading.Event` checked before each picture (the outputs are being abandoned).
+    ``thumbnails``: filled with ``name -> JPEG bytes`` of each picture scaled to ``thumb_width`` (the
+    HTML report's table embeds them without decoding the PNG again)."""
     folder = out_dir / LOOPS_DIR
     folder.mkdir(exist_ok=True)
     written, thumbs, missing = [], [], 0
@@ -256,6 +258,12 @@ def write_loop_pictures(out_dir: Path, album: KeyframeAlbum, rows: list[dict], l
         name = picture_name(row["query_id"], row["match_id"], verdict)
         cv2.imwrite(str(folder / name), pic)
         written.append(name)
+        if thumbnails is not None:
+            small = cv2.resize(pic, (thumb_width, max(1, round(pic.shape[0] * thumb_width / pic.shape[1]))),
+                               interpolation=cv2.INTER_AREA)
+            ok, buf = cv2.imencode(".jpg", small, [cv2.IMWRITE_JPEG_QUALITY, 80])
+            if ok:
+                thumbnails[name] = buf.tobytes()
         if verdict == "accepted":
             thumbs.append(pic)
     if thumbs:

@@ -177,7 +177,8 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
 
         write_html_report(out_dir, facts, result.summary_lines(), rows,
                           [f for f in outputs if f.endswith(".png")], result.loop_pictures,
-                          (out_dir / "config.yaml").read_text(encoding="utf-8"))
+                          (out_dir / "config.yaml").read_text(encoding="utf-8"),
+                          pictures.thumbs if pictures is not None else None)
     except OSError:
         raise
     except Exception as e:  # the page must never cost the user the numbers
@@ -193,6 +194,7 @@ class _PictureThread:
         import threading
 
         self.album, self.names, self.stop = album, [], threading.Event()
+        self.thumbs: dict[str, bytes] = {}  # the HTML report's thumbnails
         self.thread = threading.Thread(target=self._run, args=(out_dir, rows, cfg), name="slam-lcd-loop-pictures",
                                        daemon=True)
         self.thread.start()
@@ -201,8 +203,10 @@ class _PictureThread:
         try:
             from .loop_pictures import write_loop_pictures
 
+            from .html_report import THUMB_WIDTH
+
             self.names = write_loop_pictures(out_dir, self.album, rows, cfg.lcd, cfg.run.loop_pictures_rejected,
-                                             stop=self.stop)
+                                             stop=self.stop, thumbnails=self.thumbs, thumb_width=THUMB_WIDTH)
         except Exception as e:  # a picture must never cost the user the numbers
             log.warning("loop pictures not written: %s", e)
             self.names = []
