@@ -42,6 +42,10 @@ def register(sub) -> None:
                         "tum = /camera/rgb/image_color rgb8 + /camera/depth_registered/image_raw 16UC1 mm 30 Hz, "
                         "/tf /world -> /kinect; kitti = /kitti/camera_gray_left|right/image_raw + camera_info 10 Hz, "
                         "/tf world -> base_link; none has odometry (default: demo, the topics of --help's description)")
+    p.add_argument("--exact-depth", action="store_true",
+                   help="with --layout tum: write the exact rendered depth (millimetre steps only) instead of the "
+                        "Kinect v1 depth errors (axial noise 0.0012 + 0.0019 (z - 0.4)^2 m, 1/8-pixel disparity "
+                        "steps, 0 outside 0.5-4.5 m) (default: the Kinect errors)")
     p.add_argument("--loops-csv", default=None,
                    help="where to write the ground-truth loop pairs (default: <name>_loops.csv beside OUT; "
                         "loop_pairs.csv inside OUT with --format folder)")
@@ -71,6 +75,7 @@ def run(args) -> int:
         info = make_demo_log(args.out, fmt=fmt, frames=args.frames, seed=args.seed, stereo=args.stereo,
                              depth=args.depth, compressed=args.compressed, color=args.color, kind=args.trajectory,
                              laps=args.laps, width=w, height=h, hfov_deg=args.hfov, camera_rate=args.rate,
-                             loops_csv=args.loops_csv, progress=not args.no_progress, layout=args.layout)
+                             loops_csv=args.loops_csv, progress=not args.no_progress, layout=args.layout,
+                             depth_noise=not args.exact_depth)
     print(info.summary())
     return 0

@@ -69,6 +69,7 @@ class DemoLogInfo:
     seed: int = 0
     kind: str = "laps"
     layout: str = "demo"
+    depth_model: object = None  # the depth sensor model the depth images carry (None: exact depth)
     calibration_path: Path | None = None  # the Kalibr camchain written beside the log (layout euroc)
 
     def summary(self) -> str:
@@ -81,6 +82,8 @@ class DemoLogInfo:
             f"layout {self.layout}: no odometry topic (the run's built-in visual odometry is the source)",
             f"ground-truth loop pairs: {self.n_loop_pairs} -> {self.loop_pairs_path}",
         ]
+        if self.depth_model is not None:
+            lines.append(f"depth: {self.depth_model.describe()}")
         if self.calibration_path is not None:
             lines.append(f"calibration (Kalibr camchain): {self.calibration_path}")
         for t, d in self.topics.items():
@@ -201,7 +204,7 @@ def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int =
                   laps: float = 2.0, width: int = 640, height: int = 480, camera_rate: float | None = None,
                   odom_rate: float | None = None, loops_csv: str | Path | None = None, progress: bool = False,
                   io_conf=None, workers: int | None = None, hfov_deg: float = 70.0,
-                  layout: str = "demo") -> DemoLogInfo:
+                  layout: str = "demo", depth_noise: bool = True) -> DemoLogInfo:
     """Render the demo world along a trajectory and write it as ``fmt`` at ``out``.
 
     ``frames`` None means ``laps`` laps (default 2 laps of block A: ~850 frames at 10 Hz);
@@ -211,6 +214,9 @@ def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int =
     encodings, rates, ground truth and calibration file of that dataset's bags
     (:mod:`slam_lcd.sim.layouts`; ``stereo``, ``depth``, ``color`` and ``compressed`` are the
     layout's then). ``camera_rate`` / ``odom_rate`` (ground truth) None: the layout's rates.
+    ``depth_noise``: a layout's depth images carry its depth sensor's errors (``tum``: the
+    Kinect v1 model of :mod:`slam_lcd.sim.kinect`); False writes the exact rendered depth
+    (millimetre steps only). The demo layout's depth is exact (1/1024 m steps) either way.
     Returns a :class:`DemoLogInfo`.
     """
     t_start = time.perf_counter()
@@ -239,7 +245,7 @@ def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int =
     render_one = None
     if layout != "demo":
         def render_one(i, bank):
-            return L.frame_renderer(layout, sc, bank, er)(i)
+            return L.frame_renderer(layout, sc, bank, er, seed=seed, depth_noise=depth_noise)(i)
     frames_iter = render_frames(sc, color=color, depth=depth, stereo=stereo, seed=seed, workers=workers,
                                 render_one=render_one)
     if progress:
@@ -272,7 +278,8 @@ def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int =
                        path_length_m=sc.gt_odo.path_length(), topics=topics, loop_pairs_path=lp,
                        n_loop_pairs=len(pairs), drift=end_drift(sc.gt_odo, sc.odom), camera=sc.camera,
                        T_body_camera=sc.T_bc, wall_s=time.perf_counter() - t_start, seed=seed, kind=kind,
-                       layout=layout, calibration_path=calib_path)
+                       layout=layout, calibration_path=calib_path,
+                       depth_model=L.depth_model(layout, depth_noise))
 
 
 def _write_log(out, fmt, sc: _Scenario, frames_iter, *, depth, stereo, compressed, color, io_conf):

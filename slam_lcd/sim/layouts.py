@@ -14,7 +14,8 @@ euroc     ``/cam0/image_raw``, ``/cam1/image_raw`` mono8,   ``/leica/position`` 
 tum       ``/camera/rgb/image_color`` rgb8 30 Hz +          ``/tf`` ``/world -> /kinect`` (100 Hz) only;
           ``/camera/rgb/camera_info``,                       ``/tf_static`` ``/kinect ->
           ``/camera/depth_registered/image_raw`` 16UC1 mm   /openni_rgb_optical_frame`` (rotation only)
-          (+ its camera_info)
+          (+ its camera_info), Kinect v1 depth noise
+          (:mod:`slam_lcd.sim.kinect`; or exact)
 kitti     ``/kitti/camera_gray_left/image_raw``,            ``/tf`` ``world -> base_link`` (10 Hz, as kitti2bag
           ``/kitti/camera_gray_right/image_raw`` mono8      writes the OXTS pose); ``/tf_static`` base_link ->
           10 Hz, rectified, + their ``camera_info``          camera_gray_left / camera_gray_right
@@ -37,6 +38,7 @@ import numpy as np
 from ..geometry import inv, make_T
 from ..types import CameraModel
 from . import rig
+from .kinect import KINECT_V1, KinectDepthModel, depth_mm
 
 LAYOUTS = ("demo", "euroc", "tum", "kitti")
 
@@ -48,6 +50,9 @@ EUROC_TURN_DEG = {"cam0": (0.0, 2.0, 0.0), "cam1": (-1.5, 0.0, 0.0)}  # rotation
 EUROC_RADTAN = {"cam0": (-0.12, 0.02, 0.0006, -0.0004), "cam1": (-0.11, 0.018, -0.0003, 0.0005)}
 # the Leica station's frame: the world turned and shifted (the ATE alignment finds it)
 T_LEICA_WORLD = make_T(cv2.Rodrigues(np.radians([0.0, 0.0, 30.0]))[0], np.array([4.0, -2.5, 0.3]))
+
+# the depth sensor of a layout with depth images (``make_demo_log(depth_noise=False)``: exact depth)
+DEPTH_MODELS = {"tum": KINECT_V1}
 
 TUM_WORLD, TUM_KINECT, TUM_OPTICAL = "/world", "/kinect", "/openni_rgb_optical_frame"
 KITTI_LEFT, KITTI_RIGHT = "camera_gray_left", "camera_gray_right"
@@ -138,10 +143,26 @@ def camchain_path_for(out: Path) -> Path:
 
 
 # ----------------------------------------------------------------------------- per-frame rendering
-def frame_renderer(layout: str, sc, bank, er: EurocRig | None):
-    """``render_one(i) -> (i, image, depth | None, right | None)`` of a layout (noise as the demo log's)."""
+def depth_model(layout: str, depth_noise: bool = True) -> KinectDepthModel | None:
+    """The depth sensor a layout's depth images are written with (None: exact depth, or no depth)."""
+    return DEPTH_MODELS.get(layout) if depth_noise else None
+
+
+def depth_rng(seed: int, frame: int) -> np.random.Generator:
+    """The depth noise of one frame: its own stream, so threads and reruns give the same images."""
+    return np.random.default_rng(np.random.SeedSequence([seed, 0xD3E97, frame]))
+
+
+def frame_renderer(layout: str, sc, bank, er: EurocRig | None, *, seed: int = 0, depth_noise: bool = True):
+    """``render_one(i) -> (i, image, depth | None, right | None)`` of a layout (noise as the demo log's).
+
+    ``depth_noise``: the layout's depth sensor model (:data:`DEPTH_MODELS`), seeded per frame;
+    False: the rendered depth, exact up to the encoding's millimetres.
+    """
     from .demo_log import NOISE_BANK, _add_noise
     from .render import render
+
+    sensor = depth_model(layout, depth_noise)
 
     def euroc(i):
         T_wb, epoch = sc.gt_cam.poses[i], float(sc.laps[i])
@@ -154,8 +175,9 @@ def frame_renderer(layout: str, sc, bank, er: EurocRig | None):
         T_wc = sc.gt_cam.poses[i] @ sc.T_bc
         img, dep = render(sc.world, sc.camera, T_wc, epoch=float(sc.laps[i]), color=True, with_depth=True)
         img = _add_noise(img, bank[(7 * i) % NOISE_BANK])
-        mm = np.clip(np.round(np.nan_to_num(dep, nan=0.0, posinf=0.0) * 1000.0), 0, 65535).astype(np.uint16)
-        return i, img, mm, None
+        if sensor is not None:
+            dep = sensor.measure(dep, depth_rng(seed, i))
+        return i, img, depth_mm(dep), None
 
     def kitti(i):
         T_wc = sc.gt_cam.poses[i] @ sc.T_bc
