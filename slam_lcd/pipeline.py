@@ -197,11 +197,11 @@ class Pipeline:
 
     def _worker(self) -> ThreadPoolExecutor:
         if self._executor is None:
-            if self._workers > 1:  # each keyframe's forward on one thread, N keyframes at once
+            if self._workers > 1:  # N keyframes at once, torch's threads shared out between them
                 import torch
 
                 self._torch_threads_before = torch.get_num_threads()
-                torch.set_num_threads(1)
+                torch.set_num_threads(max(1, self._torch_threads_before // self._workers))
             self._executor = ThreadPoolExecutor(max_workers=self._workers, thread_name_prefix="slam-lcd-features")
         return self._executor
 
