@@ -137,8 +137,9 @@ def test_few_inliers_accepted_only_when_the_pose_is_tight():
 
     kf_q, kf_m, matches, T_gt = _rgbd_pair(seed=3)
     few = matches[:20]
-    conf = LcdConfig()
-    assert conf.pnp_min_inliers == 40 and conf.pnp_min_inliers_tight == 15
+    assert LcdConfig().pnp_min_inliers_tight == 0  # off by default (docs/lcd.md: false loops on the long log)
+    conf = LcdConfig(pnp_min_inliers_tight=15)
+    assert conf.pnp_min_inliers == 40
     v = estimate_loop_pose(kf_q, kf_m, few, conf)
     assert v.ok, v.reason
     sigma_t, sigma_r = pose_sigmas(v.information)
@@ -148,7 +149,7 @@ def test_few_inliers_accepted_only_when_the_pose_is_tight():
     off = estimate_loop_pose(kf_q, kf_m, few, LcdConfig(pnp_min_inliers_tight=0))
     assert not off.ok and off.reason == "too_few_3d_points"
     # a pose that the same points determine less well than the bound: rejected as loose
-    strict = estimate_loop_pose(kf_q, kf_m, few, LcdConfig(pnp_tight_max_sigma_m=0.1 * sigma_t))
+    strict = estimate_loop_pose(kf_q, kf_m, few, LcdConfig(pnp_min_inliers_tight=15, pnp_tight_max_sigma_m=0.1 * sigma_t))
     assert not strict.ok and strict.reason == "few_inliers_loose_pose"
     # 20 inliers among 40 points with depth (the other 20 matched wrongly): share 0.5 < 0.8
     rng = np.random.default_rng(0)
@@ -165,7 +166,7 @@ def test_pose_sigmas_of_a_singular_information_are_infinite():
     info = np.diag([1e4] * 3 + [1e6] * 3)  # 0.0173 rad, 1.7 mm
     st, sr = pose_sigmas(info)
     assert np.isclose(st, np.sqrt(3e-6)) and np.isclose(sr, np.degrees(np.sqrt(3e-4)))
-    conf = LcdConfig()
+    conf = LcdConfig(pnp_min_inliers_tight=15)
     assert tight_pose_reason(info, 20, 22, conf) == "few_inliers_loose_pose"  # 0.99 deg > 0.6 deg
     assert tight_pose_reason(np.diag([1e5] * 3 + [1e6] * 3), 20, 22, conf) == ""
     assert tight_pose_reason(np.diag([1e5] * 3 + [1e6] * 3), 14, 15, conf) == "too_few_pnp_inliers"

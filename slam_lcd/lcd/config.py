@@ -73,7 +73,7 @@ class LcdConfig:
     # the inliers are at least pnp_tight_min_share of the matched 3-D points and the pose's 1-sigma
     # (from its information matrix: sqrt of the trace of each covariance block) is within both bounds
     # (0: off; measured on every demo-world candidate pair: docs/lcd.md)
-    pnp_min_inliers_tight: int = 15
+    pnp_min_inliers_tight: int = 0  # off: on the 10-lap demo log 15 let two false loops (90 deg off) in
     pnp_tight_min_share: float = 0.8
     pnp_tight_max_sigma_m: float = 0.04
     pnp_tight_max_sigma_deg: float = 0.6
