@@ -74,3 +74,49 @@ def test_album_keeps_the_loops_the_detector_verified(tmp_path):
     assert album.load_loop(3, 12) is None
     album.keep_loop(SimpleNamespace(query_id=1, match_id=0, n_matches=0, graph_matches=None, graph=None))
     assert album.load_loop(1, 0) is None
+
+
+def test_picture_thread_stops_between_pictures_when_the_outputs_are_abandoned(monkeypatch, tmp_path):
+    """An error or Ctrl-C while the other outputs are written (or while waiting for the pictures):
+    the thread stops after its current picture, the album is removed, no picture is reported."""
+    import threading
+    from types import SimpleNamespace
+
+    import slam_lcd.outputs.loop_pictures as LP
+    from slam_lcd.outputs.write import _PictureThread
+
+    drawn, started = [], threading.Event()
+
+    def slow(out_dir, album, rows, lcd_conf, n_rejected, stop=None, thumbnails=None, thumb_width=240):
+        started.set()
+        while not stop.is_set():
+            drawn.append(1)
+            stop.wait(0.01)
+        return ["never.png"]
+
+    monkeypatch.setattr(LP, "write_loop_pictures", slow)
+    closed = []
+    album = SimpleNamespace(close=lambda: closed.append(1))
+    cfg = SimpleNamespace(lcd=None, run=SimpleNamespace(loop_pictures_rejected=0))
+    t = _PictureThread(tmp_path, album, [], cfg)
+    started.wait(5)
+    assert t.join(stop=True) == [] and closed == [1] and not t.thread.is_alive()
+
+    closed.clear()
+    t = _PictureThread(tmp_path, album, [], cfg)
+    started.wait(5)
+    real_join = t.thread.join
+    calls = []
+
+    def interrupted_join(*a):
+        calls.append(1)
+        if len(calls) == 1:
+            raise KeyboardInterrupt
+        return real_join(*a)
+
+    t.thread.join = interrupted_join
+    import pytest
+
+    with pytest.raises(KeyboardInterrupt):
+        t.join()
+    assert t.stop.is_set() and not t.thread.is_alive() and closed == [1]

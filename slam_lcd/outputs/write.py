@@ -214,9 +214,15 @@ class _PictureThread:
     def join(self, stop: bool = False) -> list[str]:
         if stop:
             self.stop.set()
-        self.thread.join()
-        self.album.close()
-        return [] if stop else self.names
+        try:
+            self.thread.join()
+        except BaseException:  # Ctrl-C while waiting: the thread stops after its current picture
+            self.stop.set()
+            self.thread.join()
+            raise
+        finally:
+            self.album.close()
+        return [] if self.stop.is_set() else self.names
 
 
 def _write_mcap_and_plots(pipe, out_dir, result, gt, mcap_source, copy_topics, skipped, outputs, odom, corrected,
