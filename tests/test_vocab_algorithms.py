@@ -228,3 +228,17 @@ def test_database_rejects_inconsistent_input():
         db.add(1, 4, unit(rng.normal(size=(10, 16))))
     with pytest.raises(InputError):
         db.add(2, 7, rng.integers(0, 256, size=(10, 32), dtype=np.uint8))
+
+
+def test_nearest_by_dot_in_blocks_equals_one_product(monkeypatch):
+    """Vocabulary training's nearest-centre steps are formed in row blocks (bounded memory) with the
+    same answers as one product."""
+    import slam_lcd.vocab.descriptors as D
+
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(500, 16)).astype(np.float32)
+    c = rng.normal(size=(70, 16)).astype(np.float32)
+    whole = (x @ c.T).argmax(axis=1)
+    monkeypatch.setattr(D, "_PRODUCT_BLOCK_FLOATS", 70 * 33)  # 33 rows per block
+    assert np.array_equal(D.nearest_by_dot(x, c), whole)
+    assert D.nearest_by_dot(x[:0], c).shape == (0,)

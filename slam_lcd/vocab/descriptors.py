@@ -56,3 +56,26 @@ def group_sums(x: np.ndarray, labels: np.ndarray, n_groups: int, weights: np.nda
     starts = np.flatnonzero(np.r_[True, lab[1:] != lab[:-1]])
     out[lab[starts]] = np.add.reduceat(xs, starts, axis=0)
     return out
+
+
+# a product of rows against centres is formed in row blocks of at most this many floats (64 MB)
+_PRODUCT_BLOCK_FLOATS = 16 * 1024 * 1024
+
+
+def nearest_by_dot(x: np.ndarray, centres: np.ndarray) -> np.ndarray:
+    """Index of the largest dot product of each row of ``x`` with ``centres`` (lowest on ties).
+
+    The (rows x centres) product is formed in row blocks, so memory stays bounded whatever the
+    sizes (a vocabulary trained on 600 keyframes has 170k words and 42k first-level parents: one
+    product would be 26 GB); below the block size it is the single product it always was.
+    """
+    n, m = len(x), len(centres)
+    if n == 0 or m == 0:
+        return np.zeros(n, dtype=np.int64)
+    step = max(1, _PRODUCT_BLOCK_FLOATS // m)
+    if step >= n:
+        return (x @ centres.T).argmax(axis=1)
+    out = np.empty(n, dtype=np.int64)
+    for s in range(0, n, step):
+        out[s:s + step] = (x[s:s + step] @ centres.T).argmax(axis=1)
+    return out

@@ -18,6 +18,7 @@ import warnings
 
 import numpy as np
 
+from .descriptors import nearest_by_dot
 from .kmeans import spherical_kmeans
 from .tree import VocabTree, parent_centres, tree_from_bottom_up
 
@@ -118,7 +119,7 @@ def refine_to_voronoi(x: np.ndarray, lab: np.ndarray, w: np.ndarray, iters: int)
     for _ in range(iters):
         n_par = int(lab.max()) + 1
         c = parent_centres(x, lab, n_par, w)
-        new = (x @ c.T).argmax(axis=1)
+        new = nearest_by_dot(x, c)
         _, new = np.unique(new, return_inverse=True)
         if np.array_equal(new, lab):
             break

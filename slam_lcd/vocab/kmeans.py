@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .descriptors import group_sums, normalise_rows
+from .descriptors import group_sums, nearest_by_dot, normalise_rows
 
 
 def spherical_kmeans(x: np.ndarray, k: int, rng: np.random.Generator, iters: int = 10):
@@ -29,7 +29,7 @@ def spherical_kmeans(x: np.ndarray, k: int, rng: np.random.Generator, iters: int
     c = x[idx].copy()
     labels = np.zeros(n, dtype=np.int64)
     for it in range(iters):
-        new = (x @ c.T).argmax(axis=1)
+        new = nearest_by_dot(x, c)
         if it and np.array_equal(new, labels):
             break
         labels = new
