@@ -62,20 +62,23 @@ def group_sums(x: np.ndarray, labels: np.ndarray, n_groups: int, weights: np.nda
 _PRODUCT_BLOCK_FLOATS = 16 * 1024 * 1024
 
 
-def nearest_by_dot(x: np.ndarray, centres: np.ndarray) -> np.ndarray:
-    """Index of the largest dot product of each row of ``x`` with ``centres`` (lowest on ties).
+def nearest_by_dot(x: np.ndarray, centres: np.ndarray, similarities: bool = False):
+    """Index of the largest dot product of each row of ``x`` with ``centres`` (lowest on ties), and
+    with ``similarities`` that dot product too (float32; -inf when there is no centre).
 
     The (rows x centres) product is formed in row blocks, so memory stays bounded whatever the
     sizes (a vocabulary trained on 600 keyframes has 170k words and 42k first-level parents: one
-    product would be 26 GB); below the block size it is the single product it always was.
+    product would be 26 GB; the online vocabulary reaches ~10^6 words).
     """
     n, m = len(x), len(centres)
-    if n == 0 or m == 0:
-        return np.zeros(n, dtype=np.int64)
-    step = max(1, _PRODUCT_BLOCK_FLOATS // m)
-    if step >= n:
-        return (x @ centres.T).argmax(axis=1)
-    out = np.empty(n, dtype=np.int64)
-    for s in range(0, n, step):
-        out[s:s + step] = (x[s:s + step] @ centres.T).argmax(axis=1)
-    return out
+    ids = np.zeros(n, dtype=np.int64)
+    sims = np.full(n, -np.inf, dtype=np.float32)
+    if n and m:
+        step = max(1, _PRODUCT_BLOCK_FLOATS // m)
+        for s in range(0, n, step):
+            block = x[s:s + step] @ centres.T
+            best = block.argmax(axis=1)
+            ids[s:s + step] = best
+            if similarities:
+                sims[s:s + step] = block[np.arange(len(block)), best]
+    return (ids, sims) if similarities else ids

@@ -46,9 +46,8 @@ from collections import deque
 import numpy as np
 
 from ..errors import ConfigError
+from .descriptors import nearest_by_dot
 
-# exact search keeps its product matrix under this many floats (64 MB), whatever the word count
-_EXACT_BLOCK_FLOATS = 16 * 1024 * 1024
 # the graph is built once at least this many settled words exist (the projection needs data)
 _MIN_BUILD_WORDS = 64
 # beam width while inserting a word (faiss default 40)
@@ -59,18 +58,7 @@ _HINT_CANDIDATES = 4
 
 def exact_nearest(centres: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(word id, similarity) of each row's nearest centre by dot product (lowest id on ties)."""
-    n = len(u)
-    ids = np.zeros(n, dtype=np.int64)
-    sims = np.full(n, -np.inf, dtype=np.float32)
-    if n == 0 or len(centres) == 0:
-        return ids, sims
-    step = max(1, _EXACT_BLOCK_FLOATS // len(centres))
-    for s in range(0, n, step):
-        block = u[s:s + step] @ centres.T
-        best = block.argmax(axis=1)
-        ids[s:s + step] = best
-        sims[s:s + step] = block[np.arange(len(block)), best]
-    return ids, sims
+    return nearest_by_dot(u, centres, similarities=True)
 
 
 def _rerank(centres: np.ndarray, u: np.ndarray, cand: np.ndarray, keep: int):
