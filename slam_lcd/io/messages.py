@@ -55,15 +55,21 @@ def header(stamp_ns: int, frame_id: str):
     return Header(stamp=stamp_msg(stamp_ns), frame_id=str(frame_id))
 
 
-def pose_msg(T: np.ndarray, what: str = "pose"):
-    """geometry_msgs/Pose of a 4x4 pose (refuses NaN and non-rotations)."""
-    t, q = tq_from_pose(T, what)
-    return Pose(position=Point(x=t[0], y=t[1], z=t[2]), orientation=Quaternion(x=q[0], y=q[1], z=q[2], w=q[3]))
-
-
 def _pose_from(t, q):
+    """geometry_msgs/Pose of a translation and a quaternion (x, y, z, w) already checked."""
     return Pose(position=Point(x=float(t[0]), y=float(t[1]), z=float(t[2])),
                 orientation=Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])))
+
+
+def _transform_from(t, q):
+    """geometry_msgs/Transform of a translation and a quaternion (x, y, z, w) already checked."""
+    return Transform(translation=Vector3(x=float(t[0]), y=float(t[1]), z=float(t[2])),
+                     rotation=Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])))
+
+
+def pose_msg(T: np.ndarray, what: str = "pose"):
+    """geometry_msgs/Pose of a 4x4 pose (refuses NaN and non-rotations)."""
+    return _pose_from(*tq_from_pose(T, what))
 
 
 def pose_stamped_msgs(Ts: np.ndarray, stamps_ns, frame_id: str) -> list:
@@ -76,18 +82,13 @@ def pose_stamped_msgs(Ts: np.ndarray, stamps_ns, frame_id: str) -> list:
 def tf_messages(Ts: np.ndarray, stamps_ns, parent: str, child: str) -> list:
     """One single-transform :func:`tf_message` per pose of the stack ``T_parent_child`` (vectorised conversion)."""
     t, q = tq_from_poses(Ts, "transform")
-    out = []
-    for i, s in enumerate(np.asarray(stamps_ns).tolist()):
-        tr = Transform(translation=Vector3(x=float(t[i, 0]), y=float(t[i, 1]), z=float(t[i, 2])),
-                       rotation=Quaternion(x=float(q[i, 0]), y=float(q[i, 1]), z=float(q[i, 2]), w=float(q[i, 3])))
-        out.append(TFMessage(transforms=[TransformStamped(header=header(int(s), parent), child_frame_id=str(child),
-                                                          transform=tr)]))
-    return out
+    return [TFMessage(transforms=[TransformStamped(header=header(int(s), parent), child_frame_id=str(child),
+                                                   transform=_transform_from(t[i], q[i]))])
+            for i, s in enumerate(np.asarray(stamps_ns).tolist())]
 
 
 def transform_msg(T: np.ndarray, what: str = "transform"):
-    t, q = tq_from_pose(T, what)
-    return Transform(translation=Vector3(x=t[0], y=t[1], z=t[2]), rotation=Quaternion(x=q[0], y=q[1], z=q[2], w=q[3]))
+    return _transform_from(*tq_from_pose(T, what))
 
 
 # ---- images -------------------------------------------------------------------------------
