@@ -16,12 +16,11 @@ from __future__ import annotations
 
 import numpy as np
 
-PAIR_TOLERANCE_NS = 5_000_000  # a left and a right image belong together within 5 ms
+from .log_vo import PAIR_TOLERANCE_NS, camera_info_topic_of  # the VO pass pairs its images within the same tolerance
 
 
 def right_camera_info_baseline(reader, right_topic: str) -> float | None:
     """The baseline a rectified right camera's ``CameraInfo`` states (``P[0,3] = -fx * b``), or None."""
-    from .log_vo import camera_info_topic_of
     from .messages import camera_from_camera_info
 
     info = camera_info_topic_of(right_topic)
