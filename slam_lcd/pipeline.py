@@ -116,7 +116,7 @@ class Pipeline:
         self._ahead = max(0, int(self.config.run.extract_ahead))
         self._lcd_threads = int(self.config.run.lcd_threads) if self._ahead else 0  # leave a core to extraction
         self._workers = self._extract_workers()
-        self._torch_threads_before: int | None = None  # torch's thread count, while the workers run single-threaded
+        self._torch_threads_before: int | None = None  # torch's own thread count while the workers share it out
         self._inflight: deque[tuple[Keyframe, Future | None]] = deque()
         self._executor: ThreadPoolExecutor | None = None
         # per keyframe: seconds of loop detection (and its parts), of the back end, resident kB after it

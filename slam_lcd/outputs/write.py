@@ -201,9 +201,8 @@ class _PictureThread:
 
     def _run(self, out_dir, rows, cfg) -> None:
         try:
-            from .loop_pictures import write_loop_pictures
-
             from .html_report import THUMB_WIDTH
+            from .loop_pictures import write_loop_pictures
 
             self.names = write_loop_pictures(out_dir, self.album, rows, cfg.lcd, cfg.run.loop_pictures_rejected,
                                              stop=self.stop, thumbnails=self.thumbs, thumb_width=THUMB_WIDTH)
