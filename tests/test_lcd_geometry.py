@@ -137,11 +137,11 @@ def test_few_inliers_accepted_only_when_the_pose_is_tight():
 
     kf_q, kf_m, matches, T_gt = _rgbd_pair(seed=3)
     few = matches[:20]
-    assert LcdConfig().pnp_min_inliers_tight == 0  # off by default (docs/lcd.md: false loops on the long log)
+    assert LcdConfig().pnp_min_inliers_tight == 15  # on by default, with the odometry check (test_lcd_odometry_check.py)
     conf = LcdConfig(pnp_min_inliers_tight=15)
     assert conf.pnp_min_inliers == 40
     v = estimate_loop_pose(kf_q, kf_m, few, conf)
-    assert v.ok, v.reason
+    assert v.ok and v.tight, v.reason
     sigma_t, sigma_r = pose_sigmas(v.information)
     assert sigma_t <= conf.pnp_tight_max_sigma_m and sigma_r <= conf.pnp_tight_max_sigma_deg
     assert _pose_error(v.T_match_query, T_gt)[0] < 0.02

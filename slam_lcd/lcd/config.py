@@ -73,10 +73,17 @@ class LcdConfig:
     # the inliers are at least pnp_tight_min_share of the matched 3-D points and the pose's 1-sigma
     # (from its information matrix: sqrt of the trace of each covariance block) is within both bounds
     # (0: off; measured on every demo-world candidate pair: docs/lcd.md)
-    pnp_min_inliers_tight: int = 0  # off: on the 10-lap demo log 15 let two false loops (90 deg off) in
+    pnp_min_inliers_tight: int = 15  # with the odometry check below (without it, two false loops on the 10-lap log)
     pnp_tight_min_share: float = 0.8
     pnp_tight_max_sigma_m: float = 0.04
     pnp_tight_max_sigma_deg: float = 0.6
+    # a tight-rule pose must also agree with the odometry between the two keyframes within the drift
+    # the odometry may have accumulated over the distance travelled between them:
+    # floor + max_drift x path (m), floor + deg_per_m x path (deg) (lcd/odometry_check.py)
+    odometry_max_drift: float = 0.1
+    odometry_max_drift_deg_per_m: float = 1.0
+    odometry_drift_floor_m: float = 0.5
+    odometry_drift_floor_deg: float = 5.0
     min_depth_m: float = 0.1  # depth values outside [min, max] are unknown
     max_depth_m: float = 20.0
     pixel_sigma_px: float = 1.0  # floor of the pixel noise used for the pose information matrix

@@ -26,6 +26,7 @@ from .config import LcdConfig, stops_at_first_accepted
 from .geometry import EpipolarVerdict, PoseVerdict, estimate_loop_pose, keyframe_points3d
 from .graph import GraphVerdict
 from .islands import IslandMember, group_islands
+from .odometry_check import odometry_drift_reason
 from .pair import check_pair
 from .store import DESCRIPTOR_DTYPES, DescriptorStore, compact_descriptors
 from .temporal import TemporalConsistency
@@ -147,6 +148,7 @@ class _Entry:
     points3d: np.ndarray | None
     points_source: str
     keyframe: Keyframe = field(repr=False, default=None)  # light copy without images
+    path_m: float = 0.0  # odometry distance travelled from the first keyframe to this one
 
     def nbytes(self) -> int:
         """Bytes of the arrays this entry holds (descriptors excluded: see the store)."""
@@ -276,6 +278,7 @@ class LoopDetector:
         points3d = _float32_or_none(points3d)
         landmarks = points3d if source == "landmarks" else _float32_or_none(kf.landmarks)
         position = len(self._entries)
+        path_m = self._path_to(kf)
         # the query is matched with the same compact descriptors it is stored with (symmetric pairs)
         desc = compact_descriptors(feats.descriptors, c.descriptor_dtype)
         # own small copies: views would keep the caller's larger arrays alive
@@ -285,7 +288,8 @@ class LoopDetector:
         light = Keyframe(id=kf.id, stamp=kf.stamp, T_world_body=np.array(kf.T_world_body, float), camera=camera,
                          T_body_camera=np.array(kf.T_body_camera, float), features=kept,
                          landmarks=landmarks)
-        entry = _Entry(kf.id, int(kf.stamp), position, kept, camera, light.T_body_camera, points3d, source, light)
+        entry = _Entry(kf.id, int(kf.stamp), position, kept, camera, light.T_body_camera, points3d, source, light,
+                       path_m)
         clock.lap("points3d")
 
         closures: list[LoopClosure] = []
@@ -328,6 +332,14 @@ class LoopDetector:
         clock.lap("store")
         self.last_part_seconds = clock.seconds
         return closures
+
+    def _path_to(self, kf: Keyframe) -> float:
+        """Odometry distance from the first keyframe to ``kf`` (a non-finite step counts as none)."""
+        if not self._entries:
+            return 0.0
+        last = next(reversed(self._entries.values()))
+        step = float(np.linalg.norm(np.asarray(kf.T_world_body, float)[:3, 3] - last.keyframe.T_world_body[:3, 3]))
+        return last.path_m + (step if np.isfinite(step) else 0.0)
 
     def _verification_order(self, candidates) -> list[IslandMember]:
         """What is verified, in order: the top-K in BoW order, or island by island (``lcd.islands``)."""
@@ -419,6 +431,11 @@ class LoopDetector:
             rec.pose = estimate_loop_pose(q.keyframe, m.keyframe, used, c, points3d_m=m.points3d,
                                           source=m.points_source) if m.points3d is not None else \
                 estimate_loop_pose(q.keyframe, m.keyframe, used, c)
+            if rec.pose.ok and rec.pose.tight:
+                why, rec.pose.odometry = odometry_drift_reason(rec.pose.T_match_query, m.keyframe.T_world_body,
+                                                               q.keyframe.T_world_body, q.path_m - m.path_m, c)
+                if why:
+                    rec.pose = dataclasses.replace(rec.pose, ok=False, reason=why)
             clock.lap("pose")
             if not rec.pose.ok and c.require_pose:
                 rec.reason = f"pose:{rec.pose.reason}"

@@ -136,6 +136,8 @@ class PoseVerdict:
     reason: str
     source: str = "none"  # 'rgbd' | 'stereo' | 'landmarks' | 'none'
     inlier_mask: np.ndarray | None = None
+    tight: bool = False  # accepted on the tight-pose rule (fewer inliers than pnp_min_inliers)
+    odometry: dict = field(default_factory=dict)  # agreement with odometry (tight poses: lcd/odometry_check.py)
 
     def evidence(self) -> dict:
         return {
@@ -144,6 +146,8 @@ class PoseVerdict:
             "pose_rms_px": round(float(self.rms), 4) if np.isfinite(self.rms) else None,
             "pose_source": self.source,
             "pose_reason": self.reason,
+            "pose_tight": self.tight,
+            **self.odometry,
         }
 
 
@@ -220,7 +224,7 @@ def estimate_loop_pose(
         reason = tight_pose_reason(info, n_inl, int(valid.sum()), conf)
         if reason:
             return PoseVerdict(False, None, None, n_inl, rms, reason, source, mask)
-    return PoseVerdict(True, T_mq, info, n_inl, rms, "ok", source, mask)
+    return PoseVerdict(True, T_mq, info, n_inl, rms, "ok", source, mask, tight=n_inl < conf.pnp_min_inliers)
 
 
 def min_pnp_inliers(conf: LcdConfig) -> int:
