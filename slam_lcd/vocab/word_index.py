@@ -42,6 +42,7 @@ the graph one thread at a time in id order, and a search does not depend on the 
 from __future__ import annotations
 
 from collections import deque
+from contextlib import contextmanager
 
 import numpy as np
 
@@ -54,6 +55,26 @@ _MIN_BUILD_WORDS = 64
 _EF_CONSTRUCTION = 40
 # candidates a tracked feature hands to its match in the next image
 _HINT_CANDIDATES = 4
+
+
+@contextmanager
+def _one_faiss_thread():
+    """faiss on one OpenMP thread for the duration.
+
+    Why for searches too: a keyframe's few hundred graph searches take ~10 ms; split over
+    OpenMP threads they wait on each other whenever a core is busy with something else (the
+    extraction workers of a run, another process), which measured twice as slow as one thread
+    (18.9 vs 9.2 ms for 470 searches at 72k words, a loaded 2-core machine). The answer does not
+    depend on the thread count.
+    """
+    import faiss
+
+    threads = faiss.omp_get_max_threads()
+    faiss.omp_set_num_threads(1)
+    try:
+        yield
+    finally:
+        faiss.omp_set_num_threads(threads)
 
 
 def exact_nearest(centres: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -160,7 +181,8 @@ class WordIndex:
         if len(rows):
             k = self.candidates
             self.graph.hnsw.efSearch = max(self.ef_search, k)
-            found = self.graph.search(np.ascontiguousarray(u[rows] @ self.proj), k)[1]  # node i = word i
+            with _one_faiss_thread():
+                found = self.graph.search(np.ascontiguousarray(u[rows] @ self.proj), k)[1]  # node i = word i
             if hints is not None and (hints[rows] >= 0).any():
                 found = np.concatenate([found, hints[rows]], axis=1)
             yield rows, found
@@ -200,15 +222,9 @@ class WordIndex:
     def _index_up_to(self, centres: np.ndarray, end: int) -> None:
         if end <= self.n_indexed:
             return
-        import faiss
-
         p = np.ascontiguousarray(centres[self.n_indexed:end] @ self.proj)
-        threads = faiss.omp_get_max_threads()
-        faiss.omp_set_num_threads(1)  # one thread: the graph's links do not depend on scheduling
-        try:
+        with _one_faiss_thread():  # the graph's links do not depend on scheduling
             self.graph.add(p)  # sequential: node i is word i
-        finally:
-            faiss.omp_set_num_threads(threads)
         self.n_indexed = end
 
     def _build(self, centres: np.ndarray) -> None:
