@@ -52,11 +52,12 @@ def count_compactions(monkeypatch):
     calls = []
     real = _Postings._compact
 
-    def counted(self, length):
-        calls.append(length)
-        return real(self, length)
+    def counted(self):
+        calls.append(self.end - self.held)
+        return real(self)
 
     monkeypatch.setattr(_Postings, "_compact", counted)
+    monkeypatch.setattr(_Postings, "_COPY_CHUNK", 37)  # many chunks, blocks across their borders
     return calls
 
 

@@ -2,20 +2,25 @@
 """Inverted index of the BoW database (issue #13): query + insert per keyframe, former store vs current.
 
 The bags of words come once from ``bench_scaling``'s place stream through a vocabulary trained
-beforehand on another place stream (as ``bench_scaling.py database --trained K``), and are cached
-in ``--bags`` (an .npz, with the vocabulary beside it). Then two databases get the same bags in
+beforehand on another place stream (as ``bench_scaling.py database --trained K``), or with
+``--trained 0`` from an online-mode database grown on that stream (the query's bag, the inserted
+bag and the word count of every keyframe), and are cached in ``--bags`` (an .npz, with the
+vocabulary beside it). Then two databases get the same bags in
 the loop detector's order (query top-5 with the 20 newest excluded, then insert), keyframe by
 keyframe and interleaved (the order of the two swaps every keyframe), so both see the same
 machine load: one is the current database, the other the former index as the baseline
 (``former_database`` below: per-word numpy arrays in Python lists, appended and gathered word
-by word, and the former scoring, which weighs every posting at query time). Every query's candidates must be identical (ids and scores, bit for bit), and at
-every checkpoint the scores of a probe against all keyframes too; the run stops otherwise.
+by word, and the former scoring, which weighed every posting at query time). Every query's
+candidates must be identical (ids and scores, bit for bit), and at every checkpoint the scores
+of a probe against all keyframes too; the run stops otherwise.
 
-Printed at checkpoints: mean ms per keyframe (query, insert, both) of each store over the
-``--window`` keyframes before it, the ratio former / current, and the bytes each store holds
-per keyframe.
+Printed at checkpoints: mean ms per keyframe (query, insert, both) of each over the
+``--window`` keyframes before it, the ratio former / current, and the index's memory per
+keyframe (former: its arrays' data, without the two numpy objects per word; current: the arena
+slots written and the per-word arrays), then the CPU time of each over the whole run.
 
     python tools/bench_postings.py [--keyframes 10000] [--trained 200] [--idf vocabulary|database|both]
+    python tools/bench_postings.py --trained 0 --bags bench-postings/online.npz   # online-mode bags
 """
 from __future__ import annotations
 
@@ -160,68 +165,110 @@ def former_database(vocab, conf):
     return FormerDatabase(vocab, conf)
 
 
-def make_bags(n: int, trained: int, seed: int, path: Path) -> None:
-    """Train the vocabulary, quantise ``n`` keyframes of the place stream, save both (atomically)."""
-    from slam_lcd.atomic import atomic_write
-    from slam_lcd.vocab import VocabConfig, train_vocabulary
+def _pack(bags: list) -> dict:
+    return {"words": np.concatenate([b.words for b in bags]).astype(np.int32),
+            "counts": np.concatenate([b.counts for b in bags]).astype(np.uint16),
+            "ends": np.cumsum([len(b) for b in bags]).astype(np.int64)}
 
-    conf = VocabConfig()
-    other = PlaceStream(trained, seed + 101, landmarks=LandmarkTable(seed + 101))
-    t = time.perf_counter()
-    vocab = train_vocabulary([other.keyframe(k) for k in range(trained)], conf)
-    print(f"vocabulary: {len(vocab)} words from {trained} keyframes of another place stream "
-          f"in {time.perf_counter() - t:.0f} s", flush=True)
+
+def _unpack(z, prefix: str, n: int) -> list:
+    from slam_lcd.vocab import BowVector
+
+    words, counts, ends = z[prefix + "words"].astype(np.int64), z[prefix + "counts"].astype(np.float64), z[prefix + "ends"]
+    starts = np.concatenate([[0], ends[:-1]])
+    return [BowVector(words[a:b], counts[a:b]) for a, b in zip(starts[:n], ends[:n])]
+
+
+def make_bags(n: int, trained: int, seed: int, path: Path) -> None:
+    """Bags of ``n`` keyframes of the place stream, saved (atomically) with what the replay needs.
+
+    Trained (``trained`` > 0): the vocabulary (saved beside the bags), and each keyframe's bag of its
+    words, which is both the query's and the inserted one. Online (``trained`` = 0): an online
+    database grown as the loop detector does; per keyframe the query's bag (nearest existing words),
+    the inserted one (with the words it founds) and the word count after the insert.
+    """
+    from slam_lcd.atomic import atomic_write
+    from slam_lcd.vocab import BowDatabase, BowVector, VocabConfig, train_vocabulary
+
     stream = PlaceStream(n, seed, landmarks=LandmarkTable(seed))
-    words, counts, ends = [], [], []
+    arrays = {"trained": np.array(trained), "seed": np.array(seed)}
     t = time.perf_counter()
-    for k in range(n):
-        w, c = np.unique(vocab.quantize(stream.keyframe(k)), return_counts=True)
-        words.append(w.astype(np.int32))
-        counts.append(c.astype(np.uint16))
-        ends.append((ends[-1] if ends else 0) + len(w))
-        if (k + 1) % 1000 == 0:
-            print(f"  quantised {k + 1} keyframes ({time.perf_counter() - t:.0f} s)", flush=True)
-    vocab.save(vocab_path(path))
+    if trained:
+        other = PlaceStream(trained, seed + 101, landmarks=LandmarkTable(seed + 101))
+        vocab = train_vocabulary([other.keyframe(k) for k in range(trained)], VocabConfig())
+        print(f"vocabulary: {len(vocab)} words from {trained} keyframes of another place stream "
+              f"in {time.perf_counter() - t:.0f} s", flush=True)
+        bags = []
+        for k in range(n):
+            bags.append(BowVector.from_word_ids(vocab.quantize(stream.keyframe(k))))
+            if (k + 1) % 1000 == 0:
+                print(f"  quantised {k + 1} keyframes ({time.perf_counter() - t:.0f} s)", flush=True)
+        vocab.save(vocab_path(path))
+    else:
+        db = BowDatabase(None, VocabConfig(idf_source="database"))
+        queries, bags, n_words = [], [], []
+        for k in range(n):
+            d = stream.keyframe(k)
+            queries.append(db.transform(d))
+            bags.append(db.add(k, k * 10**8, d))
+            n_words.append(db.n_words)
+            if (k + 1) % 1000 == 0:
+                print(f"  online database grown to {k + 1} keyframes ({time.perf_counter() - t:.0f} s)", flush=True)
+        arrays.update({"q_" + key: v for key, v in _pack(queries).items()}, n_words=np.array(n_words, np.int64))
+    arrays.update(_pack(bags))
     with atomic_write(path, "wb") as fh:
-        np.savez(fh, words=np.concatenate(words), counts=np.concatenate(counts), ends=np.array(ends, np.int64),
-                 trained=np.array(trained), seed=np.array(seed))
+        np.savez(fh, **arrays)
 
 
 def vocab_path(bags: Path) -> Path:
     return bags.with_name(bags.stem + "_vocab.npz")
 
 
-def replay(vocab, bags: list, idf_source: str, checkpoints: list[int], window: int) -> None:
-    """Both stores on the same bags, interleaved; prints a row per checkpoint."""
+def replay(vocab, frames: list, idf_source: str, checkpoints: list[int], window: int) -> None:
+    """Both databases on the same bags, interleaved; prints a row per checkpoint.
+
+    ``frames``: per keyframe (query bag, inserted bag, word count before, word count after); the
+    word counts are None with a vocabulary, else the online run's, given to the databases through a
+    stand-in for their growing words (the replay does not grow words: only the index is timed).
+    """
+    from types import SimpleNamespace
+
     from slam_lcd.vocab import BowDatabase, VocabConfig
 
     conf = VocabConfig(idf_source=idf_source)
     dbs = {"former": former_database(vocab, conf), "current": BowDatabase(vocab, conf)}
-    n = len(bags)
+    if vocab is None:
+        for db in dbs.values():
+            db.words = SimpleNamespace(n_words=0)
+    n = len(frames)
     times = {name: np.zeros((n, 2)) for name in dbs}
     order = list(dbs)
     print(f"-- idf from the {idf_source}: {'kf':>6s} {'query':>15s} {'insert':>15s} {'query+insert':>22s} "
-          f"{'store kB/kf':>15s}")
+          f"{'index kB/kf':>15s}")
     print(f"   {'':25s} {'former current':>15s} {'former current':>15s} {'former current ratio':>22s} "
           f"{'former current':>15s}")
-    cpu0 = {name: 0.0 for name in dbs}
-    for k, bow in enumerate(bags):
+    cpu = {name: 0.0 for name in dbs}
+    for k, (query, bow, n_before, n_after) in enumerate(frames):
         got = {}
         for name in order:
             db = dbs[name]
+            if n_before is not None:
+                db.words.n_words = n_before
             c0, t0 = time.process_time(), time.perf_counter()
-            cands = db.query(bow, top_k=5, exclude_recent_n=20) if len(db) else []
+            cands = db.query(query, top_k=5, exclude_recent_n=20) if len(db) else []
             t1 = time.perf_counter()
+            if n_after is not None:
+                db.words.n_words = n_after
             db.add_bow(k, k * 10**8, bow)
             t2 = time.perf_counter()
-            cpu0[name] += time.process_time() - c0
+            cpu[name] += time.process_time() - c0
             times[name][k] = (t1 - t0, t2 - t1)
             got[name] = [(c.match_id, c.bow_score) for c in cands]
         order.reverse()
         if got["former"] != got["current"]:
             raise SystemExit(f"keyframe {k}: candidates differ: former {got['former']} current {got['current']}")
         if k + 1 in checkpoints:
-            probe = bags[k // 2]
+            probe = frames[k // 2][1]
             s_old, s_new = dbs["former"].scores(probe), dbs["current"].scores(probe)
             if not np.array_equal(s_old, s_new):
                 raise SystemExit(f"keyframe {k}: scores differ (max {np.abs(s_old - s_new).max():.3g})")
@@ -232,41 +279,49 @@ def replay(vocab, bags: list, idf_source: str, checkpoints: list[int], window: i
             print(f"   {'':17s} {k + 1:6d}    {m['former'][0]:6.2f} {m['current'][0]:7.2f} "
                   f"{m['former'][1]:7.2f} {m['current'][1]:7.2f} {both['former']:9.2f} {both['current']:7.2f} "
                   f"x{both['former'] / both['current']:4.2f} {kb['former']:7.1f} {kb['current']:7.1f}", flush=True)
-    print(f"   CPU time over all {n} keyframes: former {cpu0['former']:.1f} s, current {cpu0['current']:.1f} s, "
-          f"x{cpu0['former'] / cpu0['current']:.2f}; scores and candidates identical at every step")
+    print(f"   CPU time over all {n} keyframes: former {cpu['former']:.1f} s, current {cpu['current']:.1f} s, "
+          f"x{cpu['former'] / cpu['current']:.2f}; scores and candidates identical at every step")
 
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--keyframes", type=int, default=10000)
     ap.add_argument("--trained", type=int, default=200, metavar="K",
-                    help="the vocabulary is trained on K keyframes of another place stream (default 200)")
+                    help="the vocabulary is trained on K keyframes of another place stream (default 200; "
+                         "0: bags of an online-mode run, database idf)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--bags", default="bench-postings/bags.npz",
                     help="cache of the bags of words (made when missing or made for other settings)")
-    ap.add_argument("--idf", choices=["vocabulary", "database", "both"], default="both")
+    ap.add_argument("--idf", choices=["vocabulary", "database", "both"], default="both",
+                    help="with a trained vocabulary: whose idf (online mode: always the database's)")
     ap.add_argument("--window", type=int, default=200, help="keyframes before each checkpoint that are averaged")
     args = ap.parse_args(argv)
-    from slam_lcd.vocab import BowVector, Vocabulary
+    from slam_lcd.vocab import Vocabulary
 
     path = Path(args.bags)
-    fresh = not path.exists() or not vocab_path(path).exists()
+    fresh = not path.exists() or (args.trained and not vocab_path(path).exists())
     if not fresh:
         with np.load(path, allow_pickle=False) as z:
             fresh = int(z["trained"]) != args.trained or int(z["seed"]) != args.seed or len(z["ends"]) < args.keyframes
     if fresh:
         make_bags(args.keyframes, args.trained, args.seed, path)
-    vocab = Vocabulary.load(vocab_path(path))
+    n = args.keyframes
     with np.load(path, allow_pickle=False) as z:
-        words, counts, ends = z["words"].astype(np.int64), z["counts"].astype(np.float64), z["ends"]
-    starts = np.concatenate([[0], ends[:-1]])
-    bags = [BowVector(words[a:b], counts[a:b]) for a, b in zip(starts[: args.keyframes], ends[: args.keyframes])]
-    n = len(bags)
-    print(f"== postings store: {n} keyframes, {len(vocab)} trained words, {ends[n - 1] / n:.0f} words per keyframe; "
+        bags = _unpack(z, "", n)
+        if args.trained:
+            vocab = Vocabulary.load(vocab_path(path))
+            frames = [(b, b, None, None) for b in bags]
+            what, idfs = f"{len(vocab)} trained words", ["vocabulary", "database"] if args.idf == "both" else [args.idf]
+        else:
+            vocab, after = None, z["n_words"][:n].tolist()
+            frames = list(zip(_unpack(z, "q_", n), bags, [0] + after[:-1], after))
+            what, idfs = f"online words (to {after[-1]})", ["database"]
+    n = len(frames)
+    print(f"== BoW index: {n} keyframes, {what}, {sum(len(f[1]) for f in frames) / n:.0f} words per keyframe; "
           f"mean ms per keyframe over the {args.window} keyframes before each checkpoint ==")
     checkpoints = sorted({c for c in (1000, 3000, 5000, 10000) if c <= n} | {n})
-    for idf in (["vocabulary", "database"] if args.idf == "both" else [args.idf]):
-        replay(vocab, bags, idf, checkpoints, args.window)
+    for idf in idfs:
+        replay(vocab, frames, idf, checkpoints, args.window)
 
 
 if __name__ == "__main__":

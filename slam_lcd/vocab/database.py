@@ -6,14 +6,18 @@ equals ``sum_w min(v1_w, v2_w)`` over the words they share: a query only visits 
 lists (inverted index) of its own words, whatever the database size.
 
 idf comes from the vocabulary's training images, or (``idf_source='database'``, and always in
-online mode) from the database so far, smoothed as ``ln((1+N)/(1+n_w)) + 1``. Postings store
-raw term counts and each keyframe's normaliser is kept up to date incrementally as document
-frequencies change, so old keyframes stay consistent while words and keyframes are added.
+online mode) from the database so far, smoothed as ``ln((1+N)/(1+n_w)) + 1``. With the
+vocabulary's fixed idf a posting holds its keyframe's final weight ``tf*idf/norm``; with
+database idf it holds the raw term count and each keyframe's normaliser is kept up to date
+incrementally as document frequencies change, so old keyframes stay consistent while words and
+keyframes are added.
 
 Cost per keyframe: a query visits the postings of its words, and an insert refreshes the
 normalisers of exactly the keyframes on those postings (the same entries), so neither touches
-keyframes that share no word with it. In online mode the nearest-word search is sub-linear in
-the word count above ``ann_min_words`` (:mod:`slam_lcd.vocab.word_index`).
+keyframes that share no word with it; both are vectorised over the postings (one flat arena,
+:class:`_Postings`: the only Python steps are a slice copy per long posting list). In online mode the
+nearest-word search is sub-linear in the word count above ``ann_min_words``
+(:mod:`slam_lcd.vocab.word_index`).
 """
 from __future__ import annotations
 
@@ -92,6 +96,7 @@ class _Postings:
     _MIN_ROOM = 2  # slots of a word's first block
     _HOLES_DEN = 8  # compact when the holes exceed 1/8 of the blocks' room
     _LONG_RUN = 384  # postings from which one slice copy of a word beats its share of an index array
+    _COPY_CHUNK = 1 << 18  # arena slots per step of a compaction
 
     def __init__(self):
         self.start = np.zeros(0, dtype=np.int64)  # per word: first slot of its block
@@ -134,7 +139,7 @@ class _Postings:
         room = np.maximum(n + np.maximum(n >> 1, 1), self._MIN_ROOM)
         need = int(room.sum())
         if self._HOLES_DEN * (self.end - self.held) > self.held:
-            self._compact(max(len(self.kf), self.held + need))
+            self._compact()
         if self.end + need > len(self.kf):
             self._grow(need)
         new_start = self.end + np.cumsum(room) - room
@@ -155,22 +160,32 @@ class _Postings:
         kf[: self.end], val[: self.end] = self.kf[: self.end], self.val[: self.end]
         self.kf, self.val = kf, val
 
-    def _compact(self, length: int) -> None:
-        """Close the holes into a fresh arena of ``length`` slots: blocks slide down in arena order with
-        their room, each run of adjacent blocks as one slice copy (a hole is left by a move, so the
-        Python steps are bounded by the moves since the last compaction)."""
-        owned = np.flatnonzero(self.cap)  # not empty: there are holes, so blocks were moved
+    def _compact(self) -> None:
+        """Close the holes in place: blocks slide down in arena order with their room.
+
+        A chunk of the arena at a time: mark the slots inside blocks, copy those down. No Python step
+        per block (online, tens of thousands of small blocks move between compactions) and no large
+        fresh array (first-touch page faults cost more than the copy itself).
+        """
+        owned = np.flatnonzero(self.cap)
         owned = owned[np.argsort(self.start[owned])]
         starts, caps = self.start[owned], self.cap[owned]
-        new_starts = np.cumsum(caps) - caps
-        first = np.flatnonzero(np.concatenate([[True], starts[1:] != starts[:-1] + caps[:-1]]))
-        last = np.concatenate([first[1:], [len(owned)]]) - 1
-        kf, val = np.empty(length, self.kf.dtype), np.empty(length, self.val.dtype)
-        for a, b, o in zip(starts[first].tolist(), (starts[last] + caps[last]).tolist(), new_starts[first].tolist()):
-            kf[o:o + b - a] = self.kf[a:b]
-            val[o:o + b - a] = self.val[a:b]
-        self.start[owned] = new_starts
-        self.kf, self.val, self.end = kf, val, self.held
+        ends = starts + caps
+        to, inside_before = 0, 0
+        for lo in range(0, self.end, self._COPY_CHUNK):
+            hi = min(self.end, lo + self._COPY_CHUNK)
+            edge = np.zeros(hi - lo + 1, dtype=np.int8)  # +1 where a block begins, -1 where one ends
+            edge[0] = inside_before
+            edge[starts[np.searchsorted(starts, lo):np.searchsorted(starts, hi)] - lo] += 1
+            edge[ends[np.searchsorted(ends, lo):np.searchsorted(ends, hi)] - lo] -= 1
+            inside = np.cumsum(edge[:-1], dtype=np.int8).view(bool)
+            inside_before = int(inside[-1])
+            kf, val = self.kf[lo:hi][inside], self.val[lo:hi][inside]
+            self.kf[to:to + len(kf)] = kf
+            self.val[to:to + len(kf)] = val
+            to += len(kf)
+        self.start[owned] = np.cumsum(caps) - caps
+        self.end = self.held
 
     def gather(self, words: np.ndarray):
         """Concatenated postings of ``words`` (sorted): (keyframe index int64, value, at, runs).
