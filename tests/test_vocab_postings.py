@@ -100,7 +100,10 @@ def test_gather_equals_posting_lists_across_moves_and_compactions(monkeypatch, l
 def test_counts_that_uint16_cannot_hold_widen_the_store_exactly():
     rng = np.random.default_rng(22)
     store, ref = _Postings(), ListPostings()
+    held = []
     for k in range(200):
+        if k % 40 == 0:
+            held.append(store.kf)  # another reference: the arena cannot grow in place, it is copied
         bow = random_bag(rng, k, 400)
         if k == 90:
             bow = BowVector(bow.words, bow.counts * 0.37)  # hand-made weights, not counts

@@ -14,10 +14,11 @@ by word, and the former scoring, which weighed every posting at query time). Eve
 candidates must be identical (ids and scores, bit for bit), and at every checkpoint the scores
 of a probe against all keyframes too; the run stops otherwise.
 
-Printed at checkpoints: mean ms per keyframe (query, insert, both) of each over the
-``--window`` keyframes before it, the ratio former / current, and the index's memory per
-keyframe (former: its arrays' data, without the two numpy objects per word; current: the arena
-slots written and the per-word arrays), then the CPU time of each over the whole run.
+Printed at checkpoints: mean CPU ms per keyframe (query, insert, both; CPU time, as other
+processes share the machine) of each over the ``--window`` keyframes before it, the ratio
+former / current, and the index's memory per keyframe (former: its arrays' data, without the two
+numpy objects per word; current: the whole arena and the per-word arrays); then CPU and
+wall time of each over the whole run.
 
     python tools/bench_postings.py [--keyframes 10000] [--trained 200] [--idf vocabulary|database|both]
     python tools/bench_postings.py --trained 0 --bags bench-postings/online.npz   # online-mode bags
@@ -247,21 +248,21 @@ def replay(vocab, frames: list, idf_source: str, checkpoints: list[int], window:
           f"{'index kB/kf':>15s}")
     print(f"   {'':25s} {'former current':>15s} {'former current':>15s} {'former current ratio':>22s} "
           f"{'former current':>15s}")
-    cpu = {name: 0.0 for name in dbs}
+    wall = {name: 0.0 for name in dbs}
     for k, (query, bow, n_before, n_after) in enumerate(frames):
         got = {}
         for name in order:
             db = dbs[name]
             if n_before is not None:
                 db.words.n_words = n_before
-            c0, t0 = time.process_time(), time.perf_counter()
+            w0, t0 = time.perf_counter(), time.process_time()
             cands = db.query(query, top_k=5, exclude_recent_n=20) if len(db) else []
-            t1 = time.perf_counter()
+            t1 = time.process_time()
             if n_after is not None:
                 db.words.n_words = n_after
             db.add_bow(k, k * 10**8, bow)
-            t2 = time.perf_counter()
-            cpu[name] += time.process_time() - c0
+            t2 = time.process_time()
+            wall[name] += time.perf_counter() - w0
             times[name][k] = (t1 - t0, t2 - t1)
             got[name] = [(c.match_id, c.bow_score) for c in cands]
         order.reverse()
@@ -279,8 +280,11 @@ def replay(vocab, frames: list, idf_source: str, checkpoints: list[int], window:
             print(f"   {'':17s} {k + 1:6d}    {m['former'][0]:6.2f} {m['current'][0]:7.2f} "
                   f"{m['former'][1]:7.2f} {m['current'][1]:7.2f} {both['former']:9.2f} {both['current']:7.2f} "
                   f"x{both['former'] / both['current']:4.2f} {kb['former']:7.1f} {kb['current']:7.1f}", flush=True)
-    print(f"   CPU time over all {n} keyframes: former {cpu['former']:.1f} s, current {cpu['current']:.1f} s, "
-          f"x{cpu['former'] / cpu['current']:.2f}; scores and candidates identical at every step")
+    cpu = {name: t.sum() for name, t in times.items()}
+    print(f"   over all {n} keyframes: CPU time former {cpu['former']:.1f} s, current {cpu['current']:.1f} s, "
+          f"x{cpu['former'] / cpu['current']:.2f}; wall time former {wall['former']:.1f} s, current "
+          f"{wall['current']:.1f} s, x{wall['former'] / wall['current']:.2f}; scores and candidates identical at "
+          f"every step")
 
 
 def main(argv=None) -> None:
@@ -318,7 +322,7 @@ def main(argv=None) -> None:
             what, idfs = f"online words (to {after[-1]})", ["database"]
     n = len(frames)
     print(f"== BoW index: {n} keyframes, {what}, {sum(len(f[1]) for f in frames) / n:.0f} words per keyframe; "
-          f"mean ms per keyframe over the {args.window} keyframes before each checkpoint ==")
+          f"mean CPU ms per keyframe over the {args.window} keyframes before each checkpoint ==")
     checkpoints = sorted({c for c in (1000, 3000, 5000, 10000) if c <= n} | {n})
     for idf in idfs:
         replay(vocab, frames, idf, checkpoints, args.window)
