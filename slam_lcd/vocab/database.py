@@ -6,14 +6,18 @@ equals ``sum_w min(v1_w, v2_w)`` over the words they share: a query only visits 
 lists (inverted index) of its own words, whatever the database size.
 
 idf comes from the vocabulary's training images, or (``idf_source='database'``, and always in
-online mode) from the database so far, smoothed as ``ln((1+N)/(1+n_w)) + 1``. Postings store
-raw term counts and each keyframe's normaliser is kept up to date incrementally as document
-frequencies change, so old keyframes stay consistent while words and keyframes are added.
+online mode) from the database so far, smoothed as ``ln((1+N)/(1+n_w)) + 1``. With the
+vocabulary's fixed idf a posting holds its keyframe's final weight ``tf*idf/norm``; with
+database idf it holds the raw term count and each keyframe's normaliser is kept up to date
+incrementally as document frequencies change, so old keyframes stay consistent while words and
+keyframes are added.
 
 Cost per keyframe: a query visits the postings of its words, and an insert refreshes the
 normalisers of exactly the keyframes on those postings (the same entries), so neither touches
-keyframes that share no word with it. In online mode the nearest-word search is sub-linear in
-the word count above ``ann_min_words`` (:mod:`slam_lcd.vocab.word_index`).
+keyframes that share no word with it; both are vectorised over the postings (one flat arena,
+:class:`_Postings`: the only Python steps are a slice copy per long posting list). In online mode the
+nearest-word search is sub-linear in the word count above ``ann_min_words``
+(:mod:`slam_lcd.vocab.word_index`).
 """
 from __future__ import annotations
 
@@ -63,50 +67,178 @@ def bow_similarity(a: BowVector, b: BowVector, idf: np.ndarray) -> float:
     return float(1.0 - 0.5 * np.abs(va - vb).sum())
 
 
+def _ranges(starts: np.ndarray, lens: np.ndarray) -> np.ndarray:
+    """Concatenation of ``arange(s, s + n)`` for every (s, n) pair, without a Python loop."""
+    ends = np.cumsum(lens)
+    idx = np.repeat(starts - (ends - lens), lens)
+    idx += np.arange(len(idx))
+    return idx
+
+
+def _grown_copy(a: np.ndarray, length: int, used: int) -> np.ndarray:
+    b = np.empty(length, a.dtype)
+    b[:used] = a[:used]
+    return b
+
+
 class _Postings:
-    """Per-word growable arrays of (keyframe index int32, term count float64), in lists indexed by word id."""
+    """Inverted index in one flat arena: word ``w``'s postings are ``kf[start[w] : start[w] + size[w]]``
+    (keyframe index, int32) and ``val[...]`` (a number per posting: the database chooses), in
+    insertion order, i.e. keyframe order.
+
+    Each word owns a block of ``cap[w]`` slots; appending to a full block moves it to the arena's end
+    with 1.5 times the room (so an entry is copied about twice on average), leaving a hole behind;
+    when the holes exceed 1/8 of the blocks' room one compacting copy closes them. The slots written
+    are then ~1.3 (at most ~1.4) times the postings, against ~1.4 times plus two numpy objects per
+    word for per-word growable arrays. Appending a keyframe is a few vectorised numpy
+    operations whatever its number of words, and a query's postings are copied out of contiguous
+    blocks (see :meth:`gather`).
+
+    Values are stored as uint16 while every value is an integer in 0..65535 (term counts always
+    are), else as float64 (the first other value widens the arena, exactly); either way they take
+    part in float64 arithmetic unchanged, so results do not depend on the storage.
+    """
+
+    _MIN_ROOM = 2  # slots of a word's first block
+    _HOLES_DEN = 8  # compact when the holes exceed 1/8 of the blocks' room
+    _LONG_RUN = 384  # postings from which one slice copy of a word beats its share of an index array
+    _COPY_CHUNK = 1 << 18  # arena slots per step of a compaction
 
     def __init__(self):
-        self.kf: list[np.ndarray | None] = []
-        self.tf: list[np.ndarray | None] = []
-        self.size = np.zeros(0, dtype=np.int64)  # entries per word
+        self.start = np.zeros(0, dtype=np.int64)  # per word: first slot of its block
+        self.size = np.zeros(0, dtype=np.int64)  # per word: entries
+        self.cap = np.zeros(0, dtype=np.int64)  # per word: slots of its block
+        self.kf = np.empty(1024, dtype=np.int32)
+        self.val = np.empty(1024, dtype=np.uint16)
+        self.end = 0  # arena slots in use (blocks and holes)
+        self.held = 0  # slots owned by blocks (sum of cap); end - held are holes
 
-    def append(self, kf_index: int, bow: BowVector) -> None:
-        kf, tf, size = self.kf, self.tf, self.size
-        top = int(bow.words[-1]) + 1 if len(bow) else 0
-        if top > len(size):
-            grow = max(top, 2 * len(size)) - len(size)
-            kf.extend([None] * grow)
-            tf.extend([None] * grow)
-            self.size = size = np.concatenate([size, np.zeros(grow, np.int64)])
-        words = bow.words
-        counts = size[words]
-        for w, n, c in zip(words.tolist(), counts.tolist(), bow.counts.tolist()):
-            if n == 0:
-                kf[w] = np.empty(2, dtype=np.int32)
-                tf[w] = np.empty(2, dtype=np.float64)
-            elif n == len(kf[w]):
-                kf[w] = np.concatenate([kf[w], np.empty(n, dtype=np.int32)])
-                tf[w] = np.concatenate([tf[w], np.empty(n, dtype=np.float64)])
-            kf[w][n] = kf_index
-            tf[w][n] = c
-        size[words] = counts + 1
+    @property
+    def nbytes(self) -> int:
+        """Memory the index holds: per-word arrays and the arena (all of it: a grown arena's tail is zeroed)."""
+        return sum(a.nbytes for a in (self.start, self.size, self.cap, self.kf, self.val))
+
+    def append(self, kf_index: int, words: np.ndarray, values: np.ndarray) -> None:
+        """Postings of keyframe ``kf_index`` (newer than every keyframe so far): ``words`` sorted unique."""
+        if not len(words):
+            return
+        top = int(words[-1]) + 1
+        if top > len(self.size):
+            grow = max(top, 2 * len(self.size)) - len(self.size)
+            self.start, self.size, self.cap = (np.concatenate([a, np.zeros(grow, np.int64)])
+                                               for a in (self.start, self.size, self.cap))
+        if self.val.dtype == np.uint16 and not (values.min() >= 0 and values.max() <= 65535
+                                                and np.array_equal(values, np.floor(values))):
+            self.val = self.val.astype(np.float64)
+        n = self.size[words]
+        full = n == self.cap[words]
+        if full.any():
+            self._move(words[full], n[full])
+        at = self.start[words] + n
+        self.kf[at] = kf_index
+        self.val[at] = values
+        self.size[words] = n + 1
+
+    def _move(self, words: np.ndarray, n: np.ndarray) -> None:
+        """Move the full blocks of ``words`` (``n`` entries each) to the arena's end, with 1.5 times the room."""
+        room = np.maximum(n + np.maximum(n >> 1, 1), self._MIN_ROOM)
+        need = int(room.sum())
+        if self._HOLES_DEN * (self.end - self.held) > self.held:
+            self._compact()
+        if self.end + need > len(self.kf):
+            self._grow(need)
+        new_start = self.end + np.cumsum(room) - room
+        some = n > 0
+        if some.any():
+            src, dst = _ranges(self.start[words[some]], n[some]), _ranges(new_start[some], n[some])
+            self.kf[dst] = self.kf[src]
+            self.val[dst] = self.val[src]
+        self.start[words] = new_start
+        self.held += need - int(self.cap[words].sum())
+        self.cap[words] = room
+        self.end += need
+
+    def _grow(self, need: int) -> None:
+        """Room for ``need`` more slots: the arena grows by a quarter (or what is needed), in place.
+
+        In place (``ndarray.resize``: realloc, which remaps the pages in use instead of copying them)
+        because a fresh array of this size is slow to fill: its first touch faults in every page,
+        huge pages where numpy asks for them, measured 140-360 ms at 3-4 million slots against
+        5-12 ms. The zeroed tail is resident at once, hence the small step. A copy where the array
+        cannot be resized (another reference to it)."""
+        length = max(self.end + need, int(1.25 * len(self.kf)))
+        try:
+            self.kf.resize(length, refcheck=True)  # (the attribute itself: a local name is another reference)
+        except ValueError:
+            self.kf = _grown_copy(self.kf, length, self.end)
+        try:
+            self.val.resize(length, refcheck=True)
+        except ValueError:
+            self.val = _grown_copy(self.val, length, self.end)
+
+    def _compact(self) -> None:
+        """Close the holes in place: blocks slide down in arena order with their room.
+
+        A chunk of the arena at a time: mark the slots inside blocks, copy those down. No Python step
+        per block (online, tens of thousands of small blocks move between compactions) and no large
+        fresh array (first-touch page faults cost more than the copy itself).
+        """
+        owned = np.flatnonzero(self.cap)
+        owned = owned[np.argsort(self.start[owned])]
+        starts, caps = self.start[owned], self.cap[owned]
+        ends = starts + caps
+        to, inside_before = 0, 0
+        for lo in range(0, self.end, self._COPY_CHUNK):
+            hi = min(self.end, lo + self._COPY_CHUNK)
+            edge = np.zeros(hi - lo + 1, dtype=np.int8)  # +1 where a block begins, -1 where one ends
+            edge[0] = inside_before
+            edge[starts[np.searchsorted(starts, lo):np.searchsorted(starts, hi)] - lo] += 1
+            edge[ends[np.searchsorted(ends, lo):np.searchsorted(ends, hi)] - lo] -= 1
+            inside = np.cumsum(edge[:-1], dtype=np.int8).view(bool)
+            inside_before = int(inside[-1])
+            kf, val = self.kf[lo:hi][inside], self.val[lo:hi][inside]
+            self.kf[to:to + len(kf)] = kf
+            self.val[to:to + len(kf)] = val
+            to += len(kf)
+        self.start[owned] = np.cumsum(caps) - caps
+        self.end = self.held
 
     def gather(self, words: np.ndarray):
-        """Concatenated postings of ``words``: (keyframe index, term count, position of the word in ``words``)."""
+        """Concatenated postings of ``words`` (sorted): (keyframe index int64, value, at, runs).
+
+        Word by word in the order of ``words``, each word's postings in keyframe order; ``runs[j]``
+        postings belong to ``words[at[j]]`` (words without postings are left out). A word with many
+        postings is one slice copy; the others share one vectorised index array (a Python step per
+        word would cost more than their copy, an index array over long lists costs more memory
+        traffic than the slices).
+        """
         size = self.size
-        lens = np.zeros(len(words), dtype=np.int64)
-        inside = words < len(size)
-        lens[inside] = size[words[inside]]
+        if len(words) and words[-1] < len(size):
+            lens = size[words]
+        else:
+            lens = np.zeros(len(words), dtype=np.int64)
+            inside = words < len(size)
+            lens[inside] = size[words[inside]]
         at = np.flatnonzero(lens)
-        if not len(at):
-            e = np.zeros(0, dtype=np.int64)
-            return e, np.zeros(0), e
-        ws, ns = words[at].tolist(), lens[at].tolist()
-        kf, tf = self.kf, self.tf
-        k = np.concatenate([kf[w][:n] for w, n in zip(ws, ns)]).astype(np.int64)
-        t = np.concatenate([tf[w][:n] for w, n in zip(ws, ns)])
-        return k, t, np.repeat(at, lens[at])
+        runs = lens[at]
+        starts = self.start[words[at]]
+        long = runs >= self._LONG_RUN
+        if not long.any():
+            src = _ranges(starts, runs)
+            return self.kf[src].astype(np.int64), self.val[src], at, runs
+        ends = np.cumsum(runs)
+        offs = ends - runs
+        kf = np.empty(int(ends[-1]), dtype=np.int64)
+        val = np.empty(len(kf), dtype=self.val.dtype)
+        for s, o, m in zip(starts[long].tolist(), offs[long].tolist(), runs[long].tolist()):
+            kf[o:o + m] = self.kf[s:s + m]
+            val[o:o + m] = self.val[s:s + m]
+        short = ~long
+        if short.any():
+            src, dst = _ranges(starts[short], runs[short]), _ranges(offs[short], runs[short])
+            kf[dst] = self.kf[src]
+            val[dst] = self.val[src]
+        return kf, val, at, runs
 
 
 class _Growable:
@@ -150,11 +282,12 @@ class BowDatabase:
         self._index_of: dict[int, int] = {}
         self._stamps = _Growable(np.int64)
         self._total = _Growable(np.float64)  # sum of term counts per keyframe
-        self._norm_fixed = _Growable(np.float64)  # sum tf*idf per keyframe (vocabulary idf)
         self._logdf_sum = _Growable(np.float64)  # sum tf*ln(1+df) per keyframe (database idf)
         self._df = _Growable(np.float64)  # keyframes containing each word (database idf)
+        # postings hold term counts with database idf (weights change as df does), the keyframe's final
+        # weight tf*idf/norm with the vocabulary's fixed idf (what a query would compute per posting)
         self._post = _Postings()
-        self._last_gather: tuple | None = None  # (keyframes then, words, kf, tf, pos) of the last scores()
+        self._last_gather: tuple | None = None  # (keyframes then, words, kf, tf, at, runs) of the last scores()
         self._bow_words: list[np.ndarray] = []  # int32 word ids per keyframe (BowVector on access)
         self._bow_counts: list[np.ndarray] = []
         self._last_unit: tuple | None = None  # (descriptors, key, result) of the last conversion (_once)
@@ -177,11 +310,10 @@ class BowDatabase:
         df = self._df.a[: max(self.n_words, self._df.n)] if words is None else self._df.a[words]
         return np.log((1.0 + len(self)) / (1.0 + df)) + 1.0
 
-    def _norms_at(self, kf: np.ndarray) -> np.ndarray:
-        """Normalisers ``sum_w tf_w * idf_w`` of the keyframes at indices ``kf`` (current idf)."""
-        if not self.idf_from_database:
-            return self._norm_fixed.a[kf]
-        return (np.log(1.0 + len(self)) + 1.0) * self._total.a[kf] - self._logdf_sum.a[kf]
+    def _database_norms(self) -> np.ndarray:
+        """Normalisers ``sum_w tf_w * idf_w`` of every keyframe under the current database idf."""
+        n = len(self)
+        return (np.log(1.0 + n) + 1.0) * self._total.a[:n] - self._logdf_sum.a[:n]
 
     # ------------------------------------------------------------- quantising
     def _check(self, desc: np.ndarray) -> np.ndarray:
@@ -265,41 +397,49 @@ class BowDatabase:
             self._df.n = max(self._df.n, self.n_words)
             # df of this keyframe's words rises by one: refresh the normalisers of the keyframes on
             # their postings (only those: the cost is that of a query with these words)
-            kf, tf, pos = self._gather(bow.words)
+            kf, tf, at, runs = self._gather(bow.words)
+            self._last_gather = None
             old = self._df.a[bow.words]
             delta = np.log(2.0 + old) - np.log(1.0 + old)
             if len(kf):
-                np.add.at(self._logdf_sum.a, kf, tf * delta[pos])
+                np.add.at(self._logdf_sum.a, kf, tf * np.repeat(delta[at], runs))
             self._df.a[bow.words] = old + 1.0
             self._logdf_sum.push(float((bow.counts * np.log(2.0 + old)).sum()))
-            self._norm_fixed.push(0.0)
+            self._post.append(index, bow.words, bow.counts)
         else:
-            self._norm_fixed.push(float((bow.counts * self.vocab.idf[bow.words]).sum()))
+            w = bow.counts * self.vocab.idf[bow.words]
+            norm = float(w.sum())
             self._logdf_sum.push(0.0)
+            self._post.append(index, bow.words, w / norm if norm > 0 else np.zeros_like(w))
         self._total.push(float(bow.counts.sum()))
         self._stamps.push(int(stamp_ns))
-        self._post.append(index, bow)
         self.kf_ids.append(kf_id)
         self._index_of[kf_id] = index
         self._bow_words.append(bow.words.astype(np.int32))
         self._bow_counts.append(np.asarray(bow.counts, dtype=np.float64))
 
     def _gather(self, words: np.ndarray):
-        """Postings of ``words`` (sorted unique), re-using what the last query gathered when no keyframe
-        was added since (the loop detector queries a keyframe, then inserts it: mostly the same words)."""
+        """Postings of ``words`` (sorted unique) as :meth:`_Postings.gather` gives them, re-using what the
+        last query gathered when no keyframe was added since (the loop detector queries a keyframe,
+        then inserts it: mostly the same words). The cached words come first, then the others."""
         c = self._last_gather
         if c is None or c[0] != len(self) or not len(c[1]) or not len(words):
             return self._post.gather(words)
-        c_words, c_kf, c_tf, c_pos = c[1:]
+        c_words, c_kf, c_val, c_at, c_runs = c[1:]
         loc = np.searchsorted(words, c_words)
         hit = (loc < len(words)) & (words[np.minimum(loc, len(words) - 1)] == c_words)
-        take = hit[c_pos]
         missing = np.ones(len(words), dtype=bool)
         missing[loc[hit]] = False
-        at = np.flatnonzero(missing)
-        kf, tf, pos = self._post.gather(words[at])
-        return (np.concatenate([c_kf[take], kf]), np.concatenate([c_tf[take], tf]),
-                np.concatenate([loc[c_pos[take]], at[pos]]))
+        fresh = np.flatnonzero(missing)
+        kf, val, at, runs = self._post.gather(words[fresh])
+        kept = hit[c_at]  # cached words with postings that are among ``words`` (usually all)
+        if not kept.all():
+            take = np.repeat(kept, c_runs)
+            c_kf, c_val, c_at, c_runs = c_kf[take], c_val[take], c_at[kept], c_runs[kept]
+        if not len(kf):
+            return c_kf, c_val, loc[c_at], c_runs
+        return (np.concatenate([c_kf, kf]), np.concatenate([c_val, val]), np.concatenate([loc[c_at], fresh[at]]),
+                np.concatenate([c_runs, runs]))
 
     def bow(self, kf_id: int) -> BowVector:
         i = self._index_of[kf_id]
@@ -320,13 +460,18 @@ class BowDatabase:
         if sq <= 0:
             return out
         a = wq / sq
-        kf, tf, pos = self._post.gather(words)
-        self._last_gather = (len(self), words, kf, tf, pos)
+        kf, val, at, runs = self._post.gather(words)
+        if self.idf_from_database:
+            self._last_gather = (n, words, kf, val, at, runs)
         if not len(kf):
             return out
-        nk = self._norms_at(kf)
-        b = np.divide(tf * idf_q[pos], nk, out=np.zeros_like(tf), where=nk > 0)
-        return np.bincount(kf, weights=np.minimum(a[pos], b), minlength=n)
+        if not self.idf_from_database:  # the postings hold the keyframes' weights
+            return np.bincount(kf, weights=np.minimum(np.repeat(a[at], runs), val), minlength=n)
+        norms = self._database_norms()  # per keyframe, then looked up: the same numbers, fewer operations
+        norms[~(norms > 0)] = np.inf  # weight 0, as the direct formula gives an empty keyframe
+        b = np.repeat(idf_q[at], runs) * val
+        b /= norms[kf]
+        return np.bincount(kf, weights=np.minimum(np.repeat(a[at], runs), b, out=b), minlength=n)
 
     def query(self, descriptors_or_bow, top_k: int = 5, exclude_recent_s: float = 0.0,
               exclude_recent_n: int = 0, *, query_id: int | None = None, stamp_ns: int | None = None,
