@@ -142,19 +142,13 @@ def former_database(vocab, conf):
             return (np.concatenate([c_kf[take], kf]), np.concatenate([c_tf[take], tf]),
                     np.concatenate([loc[c_pos[take]], at[pos]]))
 
-        def scores(self, bow):
+        def scores(self, bow):  # the query's weights as now (unchanged), the former posting arithmetic
             n = len(self)
             out = np.zeros(n)
-            if n == 0 or len(bow) == 0:
+            weighed = self._query_weights(bow) if n and len(bow) else None
+            if weighed is None:
                 return out
-            words = bow.words[bow.words < max(self.n_words, 1)] if self.online else bow.words
-            counts = bow.counts[: len(words)] if self.online else bow.counts
-            idf_q = self.idf(words)
-            wq = counts * idf_q
-            sq = wq.sum()
-            if sq <= 0:
-                return out
-            a = wq / sq
+            words, idf_q, a = weighed
             kf, tf, pos = self._post.gather(words)
             self._last_gather = (len(self), words, kf, tf, pos)
             if not len(kf):

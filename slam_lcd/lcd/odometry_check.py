@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..geometry import inv
+from ..geometry import inv, rotation_angle_deg
 from .config import LcdConfig
 
 
@@ -31,9 +31,7 @@ def odometry_disagreement(T_match_query: np.ndarray, T_world_match: np.ndarray,
     D = inv(T_odom) @ np.asarray(T_match_query, float)
     D_other = T_odom @ inv(np.asarray(T_match_query, float))  # the same disagreement from the query's side
     t = max(float(np.linalg.norm(D[:3, 3])), float(np.linalg.norm(D_other[:3, 3])))
-    R = D[:3, :3]
-    sin = 0.5 * np.linalg.norm([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
-    return t, float(np.degrees(np.arctan2(sin, 0.5 * (np.trace(R) - 1.0))))  # exact near 0 (unlike arccos)
+    return t, rotation_angle_deg(D)
 
 
 def drift_budget(path_m: float, conf: LcdConfig) -> tuple[float, float]:

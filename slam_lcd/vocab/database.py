@@ -446,20 +446,28 @@ class BowDatabase:
         return BowVector(self._bow_words[i].astype(np.int64), self._bow_counts[i])
 
     # ----------------------------------------------------------------- query
-    def scores(self, bow: BowVector) -> np.ndarray:
-        """Similarity ``1 - 0.5 ||v_q - v_k||_1`` of ``bow`` with every keyframe (inverted index)."""
-        n = len(self)
-        out = np.zeros(n)
-        if n == 0 or len(bow) == 0:
-            return out
+    def _query_weights(self, bow: BowVector):
+        """(words, their idf, the query's L1-normalised tf-idf weights), or None when the query weighs nothing.
+
+        Online, words founded after ``bow`` was made (ids beyond the vocabulary) are left out.
+        """
         words = bow.words[bow.words < max(self.n_words, 1)] if self.online else bow.words
         counts = bow.counts[: len(words)] if self.online else bow.counts
         idf_q = self.idf(words)
         wq = counts * idf_q
         sq = wq.sum()
         if sq <= 0:
+            return None
+        return words, idf_q, wq / sq
+
+    def scores(self, bow: BowVector) -> np.ndarray:
+        """Similarity ``1 - 0.5 ||v_q - v_k||_1`` of ``bow`` with every keyframe (inverted index)."""
+        n = len(self)
+        out = np.zeros(n)
+        weighed = self._query_weights(bow) if n and len(bow) else None
+        if weighed is None:
             return out
-        a = wq / sq
+        words, idf_q, a = weighed
         kf, val, at, runs = self._post.gather(words)
         if self.idf_from_database:
             self._last_gather = (n, words, kf, val, at, runs)
