@@ -132,10 +132,11 @@ def clustered_words(rng, n, dim=32):
     return unit(rng.normal(size=(n, dim)))
 
 
-def test_moved_words_are_found_at_their_new_place():
+@pytest.mark.parametrize("storage", ["sq8", "flat"])
+def test_moved_words_are_found_at_their_new_place(storage):
     rng = np.random.default_rng(0)
     centres = clustered_words(rng, 3000)
-    ix = WordIndex(32, min_words=1000, pca_dims=16, fresh_images=0)
+    ix = WordIndex(32, min_words=1000, pca_dims=16, fresh_images=0, storage=storage)
     ix.update(centres, np.arange(3000))
     assert ix.active and ix.n_indexed == ix.graph.ntotal == 3000
     # members join 300 words and move their centres by ~0.3 (a revisit's worth): the graph holds the
@@ -143,7 +144,18 @@ def test_moved_words_are_found_at_their_new_place():
     moved = np.arange(0, 3000, 10)
     centres[moved] = unit(centres[moved] + 0.3 / np.sqrt(32) * rng.normal(size=(len(moved), 32)))
     ix.update(centres, moved)
-    assert np.allclose(ix._storage()[moved], centres[moved] @ ix.proj, atol=1e-6)
+    if storage == "flat":
+        assert np.allclose(ix._storage()[moved], centres[moved] @ ix.proj, atol=1e-6)
+    else:  # the 8-bit codes of the new positions (decoded: within one quantisation step)
+        import faiss
+
+        sq = faiss.downcast_index(ix.graph.storage)
+        codes = ix._storage()[moved]
+        assert np.array_equal(codes, sq.sa_encode(np.ascontiguousarray(centres[moved] @ ix.proj)))
+        vdiff = faiss.vector_to_array(sq.sq.trained)[16:]  # (per-dimension minimum, range)
+        err = np.abs(sq.sa_decode(codes) - np.clip(centres[moved] @ ix.proj, *faiss.vector_to_array(sq.sq.trained)
+                                                   .reshape(2, 16).cumsum(axis=0)))
+        assert np.all(err <= vdiff / 255 + 1e-6)
     q = unit(centres[moved] + 0.02 * rng.normal(size=(len(moved), 32)))
     ids, sims, _ = ix.nearest(centres, q)
     ex_ids, ex_sims = exact_nearest(centres, q)
@@ -223,3 +235,55 @@ def test_training_words_need_no_index():
     for _ in range(3):
         w.add_image(unit(rng.normal(size=(40, 128))))
     assert w.index is None and w.n_words == 120
+
+
+def _mutual_nn_by_column_argmax(d1, d2, ratio, max_distance):
+    """The rule written the plain way (a column argmax): what the faster column-max form must equal."""
+    s = d1 @ d2.T
+    i1 = np.arange(len(d1))
+    nn12, nn21 = s.argmax(axis=1), s.argmax(axis=0)
+    best = s[i1, nn12]
+    keep = nn21[nn12] == i1
+    d_best = np.sqrt(np.maximum(2.0 - 2.0 * best, 0.0))
+    if ratio is not None and s.shape[1] > 1:
+        s[i1, nn12] = -np.inf
+        keep &= d_best < ratio * np.maximum(np.sqrt(np.maximum(2.0 - 2.0 * s.max(axis=1), 0.0)), 1e-12)
+    if max_distance is not None:
+        keep &= d_best < max_distance
+    return np.stack([i1[keep], nn12[keep]], axis=1)
+
+
+def test_mutual_matching_equals_the_column_argmax_rule_with_ties_and_duplicates():
+    rng = np.random.default_rng(3)
+    for t in range(150):
+        n1, n2 = rng.integers(1, 200, 2)
+        q = int(rng.integers(2, 6))  # coarse coordinates: many exactly equal similarities
+        d1 = unit(rng.integers(-q, q + 1, (n1, 6)) + 0.5)
+        d2 = unit(rng.integers(-q, q + 1, (n2, 6)) + 0.5)
+        if t % 3 == 0:
+            d2[: n2 // 2] = d1[rng.integers(0, n1, n2 // 2)]  # the same descriptor in both images
+        if t % 5 == 0:
+            d1 = np.repeat(d1[: max(1, n1 // 3)], 3, axis=0)  # repeated descriptors within an image
+        for ratio, max_distance in ((None, None), (0.9, 0.8), (0.99, None)):
+            got = mutual_nn_unit(d1.copy(), d2.copy(), ratio, max_distance)
+            assert np.array_equal(got, _mutual_nn_by_column_argmax(d1.copy(), d2.copy(), ratio, max_distance)), t
+
+
+def test_word_arrays_grow_in_place_and_keep_their_words():
+    rng = np.random.default_rng(4)
+    w = IncrementalWords(32, radius=0.3)
+    for _ in range(12):
+        w.add_image(unit(rng.normal(size=(400, 32))))
+    before = w.centres.copy(), w.counts.copy(), w.image_counts.copy()
+    arrays = [id(getattr(w, n)) for n in ("_lengths", "_centres", "_counts", "_images")]
+    cap = len(w._counts)
+    w._grow(cap + 1)
+    assert len(w._counts) == cap + cap // 4  # a quarter more, not double
+    assert [id(getattr(w, n)) for n in ("_lengths", "_centres", "_counts", "_images")] == arrays  # resized, not copied
+    held = w.centres  # a view someone holds: the arrays are copied instead, the view stays valid
+    w._grow(2 * len(w._counts))
+    assert np.array_equal(held, before[0])
+    assert all(np.array_equal(a, b) for a, b in zip((w.centres, w.counts, w.image_counts), before))
+    assert not w._centres[w.n_words:].any()
+    w.add_image(unit(rng.normal(size=(50, 32))))
+    assert w.n_words == len(before[0]) + 50

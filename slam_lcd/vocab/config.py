@@ -57,15 +57,17 @@ class VocabConfig:
     # links per word in the graph (HNSW M)
     ann_hnsw_m: int = 16
     # beam width of a graph search (more: higher recall, slower)
-    ann_ef_search: int = 24
+    ann_ef_search: int = 16
     # words per descriptor taken from the graph and re-ranked exactly against the current centres
     ann_candidates: int = 12
     # words founded in the last this-many images are searched exhaustively (their centres still move most)
     ann_fresh_images: int = 2
     # a feature matched to the previous image is decided among its match's best words (and the
     # match's word) instead of searching the graph, for up to this many images in a row (0: always search)
-    ann_hint_images: int = 2
+    ann_hint_images: int = 8
     # ... and only when the match is closer than this (a far match says little about the feature's neighbourhood)
     ann_hint_max_distance: float = 0.5
     # re-fit the projection and rebuild the graph when the vocabulary has grown by this factor (0: never)
     ann_rebuild_growth: float = 0.0
+    # how the graph stores the projected words: "sq8" (8-bit codes per dimension) or "flat" (float32)
+    ann_storage: Literal["sq8", "flat"] = "sq8"

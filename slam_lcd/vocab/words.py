@@ -21,6 +21,10 @@ from .descriptors import default_match_distance, group_sums, normalise_rows
 from .word_index import WordIndex, exact_nearest
 
 
+# most words the per-word arrays grow by at once (see IncrementalWords._grow)
+_GROW_STEP = 16384
+
+
 def mutual_nn_unit(d1: np.ndarray, d2: np.ndarray, ratio: float | None, max_distance: float | None,
                    return_distances: bool = False):
     """:func:`slam_lcd.features.matching.mutual_nn_match` for unit vectors, from one similarity product.
@@ -35,10 +39,9 @@ def mutual_nn_unit(d1: np.ndarray, d2: np.ndarray, ratio: float | None, max_dist
         return (m, np.zeros(0, np.float32)) if return_distances else m
     s = d1 @ d2.T
     nn12 = s.argmax(axis=1)
-    nn21 = s.argmax(axis=0)
     i1 = np.arange(n1)
     best = s[i1, nn12]
-    keep = nn21[nn12] == i1
+    keep = _first_row_of_column_max(s, nn12, best)
     d_best = np.sqrt(np.maximum(2.0 - 2.0 * best, 0.0))
     if ratio is not None and n2 > 1:
         s[i1, nn12] = -np.inf
@@ -48,6 +51,29 @@ def mutual_nn_unit(d1: np.ndarray, d2: np.ndarray, ratio: float | None, max_dist
         keep &= d_best < max_distance
     m = np.stack([i1[keep], nn12[keep]], axis=1).astype(np.int64)
     return (m, d_best[keep].astype(np.float32)) if return_distances else m
+
+
+def _first_row_of_column_max(s: np.ndarray, nn12: np.ndarray, best: np.ndarray) -> np.ndarray:
+    """``s.argmax(axis=0)[nn12] == arange(len(s))``: is row i the (first) best row of its best column?
+
+    The same answer from a column *max*, which numpy reduces along contiguous rows (a column
+    argmax walks the matrix with a stride: ~5x slower at 1000 x 1000, the second largest cost of
+    growing the words after the product). A row whose best equals its column's max is the
+    column's argmax unless an earlier row ties that max. Ties are rare (duplicate descriptors): one
+    count over the whole matrix says whether any column reaches its max twice; only then are the
+    tied columns resolved by an argmax of their own.
+    """
+    col_max = s.max(axis=0)
+    keep = best == col_max[nn12]
+    if keep.any() and np.count_nonzero(s == col_max) > s.shape[1]:  # some column's max is reached twice
+        cols = np.unique(nn12[keep])
+        ties = (s[:, cols] == col_max[cols]).sum(axis=0) > 1
+        if ties.any():
+            tied = cols[ties]
+            first = s[:, tied].argmax(axis=0)
+            rows = np.flatnonzero(keep & np.isin(nn12, tied))
+            keep[rows] = first[np.searchsorted(tied, nn12[rows])] == rows
+    return keep
 
 
 def _member_sums(desc: np.ndarray, inv: np.ndarray, per: np.ndarray) -> np.ndarray:
@@ -109,17 +135,31 @@ class IncrementalWords:
         return self._images[: self.n_words]
 
     def _grow(self, need: int) -> None:
+        """Room for ``need`` words: the per-word arrays grow in place by a quarter, at most ``_GROW_STEP`` words.
+
+        In place (``ndarray.resize``: realloc, which remaps the pages in use instead of copying
+        them) and in small steps, not doubled into fresh copies: memory touched for the first time
+        costs page faults (on the 2-core benchmark machine ~3-10 ms per MB; at 260k words doubling
+        the centres cost 263 ms on one keyframe of the 10-lap log, issue #13), and ``resize``
+        zeroes the new tail at once. A step of at most 16k words (16 MB of centres) keeps each
+        such pause short; the total is the same. A copy where an array cannot be resized (someone
+        holds a view of it).
+        """
         cap = len(self._counts)
         if need <= cap:
             return
-        new = max(need, 2 * cap)
+        new = max(need, cap + min(cap // 4, _GROW_STEP))
         for name in ("_sums", "_lengths", "_centres", "_counts", "_images"):
-            old = getattr(self, name)
-            if old is None:
+            if getattr(self, name) is None:
                 continue
-            arr = np.zeros((new,) + old.shape[1:], dtype=old.dtype)
-            arr[:cap] = old
-            setattr(self, name, arr)
+            shape = (new,) + getattr(self, name).shape[1:]
+            try:
+                getattr(self, name).resize(shape, refcheck=True)  # (no local name: it would be another reference)
+            except ValueError:
+                old = getattr(self, name)
+                arr = np.zeros(shape, dtype=old.dtype)
+                arr[:cap] = old
+                setattr(self, name, arr)
 
     # ----------------------------------------------------------------- search
     @staticmethod
