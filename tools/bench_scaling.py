@@ -272,7 +272,7 @@ def bench_database(args) -> None:
           f"({'real landmarks' if real is not None else 'synthetic SuperPoint-like landmarks'}) ==")
     print(f"index: ann_min_words={conf.ann_min_words} pca_dims={conf.ann_pca_dims} hnsw_m={conf.ann_hnsw_m} "
           f"ef_search={conf.ann_ef_search} candidates={conf.ann_candidates} fresh_images={conf.ann_fresh_images} "
-          f"hint_images={conf.ann_hint_images}")
+          f"hint_images={conf.ann_hint_images} storage={conf.ann_storage}")
     print("agree = same word (or the same 'new word') as exhaustive search for the next keyframe's descriptors; "
           "nn-rec = nearest word equal to exhaustive's")
     print(_HEAD)
