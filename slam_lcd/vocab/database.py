@@ -27,6 +27,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..types import LoopCandidate
+from .arrays import grow_in_place
 from .config import VocabConfig
 from .descriptors import as_unit_vectors, descriptor_kind
 from .vocabulary import Vocabulary
@@ -73,12 +74,6 @@ def _ranges(starts: np.ndarray, lens: np.ndarray) -> np.ndarray:
     idx = np.repeat(starts - (ends - lens), lens)
     idx += np.arange(len(idx))
     return idx
-
-
-def _grown_copy(a: np.ndarray, length: int, used: int) -> np.ndarray:
-    b = np.empty(length, a.dtype)
-    b[:used] = a[:used]
-    return b
 
 
 class _Postings:
@@ -161,20 +156,12 @@ class _Postings:
     def _grow(self, need: int) -> None:
         """Room for ``need`` more slots: the arena grows by a quarter (or what is needed), in place.
 
-        In place (``ndarray.resize``: realloc, which remaps the pages in use instead of copying them)
-        because a fresh array of this size is slow to fill: its first touch faults in every page,
-        huge pages where numpy asks for them, measured 140-360 ms at 3-4 million slots against
-        5-12 ms. The zeroed tail is resident at once, hence the small step. A copy where the array
-        cannot be resized (another reference to it)."""
+        In place (:mod:`slam_lcd.vocab.arrays`) because a fresh array of this size is slow to fill:
+        measured 140-360 ms at 3-4 million slots against 5-12 ms. The zeroed tail is resident at
+        once, hence the small step."""
         length = max(self.end + need, int(1.25 * len(self.kf)))
-        try:
-            self.kf.resize(length, refcheck=True)  # (the attribute itself: a local name is another reference)
-        except ValueError:
-            self.kf = _grown_copy(self.kf, length, self.end)
-        try:
-            self.val.resize(length, refcheck=True)
-        except ValueError:
-            self.val = _grown_copy(self.val, length, self.end)
+        grow_in_place(self, "kf", (length,), self.end)
+        grow_in_place(self, "val", (length,), self.end)
 
     def _compact(self) -> None:
         """Close the holes in place: blocks slide down in arena order with their room.

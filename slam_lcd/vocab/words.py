@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .arrays import grow_in_place
 from .descriptors import default_match_distance, group_sums, normalise_rows
 from .word_index import WordIndex, exact_nearest
 
@@ -137,29 +138,17 @@ class IncrementalWords:
     def _grow(self, need: int) -> None:
         """Room for ``need`` words: the per-word arrays grow in place by a quarter, at most ``_GROW_STEP`` words.
 
-        In place (``ndarray.resize``: realloc, which remaps the pages in use instead of copying
-        them) and in small steps, not doubled into fresh copies: memory touched for the first time
-        costs page faults (on the 2-core benchmark machine ~3-10 ms per MB; at 260k words doubling
-        the centres cost 263 ms on one keyframe of the 10-lap log, issue #13), and ``resize``
-        zeroes the new tail at once. A step of at most 16k words (16 MB of centres) keeps each
-        such pause short; the total is the same. A copy where an array cannot be resized (someone
-        holds a view of it).
+        In place and in small steps, not doubled into fresh copies (:mod:`slam_lcd.vocab.arrays`:
+        at 260k words doubling the centres cost 263 ms on one keyframe of the 10-lap log). A step
+        of at most 16k words (16 MB of centres) keeps each pause short; the total is the same.
         """
         cap = len(self._counts)
         if need <= cap:
             return
         new = max(need, cap + min(cap // 4, _GROW_STEP))
         for name in ("_sums", "_lengths", "_centres", "_counts", "_images"):
-            if getattr(self, name) is None:
-                continue
-            shape = (new,) + getattr(self, name).shape[1:]
-            try:
-                getattr(self, name).resize(shape, refcheck=True)  # (no local name: it would be another reference)
-            except ValueError:
-                old = getattr(self, name)
-                arr = np.zeros(shape, dtype=old.dtype)
-                arr[:cap] = old
-                setattr(self, name, arr)
+            if getattr(self, name) is not None:
+                grow_in_place(self, name, (new,) + getattr(self, name).shape[1:], cap)
 
     # ----------------------------------------------------------------- search
     @staticmethod
