@@ -211,6 +211,59 @@ def test_real_frame_extraction_with_shared_weights(superpoint_weights, shared_da
     assert f.scores.min() > 0.015
 
 
+@pytest.mark.parametrize("stripe_rows", [2, 6, 40])
+def test_striped_first_block_equals_the_whole_image(monkeypatch, stripe_rows):
+    """The first block in stripes of rows (each reads 2 rows of its neighbours) gives the whole image's result."""
+    import slam_lcd.features.superpoint as sp
+
+    ex = random_extractor(seed=3)
+    img = textured_image(h=120, w=168, seed=5)
+    x = torch.from_numpy(img)[None, None].contiguous(memory_format=torch.channels_last)
+    with torch.inference_mode():
+        whole = ex.model._first_block(x)
+        monkeypatch.setattr(sp, "STRIPE_BYTES", stripe_rows * 64 * 168 * 4)
+        striped = ex.model._first_block(x)
+        f = ex.extract(img)
+        monkeypatch.setattr(sp, "STRIPE_BYTES", 1 << 40)
+        g = ex.extract(img)
+    assert striped.shape == whole.shape == (1, 64, 60, 84)
+    torch.testing.assert_close(striped, whole, rtol=0, atol=1e-5)
+    np.testing.assert_array_equal(f.keypoints, g.keypoints)
+    np.testing.assert_allclose(f.descriptors, g.descriptors, atol=1e-5)
+
+
+def test_bfloat16_encoder_keeps_the_keypoints_and_descriptors(superpoint_weights, shared_data):
+    """features.precision bfloat16: real frames give (nearly) the float32 features; heads stay float32."""
+    import cv2
+
+    frames = [p for d in ("kitti", "tum_fr2_desk") for p in sorted((shared_data / "frames" / d).glob("*.png"))[:3]]
+    frames += sorted((shared_data / "rtabmap_corridor").glob("*.jpg"))[:3]
+    assert len(frames) == 9
+    ex32, ex16 = (load_extractor(FeaturesConfig(weights=str(superpoint_weights), precision=p, feature_cache=False),
+                                 device="cpu") for p in ("float32", "bfloat16"))
+    assert "backbone_precision" not in ex32.identity()  # float32 caches from before the option keep their key
+    assert ex16.identity()["backbone_precision"] == "bfloat16" and ex16.fingerprint != ex32.fingerprint
+    with torch.inference_mode():
+        logits, desc = ex16.model.forward_raw(torch.rand(1, 1, 64, 80))
+    assert logits.dtype == desc.dtype == torch.float32
+    near, cosine = [], []
+    for path in frames:
+        img = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+        a, b = ex32.extract(img), ex16.extract(img)
+        assert abs(len(a) - len(b)) <= 0.05 * len(a)
+        d = np.linalg.norm(a.keypoints[:, None] - b.keypoints[None], axis=2)
+        j = d.argmin(axis=1)
+        ok = d[np.arange(len(j)), j] < 1.0
+        near.append(ok.mean())
+        cosine.append(np.median(np.sum(a.descriptors[ok] * b.descriptors[j[ok]], axis=1)))
+    print(f"\nbfloat16 encoder: keypoints within 1 px {np.mean(near):.3f} (min {np.min(near):.3f}), "
+          f"descriptor cosine median {np.median(cosine):.5f}")
+    assert np.mean(near) > 0.9 and np.min(near) > 0.8
+    assert np.min(cosine) > 0.999
+    with pytest.raises(ValueError, match="backbone_precision"):
+        SuperPoint(backbone_precision="float16")
+
+
 def test_device_choice():
     from slam_lcd.errors import ConfigError
 
@@ -227,32 +280,42 @@ def test_device_choice():
 
 _FAULTS_SCRIPT = """
 import resource, sys, numpy as np, torch
+from concurrent.futures import ThreadPoolExecutor
 from slam_lcd.features import FeaturesConfig, SuperPoint, SuperPointExtractor
 from slam_lcd.features.allocator import allocator_state
 conf = FeaturesConfig(cpu_allocator=sys.argv[1])
 torch.manual_seed(0)
 ex = SuperPointExtractor(conf, device="cpu", model=SuperPoint(SuperPointExtractor.model_conf(conf)))
 img = np.random.default_rng(0).random((480, 640)).astype(np.float32)
-ex.extract(img); ex.extract(img)
-before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
-for _ in range(3):
-    ex.extract(img)
-print(allocator_state(), (resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before) // 3)
+def faults_per_forward():
+    ex.extract(img); ex.extract(img)
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+    for _ in range(3):
+        ex.extract(img)
+    return (resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before) // 3
+if sys.argv[2] == "main":
+    n = faults_per_forward()
+else:  # as the pipeline extracts: in a worker thread (its own glibc arena unless limited)
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        n = pool.submit(faults_per_forward).result()
+print(allocator_state(), n)
 """
 
 
 @pytest.mark.skipif(not __import__("sys").platform.startswith("linux"), reason="glibc mallopt is Linux-only")
-def test_cpu_allocator_retain_removes_page_faults_of_the_forward_pass():
-    """With 'retain' a 640x480 forward reuses the heap's pages: far fewer page faults than 'system'."""
+@pytest.mark.parametrize("thread", ["main", "worker"])
+def test_cpu_allocator_retain_removes_page_faults_of_the_forward_pass(thread):
+    """With 'retain' a 640x480 forward reuses the heap's pages, on the main thread and in an extraction thread."""
     import subprocess
     import sys
 
     faults = {}
     for mode in ("retain", "system"):
-        out = subprocess.run([sys.executable, "-c", _FAULTS_SCRIPT, mode], capture_output=True, text=True, check=True)
+        out = subprocess.run([sys.executable, "-c", _FAULTS_SCRIPT, mode, thread], capture_output=True, text=True,
+                             check=True)
         state, n = out.stdout.split()
         faults[mode] = int(n)
         assert state == mode
-    print(f"\nminor page faults per 640x480 forward: {faults}")
+    print(f"\nminor page faults per 640x480 forward ({thread} thread): {faults}")
     assert faults["system"] > 20000  # 78 MB activations mapped afresh each call
     assert faults["retain"] < faults["system"] / 10

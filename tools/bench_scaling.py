@@ -358,16 +358,21 @@ def _config(args, cache_dir: Path, extra: list[str] = ()):
     return load_config("default", sets)
 
 
-def _bare_forward_seconds(log: Path, stamps: np.ndarray, weights, sample: int) -> tuple[float, int, float]:
-    """Bare SuperPoint network time (forward_raw) and whole-model time over the keyframes' images (a sample, scaled)."""
+def _bare_forward_seconds(log: Path, stamps: np.ndarray, weights, sample: int, features_conf) -> tuple[float, int, float]:
+    """Bare SuperPoint network time (forward_raw) and whole-model time over the keyframes' images (a sample, scaled).
+
+    The model is built from the run's own ``features`` section (precision, layout), without its cache."""
+    import dataclasses
+
     import torch
 
-    from slam_lcd.features import FeaturesConfig, load_extractor
+    from slam_lcd.features import load_extractor
     from slam_lcd.vision.gray import image_to_gray, to_gray_float
     from slam_lcd.io import open_log
     from slam_lcd.io.decode import decode_image
 
-    ex = load_extractor(FeaturesConfig(kind="superpoint", feature_cache=False), weights=weights, device="cpu")
+    conf = dataclasses.replace(features_conf, kind="superpoint", feature_cache=False)
+    ex = load_extractor(conf, weights=weights, device="cpu")
     pick = set(stamps[np.linspace(0, len(stamps) - 1, min(sample, len(stamps))).astype(int)].tolist())
     images = []
     with open_log(log) as r:
@@ -410,10 +415,12 @@ def bench_demo(args) -> None:
     log = Path(args.log) if args.log else _demo_log(work / "demo_2laps.mcap", 2.0, args.seed)
     cache = Path(tempfile.mkdtemp(prefix="cache-", dir=work))  # empty feature cache
     out = work / "out_demo"
-    res, wall = _run(log, out, _config(args, cache), "/ground_truth/pose")
+    cfg = _config(args, cache)
+    res, wall = _run(log, out, cfg, "/ground_truth/pose")
     stamps = _keyframe_stamps(out)
-    sp, n, sp_full = _bare_forward_seconds(log, stamps, args.weights, args.forward_sample)
-    print(f"\n2-lap demo, empty feature cache ({log.name}, {res.log_duration_s:.1f} s of log)")
+    sp, n, sp_full = _bare_forward_seconds(log, stamps, args.weights, args.forward_sample, cfg.features)
+    print(f"\n2-lap demo, empty feature cache ({log.name}, {res.log_duration_s:.1f} s of log; "
+          f"SuperPoint encoder in {cfg.features.precision})")
     print(f"  keyframes {res.n_keyframes}, loops accepted {res.loops_accepted}, false {res.false_loops_accepted}, "
           f"ATE {res.ate_before:.3f} m -> {res.ate_after:.3f} m ({100 * res.ate_after / res.ate_before:.1f} %)")
     print(f"  wall {wall:.1f} s   real-time factor (wall / log) {wall / res.log_duration_s:.2f}")

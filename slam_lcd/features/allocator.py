@@ -7,10 +7,19 @@ the forward time on a 2-core machine (measured: sys time 195-227 ms of a ~900 ms
 ~5 ms with the setting below). Telling glibc to serve large blocks from the heap and not to
 trim it lets the next forward pass reuse the same pages.
 
+The same holds in the extraction threads only if they allocate from the main heap: glibc gives
+each new thread an arena of its own, whose heaps are at most 64 MB, so a 78 MB block there is
+always mapped afresh (and the mmap limit above does not stop it). Measured on the 2-lap demo
+(2 cores, two extraction threads): 10.1 s of system time in a 40.7 s run; with one arena 1.2 s
+and 37.1 s. So the arenas are limited to one (``M_ARENA_MAX``); SuperPoint's threads and the loop
+detection then share the main heap's lock, which cost less than the page faults in every run
+measured (docs/features.md).
+
 The cost is that the heap keeps up to ``trim_threshold`` bytes of freed memory instead of
 returning it to the system; a SuperPoint forward pass holds about 250 MB at its peak, so that
-memory is reused every keyframe anyway. The setting is process-wide, applied once by the
+memory is reused every keyframe anyway. The settings are process-wide, applied once by the
 program itself (not by the user's environment), and a no-op where the C library is not glibc.
+An arena that a thread already holds stays its own: applied before the extraction threads start.
 """
 from __future__ import annotations
 
@@ -25,12 +34,13 @@ log = logging.getLogger(__name__)
 _M_TRIM_THRESHOLD = -1
 _M_TOP_PAD = -2
 _M_MMAP_MAX = -4
+_M_ARENA_MAX = -8
 
 _applied: str | None = None
 
 
 def retain_freed_memory(trim_threshold: int = 1 << 30, top_pad: int = 64 << 20) -> bool:
-    """Serve large blocks from the heap and keep freed memory for reuse; True when applied."""
+    """Serve large blocks from the one main heap and keep freed memory for reuse; True when applied."""
     global _applied
     if _applied is not None:
         return _applied == "retain"
@@ -48,6 +58,7 @@ def retain_freed_memory(trim_threshold: int = 1 << 30, top_pad: int = 64 << 20) 
     gnu_get_libc_version.restype = ctypes.c_char_p
     ok = bool(mallopt(_M_MMAP_MAX, 0)) and bool(mallopt(_M_TRIM_THRESHOLD, int(trim_threshold)))
     mallopt(_M_TOP_PAD, int(top_pad))
+    ok = ok and bool(mallopt(_M_ARENA_MAX, 1))
     if ok:
         _applied = "retain"
         log.debug("glibc %s: large blocks from the heap, freed memory kept (trim threshold %d MB)",

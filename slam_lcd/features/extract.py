@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import logging
 from abc import ABC, abstractmethod
 from pathlib import Path
 from typing import Iterable, Sequence
@@ -25,6 +26,8 @@ from .config import FeaturesConfig
 from .superpoint import SuperPoint
 from .weights import load_state_dict_checked, resolve_weights, sha256_of
 
+log = logging.getLogger(__name__)
+
 
 def resolve_device(device: str) -> torch.device:
     if device == "auto":
@@ -34,6 +37,16 @@ def resolve_device(device: str) -> torch.device:
     if device not in ("cpu", "cuda") and not device.startswith("cuda:"):
         raise ConfigError(f"features.device must be 'auto', 'cpu' or 'cuda', got {device!r}")
     return torch.device(device)
+
+
+def bfloat16_is_native(device: torch.device) -> bool:
+    """Whether ``device`` computes bfloat16 convolutions in hardware (oneDNN's check on CPU: AVX512-BF16 / AMX)."""
+    if device.type == "cuda":
+        return torch.cuda.is_bf16_supported()
+    try:
+        return bool(torch.ops.mkldnn._is_mkldnn_bf16_supported())
+    except (AttributeError, RuntimeError):  # pragma: no cover - a torch without oneDNN
+        return False
 
 
 class Extractor(ABC):
@@ -98,6 +111,9 @@ class SuperPointExtractor(Extractor):
             self.model = self.model.to(memory_format=torch.channels_last)
         if self.device.type == "cpu" and conf.cpu_allocator == "retain":
             retain_freed_memory()
+        if conf.precision == "bfloat16" and not bfloat16_is_native(self.device):
+            log.warning("features.precision bfloat16: this %s has no native bfloat16 arithmetic; SuperPoint runs "
+                        "emulated and slower than float32", "CPU" if self.device.type == "cpu" else "GPU")
 
     @staticmethod
     def model_conf(conf: FeaturesConfig) -> dict:
@@ -111,10 +127,13 @@ class SuperPointExtractor(Extractor):
             "max_keypoints": conf.max_keypoints,
             "remove_borders": conf.remove_borders,
             "descriptor_sampling": conf.descriptor_sampling,
+            "backbone_precision": conf.precision,
         }
 
     def identity(self) -> dict:
         ident = {"kind": self.kind, "weights_sha256": self._weights_id, **self.model.conf}
+        if ident["backbone_precision"] == "float32":  # the reference arithmetic: caches from before it had a name stay
+            del ident["backbone_precision"]
         if self._channels_last:  # a different summation order: results differ in the last digits
             ident["layout"] = "channels_last"
         return ident

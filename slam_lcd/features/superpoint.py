@@ -108,6 +108,10 @@ def sample_descriptors(
     return F.normalize(desc, p=2, dim=1)
 
 
+# the first block's activations on the CPU stay under this (glibc's per-thread heaps hold at most 64 MB)
+STRIPE_BYTES = 32 << 20
+
+
 class SuperPoint(nn.Module):
     """The SuperPoint network with keypoint selection and descriptor sampling."""
 
@@ -118,6 +122,7 @@ class SuperPoint(nn.Module):
         "max_keypoints": -1,  # -1: keep every keypoint above the threshold
         "remove_borders": 4,
         "descriptor_sampling": "bilinear",  # or "bicubic"
+        "backbone_precision": "float32",  # or "bfloat16": the eight shared convolutions in bfloat16 (autocast)
     }
 
     def __init__(self, conf: dict | None = None, **kwargs):
@@ -129,6 +134,9 @@ class SuperPoint(nn.Module):
         self.conf = {**self.default_conf, **(conf or {}), **kwargs}
         if self.conf["descriptor_sampling"] not in ("bilinear", "bicubic"):
             raise ValueError(f"descriptor_sampling must be 'bilinear' or 'bicubic', got {self.conf['descriptor_sampling']!r}")
+        if self.conf["backbone_precision"] not in ("float32", "bfloat16"):
+            raise ValueError("backbone_precision must be 'float32' or 'bfloat16', "
+                             f"got {self.conf['backbone_precision']!r}")
 
         c1, c2, c3, c4, c5 = 64, 64, 128, 128, 256
         self.relu = nn.ReLU(inplace=True)
@@ -152,18 +160,47 @@ class SuperPoint(nn.Module):
     # ------------------------------------------------------------------ network
     def forward_raw(self, image: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """The bare network: B x 1 x H x W (H, W multiples of 8) -> (logits B x 65 x H/8 x W/8,
-        raw descriptors B x 256 x H/8 x W/8). No softmax, no normalisation."""
-        x = self.relu(self.conv1a(image))
-        x = self.pool(self.relu(self.conv1b(x)))
-        x = self.relu(self.conv2a(x))
-        x = self.pool(self.relu(self.conv2b(x)))
-        x = self.relu(self.conv3a(x))
-        x = self.pool(self.relu(self.conv3b(x)))
-        x = self.relu(self.conv4a(x))
-        x = self.relu(self.conv4b(x))
+        raw descriptors B x 256 x H/8 x W/8). No softmax, no normalisation.
+
+        With ``backbone_precision: bfloat16`` the shared encoder runs under autocast and the two
+        heads in float32 on its output: the detector's logits decide near-ties in the NMS, and
+        in bfloat16 they moved half of the keypoints by a pixel or more (docs/features.md)."""
+        low = self.conf["backbone_precision"] == "bfloat16"
+        with torch.autocast(image.device.type, dtype=torch.bfloat16, enabled=low):
+            x = self._first_block(image)
+            x = self.relu(self.conv2a(x))
+            x = self.pool(self.relu(self.conv2b(x)))
+            x = self.relu(self.conv3a(x))
+            x = self.pool(self.relu(self.conv3b(x)))
+            x = self.relu(self.conv4a(x))
+            x = self.relu(self.conv4b(x))
+        if low:
+            x = x.float()
         logits = self.convPb(self.relu(self.convPa(x)))
         descriptors = self.convDb(self.relu(self.convDa(x)))
         return logits, descriptors
+
+    def _first_block(self, image: torch.Tensor) -> torch.Tensor:
+        """conv1a, conv1b and the first pool; on the CPU in stripes of rows whose activations stay under
+        :data:`STRIPE_BYTES`.
+
+        Why: at 640x480 each of these activations is 78 MB. glibc serves a thread other than the
+        main one from heaps of at most 64 MB, so the extraction threads got every such block as
+        fresh pages (~40,000 page faults per forward even with ``cpu_allocator: retain``). A
+        stripe reads two rows above and below it (the two 3x3 convolutions' reach) and keeps only
+        its own rows: the result is the same as the whole image's (``test_striped_first_block_*``).
+        """
+        b, _, h, w = image.shape
+        rows = STRIPE_BYTES // max(1, b * self.conv1a.out_channels * w * image.element_size()) // 2 * 2
+        if image.device.type != "cpu" or rows >= h or rows < 2:
+            return self.pool(self.relu(self.conv1b(self.relu(self.conv1a(image)))))
+        stripes = []
+        for r0 in range(0, h, rows):
+            r1 = min(h, r0 + rows)
+            a0, a1 = max(0, r0 - 2), min(h, r1 + 2)
+            x = self.relu(self.conv1b(self.relu(self.conv1a(image[:, :, a0:a1]))))
+            stripes.append(self.pool(x[:, :, r0 - a0 : r1 - a0]))
+        return torch.cat(stripes, dim=2)
 
     def dense(self, image: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Full-resolution score map B x H x W (probabilities) and the unit-norm coarse
