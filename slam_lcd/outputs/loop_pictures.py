@@ -165,6 +165,21 @@ def _segments(img: np.ndarray, a: np.ndarray, b: np.ndarray, colour) -> None:
         cv2.polylines(img, list(pts), False, colour, 1, cv2.LINE_AA)
 
 
+# a filled dot of radius 2: the 5x5 square without its corners
+_DOT = np.array([(dy, dx) for dy in range(-2, 3) for dx in range(-2, 3) if dy * dy + dx * dx <= 5])
+
+
+def _dots(img: np.ndarray, pts: np.ndarray, colour) -> None:
+    """Filled dots at ``pts`` (x, y) in one indexed write (a circle call per point cost ~3 ms a picture)."""
+    if not len(pts):
+        return
+    p = np.round(pts).astype(np.int64)
+    ys = (p[:, 1, None] + _DOT[None, :, 0]).ravel()
+    xs = (p[:, 0, None] + _DOT[None, :, 1]).ravel()
+    inside = (ys >= 0) & (ys < img.shape[0]) & (xs >= 0) & (xs < img.shape[1])
+    img[ys[inside], xs[inside]] = colour
+
+
 def draw_loop(q, m, matches, kept, edges, lines: list[str], colour: tuple[int, int, int]) -> np.ndarray:
     """Query (left) and match (right) side by side: discarded matches thin red, surviving matches
     green, the graph on the surviving query keypoints and the same edges on their matches (yellow)."""
@@ -187,9 +202,7 @@ def draw_loop(q, m, matches, kept, edges, lines: list[str], colour: tuple[int, i
         for P in (gq, gm):
             _segments(canvas, P[edges[:, 0]], P[edges[:, 1]], (0, 220, 255))
     _segments(canvas, gq, gm, (80, 200, 80))
-    for a, b in zip(np.round(gq).astype(int).tolist(), np.round(gm).astype(int).tolist()):
-        cv2.circle(canvas, a, 2, (80, 255, 80), -1, cv2.LINE_AA)
-        cv2.circle(canvas, b, 2, (80, 255, 80), -1, cv2.LINE_AA)
+    _dots(canvas, np.concatenate([gq, gm]), (80, 255, 80))
     per_line = max(20, (canvas.shape[1] - 20) // 8)  # characters that fit at this font size
     lines = [ln[i:i + per_line] for ln in lines for i in range(0, max(len(ln), 1), per_line)]
     band = np.full((18 * len(lines) + 8, canvas.shape[1], 3), 255, np.uint8)
@@ -241,33 +254,48 @@ def write_loop_pictures(out_dir: Path, album: KeyframeAlbum, rows: list[dict], l
 
     ``stop``: a :class:`threading.Event` checked before each picture (the outputs are being abandoned).
     ``thumbnails``: filled with ``name -> JPEG bytes`` of each picture scaled to ``thumb_width`` (the
-    HTML report's table embeds them without decoding the PNG again)."""
+    HTML report's table embeds them without decoding the PNG again).
+
+    The PNG coding (~18 ms a picture, outside the GIL) runs in a second thread while the next
+    picture is drawn. The contact sheet keeps a small tile per accepted loop, not the picture,
+    and shows at most :data:`CONTACT_SHEET_MAX` of them, evenly spread: an hour-long log has
+    thousands of loops."""
+    from concurrent.futures import ThreadPoolExecutor
+
     folder = out_dir / LOOPS_DIR
     folder.mkdir(exist_ok=True)
-    written, thumbs, missing = [], [], 0
-    for row, verdict in _pictured(rows, n_rejected):
-        if stop is not None and stop.is_set():
-            return written
-        q, m = album.load(int(row["query_id"])), album.load(int(row["match_id"]))
-        if q is None or m is None:
-            missing += 1  # a keyframe the album did not keep (a write error, an interrupt mid-keyframe)
-            continue
-        matches, kept, edges, notes = _loop_arrays(row, q, m, lcd_conf, album)
-        colour = (60, 170, 60) if verdict == "accepted" else (60, 60, 200)
-        pic = draw_loop(q, m, matches, kept, edges, _caption(row, verdict) + notes, colour)
-        name = picture_name(row["query_id"], row["match_id"], verdict)
-        cv2.imwrite(str(folder / name), pic)
-        written.append(name)
-        if thumbnails is not None:
-            small = cv2.resize(pic, (thumb_width, max(1, round(pic.shape[0] * thumb_width / pic.shape[1]))),
-                               interpolation=cv2.INTER_AREA)
-            ok, buf = cv2.imencode(".jpg", small, [cv2.IMWRITE_JPEG_QUALITY, 80])
-            if ok:
-                thumbnails[name] = buf.tobytes()
-        if verdict == "accepted":
-            thumbs.append(pic)
-    if thumbs:
-        cv2.imwrite(str(folder / CONTACT_SHEET), contact_sheet(thumbs))
+    written, tiles, missing = [], [], 0
+    pending: list = []
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="slam-lcd-png") as coder:
+        try:
+            for row, verdict in _pictured(rows, n_rejected):
+                if stop is not None and stop.is_set():
+                    return written
+                q, m = album.load(int(row["query_id"])), album.load(int(row["match_id"]))
+                if q is None or m is None:
+                    missing += 1  # a keyframe the album did not keep (a write error, an interrupt mid-keyframe)
+                    continue
+                matches, kept, edges, notes = _loop_arrays(row, q, m, lcd_conf, album)
+                colour = (60, 170, 60) if verdict == "accepted" else (60, 60, 200)
+                pic = draw_loop(q, m, matches, kept, edges, _caption(row, verdict) + notes, colour)
+                name = picture_name(row["query_id"], row["match_id"], verdict)
+                pending.append((name, coder.submit(_write_png, folder / name, pic)))
+                tile = _scaled(pic, CONTACT_TILE_WIDTH)
+                if thumbnails is not None:
+                    ok, buf = cv2.imencode(".jpg", _scaled(tile, thumb_width), [cv2.IMWRITE_JPEG_QUALITY, 80])
+                    if ok:
+                        thumbnails[name] = buf.tobytes()
+                if verdict == "accepted":
+                    tiles.append(tile)
+                while len(pending) > 2 or (pending and pending[0][1].done()):  # at most two pictures wait
+                    written.append(_finished(*pending.pop(0)))
+        finally:
+            for item in pending:  # the pictures already handed to the coder are finished (and listed) first
+                written.append(_finished(*item))
+    if tiles:
+        if len(tiles) > CONTACT_SHEET_MAX:
+            tiles = [tiles[i] for i in np.linspace(0, len(tiles) - 1, CONTACT_SHEET_MAX).round().astype(int)]
+        _write_png(folder / CONTACT_SHEET, contact_sheet(tiles, CONTACT_TILE_WIDTH))
         written.append(CONTACT_SHEET)
     if missing and album.failed:
         log.warning("loop pictures: %d loop(s) not drawn, their keyframes were not kept (%s)", missing, album.failed)
@@ -276,12 +304,27 @@ def write_loop_pictures(out_dir: Path, album: KeyframeAlbum, rows: list[dict], l
     return written
 
 
-def contact_sheet(pictures: list[np.ndarray], width: int = 360, columns: int = 4) -> np.ndarray:
-    """The pictures scaled to ``width`` and tiled ``columns`` to a row (white gaps)."""
-    tiles = []
-    for p in pictures:
-        s = width / p.shape[1]
-        tiles.append(cv2.resize(p, (width, max(1, round(p.shape[0] * s))), interpolation=cv2.INTER_AREA))
+CONTACT_TILE_WIDTH = 360
+CONTACT_SHEET_MAX = 120  # tiles on the contact sheet at most (evenly spread over the accepted loops)
+
+
+def _scaled(img: np.ndarray, width: int) -> np.ndarray:
+    return cv2.resize(img, (width, max(1, round(img.shape[0] * width / img.shape[1]))), interpolation=cv2.INTER_AREA)
+
+
+def _write_png(path: Path, img: np.ndarray) -> None:
+    if not cv2.imwrite(str(path), img):
+        raise OSError(f"cannot write {path}")
+
+
+def _finished(name: str, future) -> str:
+    future.result()  # a write error surfaces here
+    return name
+
+
+def contact_sheet(pictures: list[np.ndarray], width: int = CONTACT_TILE_WIDTH, columns: int = 4) -> np.ndarray:
+    """The pictures scaled to ``width`` (unless they are that wide) and tiled ``columns`` to a row (white gaps)."""
+    tiles = [p if p.shape[1] == width else _scaled(p, width) for p in pictures]
     h = max(t.shape[0] for t in tiles)
     rows = []
     for i in range(0, len(tiles), columns):
