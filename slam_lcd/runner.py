@@ -24,7 +24,9 @@ import numpy as np
 from .config import Config, validate_config
 from .errors import DamagedImageError, FileMissingError, PipelineError, stamp_text
 from .io import open_log
+from .io.raw_spool import RawSpool
 from .io.trajectory_files import read_trajectory
+from .outputs.corrected_log import copied_topics
 from .outputs.output_set import OutputSet
 from .outputs.result import RunResult
 from .outputs.write import RUN_OUTPUTS, write_set
@@ -107,8 +109,8 @@ def run_log(
                        overrides=list(overrides or []))
     gt_traj = read_trajectory(gt_file) if gt_file is not None else None
 
-    album = None
-    try:  # the staging folder may exist from here on (the loop pictures' keyframe album)
+    album = spool = None
+    try:  # the staging folder may exist from here on (the loop pictures' keyframe album, the copy spool)
         with open_log(log_path, conf=cfg.io) as reader:
             if reader.message_count == 0:
                 raise PipelineError("log holds no messages", log_path)
@@ -150,6 +152,8 @@ def run_log(
                 from .outputs.loop_pictures import KeyframeAlbum
 
                 album = KeyframeAlbum(outputs.staging / ".loop_keyframes", cfg.lcd.descriptor_dtype)
+            if copy_topics:  # the topics corrected.mcap copies, kept undecoded from the one pass over the log
+                spool = RawSpool(outputs.staging / ".corrected_mcap_spool", copied_topics(copy_topics))
             pipe = _make_pipeline(cfg, extractor, vocab, log_path, topics, album,
                                   rectified=stereo is not None and stereo.rectifier is not None)
             if calibrated is not None:  # the calibration file's camera (CameraInfo is not read then)
@@ -165,7 +169,7 @@ def run_log(
                 for stamp, T, cov, segment_start in vo_odometry.odometry_samples():
                     pipe.add_odometry(stamp, T, cov, segment_start=segment_start)
             gt_traj_from_log = _drive(reader, topics, pipe, result, cfg, tf, body_frame_of(first.get(topics.odom)),
-                                      vo_odometry, log_path, progress, stereo)
+                                      vo_odometry, log_path, progress, stereo, spool)
             result.log_duration_s = reader.duration_ns * 1e-9
             if gt_from_tf is not None:
                 gt_traj_from_log = gt_from_tf
@@ -186,10 +190,12 @@ def run_log(
             result.gt_source = None  # a ground-truth topic without a message
         result.wall_s = time.perf_counter() - t_start
     except BaseException:
+        if spool is not None:
+            spool.discard()
         outputs.discard()  # a run that fails before its outputs leaves no staging folder behind
         raise
     write_set(outputs, pipe, result, gt_traj, log_path if mcap_wanted else None, copy_topics, notes, read_to_end,
-              album=album)
+              album=album, spool=spool)
     return result
 
 
@@ -231,19 +237,23 @@ def _make_pipeline(cfg, extractor, vocab, log_path, topics: Topics, keyframe_sin
 
 
 def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame, vo_odometry, log_path,
-           progress: bool, stereo=None) -> Trajectory | None:
+           progress: bool, stereo=None, spool=None) -> Trajectory | None:
     """Stream the chosen topics into ``pipe`` in log order; returns the ground truth read on the way.
 
     A Ctrl-C stops the stream (``result.interrupted``); a damaged image is skipped and counted.
     ``stereo`` (a :class:`~slam_lcd.sensors.stereo_pairs.StereoFrames`): each left image waits for
     its right one and goes in with it (the loop detector's stereo points, for keyframes only).
+    ``spool`` (a :class:`~slam_lcd.io.raw_spool.RawSpool`): the same pass keeps the topics
+    ``corrected.mcap`` copies, undecoded; it is complete only when the log was read to its end.
     """
     gt_st, gt_T = [], []
     camera_set = False
     damaged: list[DamagedImageError] = []
     bar = progress_bar(total=reader.topics[topics.image].count, desc="frames", unit="img", enabled=progress)
+    raw = dict(raw_topics=spool.wanted, raw_sink=spool.add) if spool is not None and spool.wanted else {}
+    read_all = False
     try:
-        for m in reader.messages(topics.wanted()):
+        for m in reader.messages(topics.wanted(), **raw):
             if m.topic == topics.odom:
                 with at_message(m, log_path):
                     T, cov = decode_pose_of(m)
@@ -298,6 +308,7 @@ def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame,
                     T = decode_ground_truth(m)
                 gt_st.append(m.stamp)
                 gt_T.append(T)
+        read_all = True
         if stereo is not None:
             for stamp, left, right in stereo.flush():
                 pipe.add_image(stamp, left, right_image=right)
@@ -306,6 +317,8 @@ def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame,
         log.warning("interrupted: writing the partial result")
     finally:
         bar.close()
+        if spool is not None:
+            spool.finish(complete=read_all)
     if stereo is not None and stereo.unpaired:
         log.warning("%s: %d image(s) of %s had no %s partner within %.0f ms: no stereo points for them", log_path,
                     stereo.unpaired, topics.image, topics.right, stereo.tolerance_ns * 1e-6)

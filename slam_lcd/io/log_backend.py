@@ -138,6 +138,17 @@ def deserialised(path, records, deser, use_header: bool):
         yield LogMessage(topic, msgtype, stamp, t, msg)
 
 
+def with_raw_copies(records, wanted: frozenset, raw_topics: frozenset, raw_sink):
+    """The ``(meta, log_time, bytes)`` records of ``wanted`` topics; those of ``raw_topics`` are also
+    handed to ``raw_sink`` as :class:`RawMessage` (one pass over the log serves both)."""
+    for rec in records:
+        (topic, msgtype, _, _), t, data = rec
+        if topic in raw_topics:
+            raw_sink(RawMessage(topic, msgtype, t, data))
+        if topic in wanted:
+            yield rec
+
+
 def deser_error(path, topic, e):
     return CorruptLogError(f"message on topic {topic!r} cannot be decoded ({e})", path)
 

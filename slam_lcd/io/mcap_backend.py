@@ -12,7 +12,7 @@ from pathlib import Path
 from ..errors import CorruptLogError, TruncatedLogError, UnsupportedFormatError
 from .config import IOConfig
 from .log_backend import (TF_TYPE, LogContents, RawMessage, TopicInfo, build_typestore, deserialised, has_header,
-                          one_line, unreadable)
+                          one_line, unreadable, with_raw_copies)
 
 log = logging.getLogger(__name__)
 
@@ -176,9 +176,12 @@ class McapStreamBackend:
             m = meta[cid]
             yield RawMessage(m[0], m[1], t, data)
 
-    def messages(self, names, use_header):
+    def messages(self, names, use_header, raw_names=(), raw_sink=None):
         meta = self.meta
-        records = ((meta[cid], t, data) for cid, t, data in self._records(names))
+        extra = [n for n in raw_names if n not in names] if raw_sink is not None else []
+        records = ((meta[cid], t, data) for cid, t, data in self._records(list(names) + extra))
+        if raw_sink is not None:
+            records = with_raw_copies(records, frozenset(names), frozenset(raw_names), raw_sink)
         yield from deserialised(self.path, records, self.deser, use_header)
 
     def close(self):

@@ -161,12 +161,24 @@ class LogReader:
             return iter(())
         return self._backend.raw(names)
 
-    def messages(self, topics: Iterable[str] | str | None = None) -> Iterator[LogMessage]:
-        """Deserialised messages of ``topics`` (default all) in log-time order, streaming."""
+    def messages(self, topics: Iterable[str] | str | None = None, *, raw_topics: Iterable[str] | None = None,
+                 raw_sink=None) -> Iterator[LogMessage]:
+        """Deserialised messages of ``topics`` (default all) in log-time order, streaming.
+
+        ``raw_topics`` with ``raw_sink``: the messages of those topics are also handed, undecoded,
+        to ``raw_sink(RawMessage)`` as the same pass reaches them (what ``run`` copies into
+        ``corrected.mcap``: the log is decompressed once, not twice)."""
         names = self.resolve_topics(topics)
-        if not names:
+        raw = self.resolve_topics(raw_topics) if raw_sink is not None and raw_topics else []
+        if not names and not raw:
             return iter(())
-        return self._backend.messages(names, self.stamp_source == "header")
+        if not raw:
+            return self._backend.messages(names, self.stamp_source == "header")
+        return self._backend.messages(names, self.stamp_source == "header", raw, raw_sink)
+
+    def deserialise(self, raw: RawMessage):
+        """The message object of a :class:`RawMessage` read from this log."""
+        return self._backend.deser(raw.data, raw.msgtype)
 
     def __repr__(self):
         return f"LogReader({str(self.path)!r}, format={self.format!r}, topics={len(self._contents.topics)})"

@@ -7,7 +7,7 @@ from pathlib import Path
 from ..errors import CorruptLogError, SlamLcdError
 from .config import IOConfig
 from .log_backend import (TF_TYPE, LogContents, RawMessage, TopicInfo, build_typestore, deserialised, has_header,
-                          one_line, unreadable)
+                          one_line, unreadable, with_raw_copies)
 from .ros1_chunks import ros1_messages
 
 log = logging.getLogger(__name__)
@@ -78,17 +78,21 @@ class RosbagsBackend:
         except Exception as e:  # rosbags, zstd/lz4 and struct raise many kinds on damaged bytes
             raise unreadable(self.path, e, last[0]) from None
 
-    def messages(self, names, use_header):
+    def messages(self, names, use_header, raw_names=(), raw_sink=None):
         meta = self.meta
         last = [None]
+        extra = [n for n in raw_names if n not in names] if raw_sink is not None else []
 
         def records():
-            for conn, t, data in self._stream(names):
+            for conn, t, data in self._stream(list(names) + extra):
                 last[0] = t
                 yield meta[id(conn)], t, data
 
+        stream = records()
+        if raw_sink is not None:
+            stream = with_raw_copies(stream, frozenset(names), frozenset(raw_names), raw_sink)
         try:
-            yield from deserialised(self.path, records(), self.deser, use_header)
+            yield from deserialised(self.path, stream, self.deser, use_header)
         except SlamLcdError:
             raise
         except Exception as e:  # rosbags, zstd/lz4 and struct raise many kinds on damaged bytes

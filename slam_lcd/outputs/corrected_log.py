@@ -63,12 +63,23 @@ class TfPlan:
     notes: list[str] = field(default_factory=list)
 
 
-def log_tf_parents(reader, topics) -> dict[str, str]:
-    """``{child: parent}`` of every transform on the (copied) TF topics of the log."""
+def copied_topics(copy_topics) -> list[str]:
+    """The input topics copied as they are (the file's own topics are written anew)."""
+    return [t for t in copy_topics if t not in (POSE_TOPIC, PATH_TOPIC, LOOPS_TOPIC, GT_TOPIC)]
+
+
+def log_tf_parents(reader, topics, spooled=None) -> dict[str, str]:
+    """``{child: parent}`` of every transform on the (copied) TF topics of the log (or of ``spooled``, its
+    undecoded messages kept by the run: see :mod:`slam_lcd.io.raw_spool`)."""
     tf_topics = [t for t in topics if reader.topics[t].msgtype == TF_TYPE]
+    if spooled is not None:
+        wanted = set(tf_topics)
+        msgs = (reader.deserialise(r) for r in spooled if r.topic in wanted) if wanted else ()
+    else:
+        msgs = (m.msg for m in reader.messages(tf_topics)) if tf_topics else ()
     parents: dict[str, str] = {}
-    for m in reader.messages(tf_topics) if tf_topics else ():
-        for ts in m.msg.transforms:
+    for msg in msgs:
+        for ts in msg.transforms:
             parents.setdefault(ts.child_frame_id.lstrip("/"), ts.header.frame_id.lstrip("/"))
     return parents
 
@@ -133,11 +144,13 @@ def _keyframe_paths(kf: Trajectory, frame: str):
 def write_corrected_log(path: Path, *, odom: Trajectory, corrected: Trajectory, kf_ids: list[int],
                         kf_corrected: Trajectory, loops: list[tuple[int, int, int]], log_frames: dict, run_conf,
                         copy_from: Path, copy_topics: list[str], gt_alignment=None, gt_poses: Trajectory | None = None,
-                        io_conf=None) -> TfPlan:
+                        io_conf=None, spooled=None) -> TfPlan:
     """Write ``path`` (see the module docstring). ``loops``: ``(query_id, match_id, stamp_ns)`` of accepted loops.
 
     ``gt_poses``: a ground truth read from a file (it is not in the log), written on
-    :data:`GT_TOPIC` in frame ``log_frames['gt']`` and tied to the tree like a log's."""
+    :data:`GT_TOPIC` in frame ``log_frames['gt']`` and tied to the tree like a log's.
+    ``spooled``: a complete :class:`~slam_lcd.io.raw_spool.RawSpool` of the copied topics (the run's
+    pass kept them): read instead of decompressing the log again."""
     from ..io import messages as M
     from ..io.reader import open_log
     from ..io.writers import open_writer
@@ -147,8 +160,10 @@ def write_corrected_log(path: Path, *, odom: Trajectory, corrected: Trajectory, 
 
         raise InvalidPoseError("the corrected trajectory has NaN/inf poses; corrected.mcap not written")
     with open_log(copy_from) as reader:
-        chosen = [t for t in copy_topics if t not in (POSE_TOPIC, PATH_TOPIC, LOOPS_TOPIC, GT_TOPIC)]
-        plan = plan_frames(run_conf, log_frames, log_tf_parents(reader, chosen))
+        chosen = copied_topics(copy_topics)
+        if spooled is not None and not (spooled.complete and set(spooled.wanted) == set(chosen)):
+            spooled = None  # an interrupted pass (or other topics): read the log
+        plan = plan_frames(run_conf, log_frames, log_tf_parents(reader, chosen, spooled))
         for note in plan.notes:
             log.info("corrected.mcap: %s", note)
         own = []  # (stamp, order, topic, message)
@@ -203,7 +218,7 @@ def write_corrected_log(path: Path, *, odom: Trajectory, corrected: Trajectory, 
 
             ros1 = reader.format == "rosbag1"
             if chosen:
-                for t_name, msgtype, log_time, raw in reader.raw_messages(chosen):
+                for t_name, msgtype, log_time, raw in (spooled if spooled is not None else reader.raw_messages(chosen)):
                     flush_until(log_time)
                     w.write_raw(t_name, msgtype, raw, log_time, ros1=ros1, typestore=reader.typestore)
             flush_until(None)

@@ -256,42 +256,43 @@ def write_loop_pictures(out_dir: Path, album: KeyframeAlbum, rows: list[dict], l
     ``thumbnails``: filled with ``name -> JPEG bytes`` of each picture scaled to ``thumb_width`` (the
     HTML report's table embeds them without decoding the PNG again).
 
-    The PNG coding (~18 ms a picture, outside the GIL) runs in a second thread while the next
-    picture is drawn. The contact sheet keeps a small tile per accepted loop, not the picture,
-    and shows at most :data:`CONTACT_SHEET_MAX` of them, evenly spread: an hour-long log has
-    thousands of loops."""
+    Two pictures are made at a time, each in a thread of its own: reading the album, drawing
+    and the PNG coding (~18 ms a picture) run mostly outside the GIL. They are listed in the
+    order they are chosen. The contact sheet keeps a small tile per accepted loop, not the
+    picture, and shows at most :data:`CONTACT_SHEET_MAX` of them, evenly spread: an hour-long
+    log has thousands of loops."""
     from concurrent.futures import ThreadPoolExecutor
 
     folder = out_dir / LOOPS_DIR
     folder.mkdir(exist_ok=True)
     written, tiles, missing = [], [], 0
     pending: list = []
-    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="slam-lcd-png") as coder:
+
+    def collect(future) -> None:
+        nonlocal missing
+        made = future.result()  # a write error surfaces here
+        if made is None:
+            missing += 1  # a keyframe the album did not keep (a write error, an interrupt mid-keyframe)
+            return
+        name, verdict, tile, thumb = made
+        written.append(name)
+        if thumbnails is not None and thumb is not None:
+            thumbnails[name] = thumb
+        if verdict == "accepted":
+            tiles.append(tile)
+
+    with ThreadPoolExecutor(max_workers=PICTURE_THREADS, thread_name_prefix="slam-lcd-pictures") as pool:
         try:
             for row, verdict in _pictured(rows, n_rejected):
                 if stop is not None and stop.is_set():
                     return written
-                q, m = album.load(int(row["query_id"])), album.load(int(row["match_id"]))
-                if q is None or m is None:
-                    missing += 1  # a keyframe the album did not keep (a write error, an interrupt mid-keyframe)
-                    continue
-                matches, kept, edges, notes = _loop_arrays(row, q, m, lcd_conf, album)
-                colour = (60, 170, 60) if verdict == "accepted" else (60, 60, 200)
-                pic = draw_loop(q, m, matches, kept, edges, _caption(row, verdict) + notes, colour)
-                name = picture_name(row["query_id"], row["match_id"], verdict)
-                pending.append((name, coder.submit(_write_png, folder / name, pic)))
-                tile = _scaled(pic, CONTACT_TILE_WIDTH)
-                if thumbnails is not None:
-                    ok, buf = cv2.imencode(".jpg", _scaled(tile, thumb_width), [cv2.IMWRITE_JPEG_QUALITY, 80])
-                    if ok:
-                        thumbnails[name] = buf.tobytes()
-                if verdict == "accepted":
-                    tiles.append(tile)
-                while len(pending) > 2 or (pending and pending[0][1].done()):  # at most two pictures wait
-                    written.append(_finished(*pending.pop(0)))
+                pending.append(pool.submit(_make_picture, folder, album, row, verdict, lcd_conf,
+                                           thumb_width if thumbnails is not None else 0))
+                while len(pending) > 2 * PICTURE_THREADS:  # a few pictures in memory at most
+                    collect(pending.pop(0))
         finally:
-            for item in pending:  # the pictures already handed to the coder are finished (and listed) first
-                written.append(_finished(*item))
+            for future in pending:  # the pictures already started are finished (and listed) first
+                collect(future)
     if tiles:
         if len(tiles) > CONTACT_SHEET_MAX:
             tiles = [tiles[i] for i in np.linspace(0, len(tiles) - 1, CONTACT_SHEET_MAX).round().astype(int)]
@@ -304,6 +305,26 @@ def write_loop_pictures(out_dir: Path, album: KeyframeAlbum, rows: list[dict], l
     return written
 
 
+def _make_picture(folder: Path, album: KeyframeAlbum, row: dict, verdict: str, lcd_conf, thumb_width: int):
+    """One loop's picture written to ``folder``: (name, verdict, contact-sheet tile, JPEG thumbnail or None),
+    or None when the album lacks one of its keyframes."""
+    q, m = album.load(int(row["query_id"])), album.load(int(row["match_id"]))
+    if q is None or m is None:
+        return None
+    matches, kept, edges, notes = _loop_arrays(row, q, m, lcd_conf, album)
+    colour = (60, 170, 60) if verdict == "accepted" else (60, 60, 200)
+    pic = draw_loop(q, m, matches, kept, edges, _caption(row, verdict) + notes, colour)
+    name = picture_name(row["query_id"], row["match_id"], verdict)
+    _write_png(folder / name, pic)
+    tile = _scaled(pic, CONTACT_TILE_WIDTH)
+    thumb = None
+    if thumb_width:
+        ok, buf = cv2.imencode(".jpg", _scaled(tile, thumb_width), [cv2.IMWRITE_JPEG_QUALITY, 80])
+        thumb = buf.tobytes() if ok else None
+    return name, verdict, tile, thumb
+
+
+PICTURE_THREADS = 2
 CONTACT_TILE_WIDTH = 360
 CONTACT_SHEET_MAX = 120  # tiles on the contact sheet at most (evenly spread over the accepted loops)
 
@@ -315,11 +336,6 @@ def _scaled(img: np.ndarray, width: int) -> np.ndarray:
 def _write_png(path: Path, img: np.ndarray) -> None:
     if not cv2.imwrite(str(path), img):
         raise OSError(f"cannot write {path}")
-
-
-def _finished(name: str, future) -> str:
-    future.result()  # a write error surfaces here
-    return name
 
 
 def contact_sheet(pictures: list[np.ndarray], width: int = CONTACT_TILE_WIDTH, columns: int = 4) -> np.ndarray:

@@ -44,15 +44,21 @@ def partial_text(result: RunResult, notes=(), *, read_to_end: bool, while_writin
 
 
 def write_set(outputs: OutputSet, pipe, result: RunResult, gt, mcap_source, copy_topics, notes=None,
-              read_to_end: bool = True, album=None) -> None:
-    """Write every output into the staging folder, then publish the set (partial when interrupted)."""
+              read_to_end: bool = True, album=None, spool=None) -> None:
+    """Write every output into the staging folder, then publish the set (partial when interrupted).
+
+    ``spool``: the run's :class:`~slam_lcd.io.raw_spool.RawSpool` of the copied topics (removed here)."""
     notes = list(notes or [])
     partial = result.interrupted
     try:
         if partial:  # said first: a second Ctrl-C may stop the writing at any file
             outputs.mark_partial(partial_text(result, notes, read_to_end=read_to_end))
-        write_outputs(pipe, outputs.staging, result, gt, mcap_source, copy_topics,
-                      skipped=notes if partial else None, album=album)
+        try:
+            write_outputs(pipe, outputs.staging, result, gt, mcap_source, copy_topics,
+                          skipped=notes if partial else None, album=album, spool=spool)
+        finally:
+            if spool is not None:  # a working file inside the staging folder: never published
+                spool.discard()
         if partial:
             outputs.mark_partial(partial_text(result, notes, read_to_end=read_to_end))
     except KeyboardInterrupt:
@@ -88,7 +94,7 @@ def _write_error(e: OSError, outputs: OutputSet) -> InputError:
 
 def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
                   mcap_source: Path | None, copy_topics: list[str] | None = None,
-                  skipped: list[str] | None = None, album=None) -> None:
+                  skipped: list[str] | None = None, album=None, spool=None) -> None:
     """Write every output of a run into ``out_dir`` (normally an :class:`OutputSet` staging folder).
 
     ``album``: the run's :class:`~.loop_pictures.KeyframeAlbum` (loop pictures), removed here.
@@ -158,7 +164,7 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
     pictures = _PictureThread(out_dir, album, rows, cfg) if album is not None else None
     try:
         _write_mcap_and_plots(pipe, out_dir, result, gt, mcap_source, copy_topics, skipped, outputs, odom, corrected,
-                              kf_corr, ate_before, ate_after)
+                              kf_corr, ate_before, ate_after, spool)
     except BaseException:  # an error or Ctrl-C: the pictures stop between two, nothing is written after we leave
         if pictures is not None:
             pictures.join(stop=True)
@@ -225,7 +231,7 @@ class _PictureThread:
 
 
 def _write_mcap_and_plots(pipe, out_dir, result, gt, mcap_source, copy_topics, skipped, outputs, odom, corrected,
-                          kf_corr, ate_before, ate_after) -> None:
+                          kf_corr, ate_before, ate_after, spool=None) -> None:
     cfg = pipe.config
     # ---- corrected MCAP (input topics + corrected trajectory)
     if mcap_source is not None and len(corrected) == 0 and skipped is not None:
@@ -243,7 +249,7 @@ def _write_mcap_and_plots(pipe, out_dir, result, gt, mcap_source, copy_topics, s
                             kf_ids=[k.id for k in pipe.keyframes], kf_corrected=kf_corr, loops=accepted,
                             log_frames=frames, run_conf=cfg.run, copy_from=mcap_source,
                             copy_topics=copy_topics or [], io_conf=cfg.io, gt_poses=gt_file,
-                            gt_alignment=ate_after.alignment if ate_after is not None else None)
+                            gt_alignment=ate_after.alignment if ate_after is not None else None, spooled=spool)
         outputs.append("corrected.mcap")
 
     # ---- plots
