@@ -120,3 +120,40 @@ def test_picture_thread_stops_between_pictures_when_the_outputs_are_abandoned(mo
     with pytest.raises(KeyboardInterrupt):
         t.join()
     assert t.stop.is_set() and not t.thread.is_alive() and closed == [1]
+
+
+def test_many_loops_each_get_a_picture_in_order_and_the_contact_sheet_keeps_at_most_its_cap(tmp_path):
+    """130 accepted loops: 130 pictures listed in the chosen order (two threads make them), a thumbnail
+    each, and a contact sheet of CONTACT_SHEET_MAX (120) evenly spread tiles (4 to a row)."""
+    from types import SimpleNamespace
+
+    from slam_lcd.config import load_config
+    from slam_lcd.outputs.loop_pictures import (CONTACT_SHEET_MAX, KeyframeAlbum, _pictured,
+                                                write_loop_pictures)
+
+    rng = np.random.default_rng(0)
+    album = KeyframeAlbum(tmp_path / "album")
+    for k in range(131):
+        kp = rng.uniform(4, 60, (12, 2)).astype(np.float32)
+        feats = SimpleNamespace(keypoints=kp, descriptors=rng.standard_normal((12, 8)).astype(np.float32),
+                                image_size=(64, 48))
+        album(SimpleNamespace(id=k, image=rng.integers(0, 255, (48, 64), dtype=np.uint8), features=feats))
+    rows = []
+    for q in range(1, 131):
+        album.keep_loop(SimpleNamespace(query_id=q, match_id=q - 1, n_matches=12, graph_matches=np.stack(
+            [np.arange(12), np.arange(12)], 1), graph=SimpleNamespace(kept=np.arange(10), n_nodes=10)))
+        rows.append(dict(query_id=q, match_id=q - 1, backend_verdict="accepted", backend_reason="ok", reason="ok",
+                         rank=0, bow_score="0.5", n_matches=12, graph_nodes=10, pose_inliers=9, gt_distance_m="",
+                         err_trans_m="", err_rot_deg=""))
+    thumbs: dict = {}
+    names = write_loop_pictures(tmp_path, album, rows, load_config("default").lcd, 0, thumbnails=thumbs)
+    expected = [picture_name(r["query_id"], r["match_id"], "accepted") for r, _ in _pictured(rows, 0)]
+    assert names == expected + [CONTACT_SHEET] and len(expected) == 130
+    assert sorted(thumbs) == sorted(expected)
+    for n in names[:-1:17]:
+        img = cv2.imread(str(tmp_path / LOOPS_DIR / n))
+        assert img.shape[1] == 128 and img.shape[0] > 48
+    sheet = cv2.imread(str(tmp_path / LOOPS_DIR / CONTACT_SHEET))
+    tile_h = round(img.shape[0] * 360 / 128)
+    assert sheet.shape[1] == 4 * (360 + 8)
+    assert sheet.shape[0] == (CONTACT_SHEET_MAX // 4) * (tile_h + 8)
