@@ -433,6 +433,12 @@ def bench_demo(args) -> None:
           f"(in the background: {ext / max(res.n_keyframes, 1) * 1e3:.0f} ms per keyframe)")
     for k, v in sorted(res.stages.items()):
         print(f"    stage {k:20s} {v['seconds']:8.2f} s  {v['calls']:6d} calls")
+    rss = np.array([r.get("rss_kb", 0) for r in res.keyframe_seconds], np.float64) / 1024
+    if len(rss) > 1:  # with the extraction running (the log benchmark's features are cached)
+        a = min(len(rss) // 4, 100)
+        print(f"  resident memory (extracting): {rss[0]:.0f} MB at the first keyframe, {rss.max():.0f} MB at most, "
+              f"{rss[-1]:.0f} MB at the last; growth after keyframe {a}: "
+              f"{1024 * (rss[-1] - rss[a]) / max(len(rss) - 1 - a, 1):.0f} kB per keyframe")
 
 
 def bench_log(args) -> None:

@@ -15,9 +15,14 @@ and 37.1 s. So the arenas are limited to one (``M_ARENA_MAX``); SuperPoint's thr
 detection then share the main heap's lock, which cost less than the page faults in every run
 measured (docs/features.md).
 
-The cost is that the heap keeps up to ``trim_threshold`` bytes of freed memory instead of
-returning it to the system; a SuperPoint forward pass holds about 250 MB at its peak, so that
-memory is reused every keyframe anyway. The settings are process-wide, applied once by the
+The cost is that the heap keeps freed memory instead of returning it to the system; a
+SuperPoint forward pass holds about 250 MB at its peak, so that memory is reused every keyframe
+anyway. But not all of it: the forward's blocks are freed around smaller ones that live on
+(features, the vocabulary's arrays), and the holes between them grew the heap by 0.7-1.5 MB per
+keyframe on the 10-lap demo log (835 keyframes: 1.1 GB free inside a 2 GB process). So
+:func:`trim_when_fragmented`, called after each forward, hands free pages back
+(``malloc_trim``, ~30 ms) once more than :data:`FREE_LIMIT` bytes lie free in the heap: a
+few times per thousand keyframes, each costing the next forwards their page faults once. The settings are process-wide, applied once by the
 program itself (not by the user's environment), and a no-op where the C library is not glibc.
 An arena that a thread already holds stays its own: applied before the extraction threads start.
 """
@@ -37,6 +42,10 @@ _M_MMAP_MAX = -4
 _M_ARENA_MAX = -8
 
 _applied: str | None = None
+_libc = None
+
+# freed memory the heap may hold before trim_when_fragmented returns it (two forwards' working sets fit)
+FREE_LIMIT = 256 << 20
 
 
 def retain_freed_memory(trim_threshold: int = 1 << 30, top_pad: int = 64 << 20) -> bool:
@@ -53,6 +62,7 @@ def retain_freed_memory(trim_threshold: int = 1 << 30, top_pad: int = 64 << 20) 
         gnu_get_libc_version = libc.gnu_get_libc_version  # present in glibc only
     except (OSError, AttributeError):
         return False
+    global _libc
     mallopt.argtypes = [ctypes.c_int, ctypes.c_int]
     mallopt.restype = ctypes.c_int
     gnu_get_libc_version.restype = ctypes.c_char_p
@@ -61,6 +71,7 @@ def retain_freed_memory(trim_threshold: int = 1 << 30, top_pad: int = 64 << 20) 
     ok = ok and bool(mallopt(_M_ARENA_MAX, 1))
     if ok:
         _applied = "retain"
+        _libc = libc
         log.debug("glibc %s: large blocks from the heap, freed memory kept (trim threshold %d MB)",
                   gnu_get_libc_version().decode(), trim_threshold >> 20)
     return ok
@@ -69,3 +80,36 @@ def retain_freed_memory(trim_threshold: int = 1 << 30, top_pad: int = 64 << 20) 
 def allocator_state() -> str:
     """'retain' once applied, 'unavailable' where it could not be, 'system' when never asked."""
     return _applied or "system"
+
+
+class _MallInfo2(ctypes.Structure):
+    _fields_ = [(n, ctypes.c_size_t) for n in
+                ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks", "fordblks",
+                 "keepcost")]
+
+
+def heap_free_bytes() -> int | None:
+    """Bytes lying free inside glibc's heaps (``mallinfo2``, glibc >= 2.33); None where unknown."""
+    if _libc is None or not hasattr(_libc, "mallinfo2"):
+        return None
+    _libc.mallinfo2.restype = _MallInfo2
+    return int(_libc.mallinfo2().fordblks)
+
+
+_free_after_trim = 0
+
+
+def trim_when_fragmented(limit: int = FREE_LIMIT) -> bool:
+    """With 'retain' applied: ``malloc_trim(0)`` once the heap's free bytes grew by more than ``limit``
+    since the last trim; True if trimmed.
+
+    Free chunks whose pages were handed back still count as free (``mallinfo2``), hence the
+    growth since the last trim, not the total. ``mallinfo2`` takes ~2 us: cheap after every forward."""
+    global _free_after_trim
+    free = heap_free_bytes()
+    if free is None or free - _free_after_trim <= limit:
+        return False
+    _libc.malloc_trim(0)
+    _free_after_trim = heap_free_bytes() or 0
+    log.debug("glibc heap: %d MB free inside it; pages returned to the system (malloc_trim)", free >> 20)
+    return True

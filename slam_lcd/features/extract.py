@@ -21,7 +21,7 @@ import torch
 from ..errors import ConfigError
 from ..types import Features
 from ..vision.gray import to_gray_float, to_gray_uint8
-from .allocator import retain_freed_memory
+from .allocator import retain_freed_memory, trim_when_fragmented
 from .config import FeaturesConfig
 from .superpoint import SuperPoint
 from .weights import load_state_dict_checked, resolve_weights, sha256_of
@@ -109,7 +109,8 @@ class SuperPointExtractor(Extractor):
         self._channels_last = self.device.type == "cpu" and conf.cpu_channels_last
         if self._channels_last:
             self.model = self.model.to(memory_format=torch.channels_last)
-        if self.device.type == "cpu" and conf.cpu_allocator == "retain":
+        self._trim_heap = self.device.type == "cpu" and conf.cpu_allocator == "retain"
+        if self._trim_heap:
             retain_freed_memory()
         if conf.precision == "bfloat16" and not bfloat16_is_native(self.device):
             log.warning("features.precision bfloat16: this %s has no native bfloat16 arithmetic; SuperPoint runs "
@@ -145,6 +146,8 @@ class SuperPointExtractor(Extractor):
             batch = batch.contiguous(memory_format=torch.channels_last)
         with torch.inference_mode():
             out = self.model({"image": batch.to(self.device, non_blocking=True)})
+            if self._trim_heap:  # the retained heap's holes do not pile up (features/allocator.py)
+                trim_when_fragmented()
             counts = [len(k) for k in out["keypoints"]]
             # one device-to-host copy for the whole batch: [x, y, score, descriptor...] rows
             packed = torch.cat(
