@@ -96,20 +96,29 @@ def heap_free_bytes() -> int | None:
     return int(_libc.mallinfo2().fordblks)
 
 
+# calls of trim_when_fragmented between two trims at least (and before the first): a trim costs the
+# next forward passes their page faults once, so it must never come every forward
+TRIM_MIN_CALLS = 50
 _free_after_trim = 0
+_calls_since_trim = 0
 
 
-def trim_when_fragmented(limit: int = FREE_LIMIT) -> bool:
+def trim_when_fragmented(limit: int = FREE_LIMIT, min_calls: int = TRIM_MIN_CALLS) -> bool:
     """With 'retain' applied: ``malloc_trim(0)`` once the heap's free bytes grew by more than ``limit``
-    since the last trim; True if trimmed.
+    since the last trim, and at most once per ``min_calls`` calls; True if trimmed.
 
     Free chunks whose pages were handed back still count as free (``mallinfo2``), hence the
-    growth since the last trim, not the total. ``mallinfo2`` takes ~2 us: cheap after every forward."""
-    global _free_after_trim
+    growth since the last trim, not the total; but a trim also shrinks the heap's top, which the
+    next forward grows again, hence the spacing. ``mallinfo2`` takes ~2 us: cheap after every forward."""
+    global _free_after_trim, _calls_since_trim
+    _calls_since_trim += 1
+    if _calls_since_trim < min_calls:
+        return False
     free = heap_free_bytes()
     if free is None or free - _free_after_trim <= limit:
         return False
     _libc.malloc_trim(0)
+    _calls_since_trim = 0
     _free_after_trim = heap_free_bytes() or 0
     log.debug("glibc heap: %d MB free inside it; pages returned to the system (malloc_trim)", free >> 20)
     return True
