@@ -21,9 +21,12 @@ anyway. But not all of it: the forward's blocks are freed around smaller ones th
 (features, the vocabulary's arrays), and the holes between them grew the heap by 0.7-1.5 MB per
 keyframe on the 10-lap demo log (835 keyframes: 1.1 GB free inside a 2 GB process). So
 :func:`trim_when_fragmented`, called after each forward, hands free pages back
-(``malloc_trim``, ~30 ms) once more than :data:`FREE_LIMIT` bytes lie free in the heap: a
-few times per thousand keyframes, each costing the next forwards their page faults once. The settings are process-wide, applied once by the
-program itself (not by the user's environment), and a no-op where the C library is not glibc.
+(``malloc_trim``, ~7-30 ms) once the heap's free bytes grew by :data:`FREE_LIMIT` since the
+last trim, at most once per :data:`TRIM_MIN_CALLS` forwards: 6-7 times in 835 keyframes, each
+costing the next forwards their page faults once.
+
+The settings are process-wide, applied once by the program itself (not by the user's
+environment), and a no-op where the C library is not glibc.
 An arena that a thread already holds stays its own: applied before the extraction threads start.
 """
 from __future__ import annotations
@@ -44,13 +47,19 @@ _M_ARENA_MAX = -8
 _applied: str | None = None
 _libc = None
 
-# freed memory the heap may hold before trim_when_fragmented returns it (two forwards' working sets fit)
+# growth of the heap's free bytes after which trim_when_fragmented returns them (two forwards' working sets fit)
 FREE_LIMIT = 256 << 20
+
+
+class _MallInfo2(ctypes.Structure):
+    _fields_ = [(n, ctypes.c_size_t) for n in
+                ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks", "fordblks",
+                 "keepcost")]
 
 
 def retain_freed_memory(trim_threshold: int = 1 << 30, top_pad: int = 64 << 20) -> bool:
     """Serve large blocks from the one main heap and keep freed memory for reuse; True when applied."""
-    global _applied
+    global _applied, _libc
     if _applied is not None:
         return _applied == "retain"
     _applied = "unavailable"
@@ -62,7 +71,6 @@ def retain_freed_memory(trim_threshold: int = 1 << 30, top_pad: int = 64 << 20) 
         gnu_get_libc_version = libc.gnu_get_libc_version  # present in glibc only
     except (OSError, AttributeError):
         return False
-    global _libc
     mallopt.argtypes = [ctypes.c_int, ctypes.c_int]
     mallopt.restype = ctypes.c_int
     gnu_get_libc_version.restype = ctypes.c_char_p
@@ -72,6 +80,8 @@ def retain_freed_memory(trim_threshold: int = 1 << 30, top_pad: int = 64 << 20) 
     if ok:
         _applied = "retain"
         _libc = libc
+        if hasattr(libc, "mallinfo2"):  # glibc >= 2.33
+            libc.mallinfo2.restype = _MallInfo2
         log.debug("glibc %s: large blocks from the heap, freed memory kept (trim threshold %d MB)",
                   gnu_get_libc_version().decode(), trim_threshold >> 20)
     return ok
@@ -82,17 +92,11 @@ def allocator_state() -> str:
     return _applied or "system"
 
 
-class _MallInfo2(ctypes.Structure):
-    _fields_ = [(n, ctypes.c_size_t) for n in
-                ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks", "fordblks",
-                 "keepcost")]
-
 
 def heap_free_bytes() -> int | None:
     """Bytes lying free inside glibc's heaps (``mallinfo2``, glibc >= 2.33); None where unknown."""
     if _libc is None or not hasattr(_libc, "mallinfo2"):
         return None
-    _libc.mallinfo2.restype = _MallInfo2
     return int(_libc.mallinfo2().fordblks)
 
 
