@@ -138,9 +138,17 @@ def deserialised(path, records, deser, use_header: bool):
         yield LogMessage(topic, msgtype, stamp, t, msg)
 
 
-def with_raw_copies(records, wanted: frozenset, raw_topics: frozenset, raw_sink):
-    """The ``(meta, log_time, bytes)`` records of ``wanted`` topics; those of ``raw_topics`` are also
-    handed to ``raw_sink`` as :class:`RawMessage` (one pass over the log serves both)."""
+def with_raw_copies(read, names, raw_names=(), raw_sink=None):
+    """``read(topics)``'s ``(meta, log_time, bytes)`` records of ``names``; with ``raw_sink``, the one
+    pass also reads ``raw_names`` and hands their records to it as :class:`RawMessage` (shared by
+    both backends' ``messages``)."""
+    if raw_sink is None:
+        return read(list(names))
+    extra = [n for n in raw_names if n not in names]
+    return _copying(read(list(names) + extra), frozenset(names), frozenset(raw_names), raw_sink)
+
+
+def _copying(records, wanted: frozenset, raw_topics: frozenset, raw_sink):
     for rec in records:
         (topic, msgtype, _, _), t, data = rec
         if topic in raw_topics:

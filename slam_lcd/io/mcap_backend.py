@@ -178,11 +178,11 @@ class McapStreamBackend:
 
     def messages(self, names, use_header, raw_names=(), raw_sink=None):
         meta = self.meta
-        extra = [n for n in raw_names if n not in names] if raw_sink is not None else []
-        records = ((meta[cid], t, data) for cid, t, data in self._records(list(names) + extra))
-        if raw_sink is not None:
-            records = with_raw_copies(records, frozenset(names), frozenset(raw_names), raw_sink)
-        yield from deserialised(self.path, records, self.deser, use_header)
+
+        def records(topics):
+            return ((meta[cid], t, data) for cid, t, data in self._records(topics))
+
+        yield from deserialised(self.path, with_raw_copies(records, names, raw_names, raw_sink), self.deser, use_header)
 
     def close(self):
         self.fh.close()

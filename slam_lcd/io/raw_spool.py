@@ -35,7 +35,6 @@ class RawSpool:
         self._names: list[tuple[str, str]] = []  # index -> (topic, msgtype)
         self._fh = open(self.path, "wb", buffering=1 << 20)
         self.count = 0
-        self.nbytes = 0
         self.complete = False
 
     def add(self, m: RawMessage) -> None:
@@ -46,7 +45,6 @@ class RawSpool:
         self._fh.write(_HEAD.pack(i, int(m.log_time), len(m.data)))
         self._fh.write(m.data)
         self.count += 1
-        self.nbytes += _HEAD.size + len(m.data)
 
     def finish(self, complete: bool) -> None:
         """Stop writing; ``complete``: the pass read the log to its end."""

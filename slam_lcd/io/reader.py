@@ -172,9 +172,7 @@ class LogReader:
         raw = self.resolve_topics(raw_topics) if raw_sink is not None and raw_topics else []
         if not names and not raw:
             return iter(())
-        if not raw:
-            return self._backend.messages(names, self.stamp_source == "header")
-        return self._backend.messages(names, self.stamp_source == "header", raw, raw_sink)
+        return self._backend.messages(names, self.stamp_source == "header", raw, raw_sink if raw else None)
 
     def deserialise(self, raw: RawMessage):
         """The message object of a :class:`RawMessage` read from this log."""

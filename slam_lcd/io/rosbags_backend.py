@@ -81,16 +81,13 @@ class RosbagsBackend:
     def messages(self, names, use_header, raw_names=(), raw_sink=None):
         meta = self.meta
         last = [None]
-        extra = [n for n in raw_names if n not in names] if raw_sink is not None else []
 
-        def records():
-            for conn, t, data in self._stream(list(names) + extra):
+        def records(topics):
+            for conn, t, data in self._stream(topics):
                 last[0] = t
                 yield meta[id(conn)], t, data
 
-        stream = records()
-        if raw_sink is not None:
-            stream = with_raw_copies(stream, frozenset(names), frozenset(raw_names), raw_sink)
+        stream = with_raw_copies(records, names, raw_names, raw_sink)
         try:
             yield from deserialised(self.path, stream, self.deser, use_header)
         except SlamLcdError:
