@@ -1,4 +1,4 @@
-"""Loop pictures (issue 19): a PNG per accepted loop under loops/ (the two keyframe images side
+"""Loop pictures (issue 19): a JPEG per accepted loop under loops/ (the two keyframe images side
 by side, surviving matches and graph edges), the back end's rejections and the closest
 detector rejections with their reason, a contact sheet; the keyframe album is gone after
 the run; a second run replaces the folder as a whole."""
@@ -25,7 +25,7 @@ def test_a_picture_per_accepted_loop_and_a_contact_sheet(report_run):
         # matches drawn: green pixels (surviving matches) well beyond what the grey images hold
         green = (img[..., 1] > 180) & (img[..., 0] < 120) & (img[..., 2] < 120)
         assert green.sum() > 200
-    rejected = sorted(folder.glob("*_rejected.png"))
+    rejected = sorted(folder.glob("*_rejected.jpg"))
     assert 1 <= len(rejected) <= 8 + rep["loops"]["rejected_by_backend"]
     sheet = cv2.imread(str(folder / CONTACT_SHEET))
     assert sheet is not None and sheet.shape[0] > 100
