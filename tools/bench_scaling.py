@@ -433,12 +433,13 @@ def bench_demo(args) -> None:
           f"(in the background: {ext / max(res.n_keyframes, 1) * 1e3:.0f} ms per keyframe)")
     for k, v in sorted(res.stages.items()):
         print(f"    stage {k:20s} {v['seconds']:8.2f} s  {v['calls']:6d} calls")
-    rss = np.array([r.get("rss_kb", 0) for r in res.keyframe_seconds], np.float64) / 1024
-    if len(rss) > 1:  # with the extraction running (the log benchmark's features are cached)
-        a = min(len(rss) // 4, 100)
+    rss_kb = np.array([r.get("rss_kb", 0) for r in res.keyframe_seconds], np.float64)
+    if len(rss_kb) > 1:  # with the extraction running (the log benchmark's features are cached)
+        a = min(len(rss_kb) // 4, 100)
+        rss = rss_kb / 1024
         print(f"  resident memory (extracting): {rss[0]:.0f} MB at the first keyframe, {rss.max():.0f} MB at most, "
               f"{rss[-1]:.0f} MB at the last; growth after keyframe {a}: "
-              f"{1024 * (rss[-1] - rss[a]) / max(len(rss) - 1 - a, 1):.0f} kB per keyframe")
+              f"{_rss_growth_kb(rss_kb, a):.0f} kB per keyframe")
 
 
 def bench_log(args) -> None:
@@ -478,8 +479,12 @@ def bench_log(args) -> None:
     print(f"  LCD + back end per keyframe: keyframes 100-200 {1e3 * early:.1f} ms, last 100 {1e3 * late:.1f} ms, "
           f"growth late/early {late / early:.2f}")
     if n > 200:
-        kb = (ks[-1, 2] - ks[100, 2]) / (n - 101)
-        print(f"  resident memory growth after keyframe 100: {kb:.0f} kB per keyframe")
+        print(f"  resident memory growth after keyframe 100: {_rss_growth_kb(ks[:, 2], 100):.0f} kB per keyframe")
+
+
+def _rss_growth_kb(rss_kb: np.ndarray, after: int) -> float:
+    """Resident memory added per keyframe from keyframe ``after`` to the last (kB; ``rss_kb`` per keyframe)."""
+    return float(rss_kb[-1] - rss_kb[after]) / max(len(rss_kb) - 1 - after, 1)
 
 
 def main(argv=None) -> None:

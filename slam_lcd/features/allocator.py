@@ -92,7 +92,6 @@ def allocator_state() -> str:
     return _applied or "system"
 
 
-
 def heap_free_bytes() -> int | None:
     """Bytes lying free inside glibc's heaps (``mallinfo2``, glibc >= 2.33); None where unknown."""
     if _libc is None or not hasattr(_libc, "mallinfo2"):

@@ -39,6 +39,9 @@ ALBUM_MAX_WIDTH = 640  # stored images are scaled down to this width (keypoints 
 # lines keep their colour (99% of the green pixels; 4:2:0 kept 46-71%). 3,000 loops of an
 # hour-long log are then ~1.6 GB less disk and ~45 s less CPU.
 PICTURE_JPEG = [cv2.IMWRITE_JPEG_QUALITY, 90, cv2.IMWRITE_JPEG_SAMPLING_FACTOR, cv2.IMWRITE_JPEG_SAMPLING_FACTOR_444]
+PICTURE_THREADS = 2  # pictures made at a time (write_loop_pictures)
+CONTACT_TILE_WIDTH = 360
+CONTACT_SHEET_MAX = 120  # tiles on the contact sheet at most (evenly spread over the accepted loops)
 
 
 class KeyframeAlbum:
@@ -327,11 +330,6 @@ def _make_picture(folder: Path, album: KeyframeAlbum, row: dict, verdict: str, l
         ok, buf = cv2.imencode(".jpg", _scaled(tile, thumb_width), [cv2.IMWRITE_JPEG_QUALITY, 80])
         thumb = buf.tobytes() if ok else None
     return name, verdict, tile, thumb
-
-
-PICTURE_THREADS = 2
-CONTACT_TILE_WIDTH = 360
-CONTACT_SHEET_MAX = 120  # tiles on the contact sheet at most (evenly spread over the accepted loops)
 
 
 def _scaled(img: np.ndarray, width: int) -> np.ndarray:
