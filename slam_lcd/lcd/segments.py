@@ -7,6 +7,9 @@ rounds, two directions, five candidates per keyframe).
 
 How (:func:`crosses_any`, the question verification asks):
 
+0. Few segments (<= 256, half of the graphs of a demo run): every pair, from one index table
+   kept for all calls. Below that size the grid's bookkeeping (a few dozen small array
+   operations) costs more than the ~32,000 pair tests it avoids.
 1. Each segment is tested against the next 3 segments in the grid order of their mid points
    (E x 3 tests). In a scrambled drawing (a false loop, or the outliers of a true one) long
    segments with nearby mid points nearly always cross, so this settles almost every one.
@@ -37,6 +40,20 @@ import numpy as np
 _FIRST_PASS_NEIGHBOURS = 3  # pass 1: each segment against this many next ones in mid-point grid order
 _DIRECT_MAX_OPEN = 48  # at most this many unsettled segments: test them against all (cheaper than the grid)
 _PAIR_CHUNK = 1 << 20  # candidate pairs tested per block (bounds the temporaries)
+_ALL_PAIRS_MAX = 256  # up to this many segments crosses_any tests every pair (step 0 of the module note)
+
+
+_PAIRS: tuple[np.ndarray, np.ndarray] | None = None  # every pair (i < j < _ALL_PAIRS_MAX), ordered by j
+
+
+def _pairs_below(m: int) -> tuple[np.ndarray, np.ndarray]:
+    """Every pair (i < j < m) for m <= _ALL_PAIRS_MAX: a prefix of one table ordered by j (0.5 MB, built once)."""
+    global _PAIRS
+    if _PAIRS is None:
+        j, i = np.tril_indices(_ALL_PAIRS_MAX, -1)  # rows j > columns i, row-major: ordered by j
+        _PAIRS = (i, j)
+    n = m * (m - 1) // 2
+    return _PAIRS[0][:n], _PAIRS[1][:n]
 
 
 class _Segments:
@@ -209,6 +226,9 @@ def crosses_any(points: np.ndarray, edges: np.ndarray) -> np.ndarray:
     if m < 2:
         return crossed
     segs = _Segments(points, edges)
+    if m <= _ALL_PAIRS_MAX:  # step 0: every pair
+        _test_and_mark(segs, *_pairs_below(m), crossed)
+        return crossed
     # pass 1: each segment against the next few in the grid order of the mid points
     mx, my = 0.5 * (segs.px + segs.qx), 0.5 * (segs.py + segs.qy)
     x0, y0 = mx.min(), my.min()
