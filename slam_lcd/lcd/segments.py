@@ -9,7 +9,8 @@ How (:func:`crosses_any`, the question verification asks):
 
 0. Few segments (<= 256, half of the graphs of a demo run): every pair, from one index table
    kept for all calls. Below that size the grid's bookkeeping (a few dozen small array
-   operations) costs more than the ~32,000 pair tests it avoids.
+   operations) costs more than the pair tests it avoids; at most 32,640 of them, a constant,
+   so the cost per call stated below holds for every size.
 1. Each segment is tested against the next 3 segments in the grid order of their mid points
    (E x 3 tests). In a scrambled drawing (a false loop, or the outliers of a true one) long
    segments with nearby mid points nearly always cross, so this settles almost every one.
