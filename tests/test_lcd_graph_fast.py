@@ -77,7 +77,7 @@ def test_small_drawings_all_pairs_and_grid_paths_agree(monkeypatch):
     from slam_lcd.lcd import segments
 
     rng = np.random.default_rng(9)
-    cases = []
+    drawings = []
     for n, wrong in [(20, 0.0), (40, 0.1), (60, 0.5), (85, 0.05)]:  # 40-250 edges
         src = rng.uniform([0, 0], [640, 480], (n, 2))
         _, edges = planar_graph(src, 3.0)
@@ -85,17 +85,14 @@ def test_small_drawings_all_pairs_and_grid_paths_agree(monkeypatch):
         bad = rng.choice(n, int(wrong * n), replace=False)
         dst[bad] = rng.uniform([0, 0], [640, 480], (len(bad), 2))
         assert 2 <= len(edges) <= segments._ALL_PAIRS_MAX
-        cases.append((dst, edges, ref.crossing_edges(dst, edges) > 0))
-    cases.append((rng.integers(0, 10, (30, 2)).astype(np.float64), rng.integers(0, 30, (200, 2)), None))
-    for pts, edges, expect in cases:
-        edges = edges[edges[:, 0] != edges[:, 1]]
-        expect = ref.crossing_edges(pts, edges) > 0 if expect is None else expect
-        assert np.array_equal(crosses_any(pts, edges), expect)
-    monkeypatch.setattr(segments, "_ALL_PAIRS_MAX", 0)  # the grid path for every size
-    for pts, edges, expect in cases:
-        edges = edges[edges[:, 0] != edges[:, 1]]
-        expect = ref.crossing_edges(pts, edges) > 0 if expect is None else expect
-        assert np.array_equal(crosses_any(pts, edges), expect)
+        drawings.append((dst, edges))
+    edges = rng.integers(0, 30, (200, 2))
+    drawings.append((rng.integers(0, 10, (30, 2)).astype(np.float64), edges[edges[:, 0] != edges[:, 1]]))
+    cases = [(pts, edges, ref.crossing_edges(pts, edges) > 0) for pts, edges in drawings]
+    for limit in (segments._ALL_PAIRS_MAX, 0):  # 0: the grid path for every size
+        monkeypatch.setattr(segments, "_ALL_PAIRS_MAX", limit)
+        for pts, edges, expect in cases:
+            assert np.array_equal(crosses_any(pts, edges), expect)
 
 
 def test_planar_graph_and_empty_inputs_unchanged():

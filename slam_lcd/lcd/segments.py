@@ -42,8 +42,6 @@ _FIRST_PASS_NEIGHBOURS = 3  # pass 1: each segment against this many next ones i
 _DIRECT_MAX_OPEN = 48  # at most this many unsettled segments: test them against all (cheaper than the grid)
 _PAIR_CHUNK = 1 << 20  # candidate pairs tested per block (bounds the temporaries)
 _ALL_PAIRS_MAX = 256  # up to this many segments crosses_any tests every pair (step 0 of the module note)
-
-
 _PAIRS: tuple[np.ndarray, np.ndarray] | None = None  # every pair (i < j < _ALL_PAIRS_MAX), ordered by j
 
 
