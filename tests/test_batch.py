@@ -343,3 +343,33 @@ def test_ray_missing_is_a_one_line_error(monkeypatch, tmp_path, batch_inputs):
     with pytest.raises(InputError, match=r"pip install 'slam-lcd\[ray\]'"):
         run_batch([log_path(logs, "demo_mcap")], tmp_path / "out", cfg, ray="local", progress=False)
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("when", ["after_publish", "before_any_output"])
+def test_ctrl_c_around_publish_is_reported_by_what_the_folder_holds(batch_inputs, tmp_path, monkeypatch, when):
+    """A Ctrl-C that lands after run_log published its complete set (the race CI met on Ray) is an
+    ``ok`` row from that set's report; one that lands before any output is ``interrupted``, nothing written."""
+    import slam_lcd.runner as runner
+    from slam_lcd.batch.done import completed_report
+    from slam_lcd.batch.worker import LogTask, SharedWork, run_task
+
+    logs, cfg = batch_inputs
+    real = runner.run_log
+
+    def run_then_ctrl_c(*args, **kwargs):
+        if when == "after_publish":
+            real(*args, **kwargs)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(runner, "run_log", run_then_ctrl_c)
+    out = tmp_path / "demo_ros1"
+    task = LogTask(log=str(log_path(logs, "demo_ros1")), name="demo_ros1", out_dir=str(out))
+    row = run_task(task, SharedWork(config=cfg))
+    if when == "after_publish":
+        assert row["status"] == "ok" and "interrupted" in row["message"], row
+        report, why = completed_report(out, cfg, task.log)
+        assert report is not None, why
+        assert row["keyframes"] == report["keyframes"] > 0
+    else:
+        assert row["status"] == "interrupted" and "no new outputs" in row["message"], row
+        assert not out.exists()

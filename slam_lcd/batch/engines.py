@@ -16,12 +16,13 @@ from __future__ import annotations
 
 import logging
 import os
+import time
 from pathlib import Path
 from typing import Callable, Sequence
 
 from ..errors import InputError
 from .rows import error_row, interrupted_row
-from .worker import LogTask, SharedWork, pool_worker_init, run_task
+from .worker import LogTask, SharedWork, pool_worker_init, run_task, stopped_row
 
 log = logging.getLogger(__name__)
 
@@ -182,18 +183,21 @@ class RayEngine(Engine):
         queue = list(tasks)
         limit = self.workers or len(queue)
         inflight: dict = {}
+        submitted: dict[str, int] = {}  # when each log was handed to Ray (see stopped_row)
 
         def submit():
             while queue and len(inflight) < limit:
                 t = queue.pop(0)
                 inflight[remote.remote(t, shared_ref)] = t
+                submitted[t.name] = time.time_ns()
 
         submit()
         try:
             while inflight:
                 done, _ = ray.wait(list(inflight), num_returns=1)
                 for ref in done:
-                    on_row(_ray_row(ray, ref, inflight.pop(ref)))
+                    t = inflight.pop(ref)
+                    on_row(_ray_row(ray, ref, t, shared.config, submitted[t.name]))
                 submit()
         except KeyboardInterrupt:
             queue.clear()
@@ -204,17 +208,19 @@ class RayEngine(Engine):
             finished = set(done)
             for ref in refs:
                 t = inflight.pop(ref)
-                on_row(_ray_row(ray, ref, t) if ref in finished else interrupted_row(t.name, t.log, t.out_dir))
+                since = submitted[t.name]
+                on_row(_ray_row(ray, ref, t, shared.config, since) if ref in finished
+                       else stopped_row(t, shared.config, since))
             raise
 
 
-def _ray_row(ray, ref, task: LogTask) -> dict:
+def _ray_row(ray, ref, task: LogTask, config, since_ns: int) -> dict:
     from ray.exceptions import RayTaskError, TaskCancelledError
 
     try:
         return ray.get(ref)
-    except TaskCancelledError:
-        return interrupted_row(task.name, task.log, task.out_dir)
+    except TaskCancelledError:  # the Ctrl-C reached the task outside run_log (maybe after it published)
+        return stopped_row(task, config, since_ns)
     except RayTaskError as e:  # run_task returns rows for failing logs: this is Ray's or the worker's failure
         return error_row(task.name, task.log, task.out_dir, f"{task.log}: the Ray task failed ({e.cause!r})")
     except Exception as e:  # worker or node lost after its retries, object lost ...

@@ -6,7 +6,8 @@ carry objects that only make sense in the process that made them.
 
 The columns (:data:`COLUMNS`, explained in docs/batch.md):
 
-- ``status``: ``ok`` (run now, complete outputs), ``skipped`` (complete outputs of the same
+- ``status``: ``ok`` (run now, complete outputs; also a run that published its complete set
+  just before a Ctrl-C reached it), ``skipped`` (complete outputs of the same
   configuration were there already: nothing was run), ``error`` (the log failed; ``message``
   says why, in one line naming the file), ``interrupted`` (Ctrl-C while it ran: its folder
   holds a set marked partial, or nothing), ``cancelled`` (Ctrl-C before it started);

@@ -27,6 +27,7 @@ import json
 import os
 import signal
 import threading
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -168,6 +169,7 @@ def _run(task: LogTask, shared: SharedWork) -> dict:
     for k, v in shared.env.items():
         if os.environ.get(k) != v:
             os.environ[k] = v
+    started_ns = time.time_ns()
     try:
         limit_threads(shared.threads)
         cfg = shared.config
@@ -178,7 +180,7 @@ def _run(task: LogTask, shared: SharedWork) -> dict:
                          depth_topic=shared.depth_topic, extractor=extractor, vocab=vocab, progress=False,
                          write_mcap=shared.write_mcap, input_paths=shared.input_paths)
     except KeyboardInterrupt:
-        return interrupted_row(task.name, task.log, task.out_dir)
+        return stopped_row(task, shared.config, started_ns)
     except SlamLcdError as e:
         return error_row(task.name, task.log, task.out_dir, str(e))
     except OSError as e:
@@ -189,6 +191,26 @@ def _run(task: LogTask, shared: SharedWork) -> dict:
                          f"{task.log}: internal error ({type(e).__name__}: {e}); rerun it alone with "
                          "`slam-lcd run --debug` for the traceback")
     return row_from_result(task.name, task.log, result)
+
+
+def stopped_row(task: LogTask, config, since_ns: int) -> dict:
+    """The row of a log whose run a Ctrl-C stopped before it returned a result.
+
+    Why not always ``interrupted``: the Ctrl-C can land just after the run published its
+    complete set (between the rename and the return). That folder is a finished result of
+    this configuration, written since ``since_ns``: it is reported ``ok``, from its report.
+    """
+    from .done import completed_report
+
+    report, _ = completed_report(task.out_dir, config, task.log)
+    try:
+        fresh = report is not None and (Path(task.out_dir) / "report.json").stat().st_mtime_ns >= since_ns
+    except OSError:
+        fresh = False
+    if fresh:
+        return row_from_report(task.name, task.log, task.out_dir, report, status="ok",
+                               message="finished as the batch was interrupted (Ctrl-C)")
+    return interrupted_row(task.name, task.log, task.out_dir)
 
 
 def skipped_row(task: LogTask, report: dict) -> dict:
