@@ -275,12 +275,19 @@ def test_striped_first_block_equals_the_whole_image(monkeypatch, stripe_rows):
 
 
 def test_bfloat16_encoder_keeps_the_keypoints_and_descriptors(superpoint_weights, shared_data):
-    """features.precision bfloat16: real frames give (nearly) the float32 features; heads stay float32."""
+    """features.precision bfloat16: real frames give (nearly) the float32 features; heads stay float32.
+
+    Three frames of each source (KITTI, TUM, corridor) where the CPU computes bfloat16 in
+    hardware; one of each where oneDNN emulates it (~5 s per frame on an AVX2-only CPU)."""
     import cv2
 
-    frames = [p for d in ("kitti", "tum_fr2_desk") for p in sorted((shared_data / "frames" / d).glob("*.png"))[:3]]
-    frames += sorted((shared_data / "rtabmap_corridor").glob("*.jpg"))[:3]
-    assert len(frames) == 9
+    from slam_lcd.features.extract import bfloat16_is_native
+
+    per_source = 3 if bfloat16_is_native(torch.device("cpu")) else 1
+    frames = [p for d in ("kitti", "tum_fr2_desk")
+              for p in sorted((shared_data / "frames" / d).glob("*.png"))[:per_source]]
+    frames += sorted((shared_data / "rtabmap_corridor").glob("*.jpg"))[:per_source]
+    assert len(frames) == 3 * per_source
     ex32, ex16 = (load_extractor(FeaturesConfig(weights=str(superpoint_weights), precision=p, feature_cache=False),
                                  device="cpu") for p in ("float32", "bfloat16"))
     assert "backbone_precision" not in ex32.identity()  # float32 caches from before the option keep their key
