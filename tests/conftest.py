@@ -98,22 +98,40 @@ def demo_keyframes_rgbd(superpoint_cpu):
     return demo_keyframes(superpoint_cpu, sensor="rgbd")
 
 
-# --------------------------------------------------------------------------- a run's outputs (issue 19)
-REPORT_RUN_FRAMES = 470  # a little more than one lap of the demo block: loops close
+# --------------------------------------------------------------------------- the short demo log
+# 470 frames: a little more than one lap of the demo block, so the start is revisited and loops close
+DEMO_LOG = dict(frames=470, seed=1, depth=True, width=320, height=240)
 
 
 @pytest.fixture(scope="session")
-def report_run(tmp_path_factory):
-    """`slam-lcd run` (ORB, in-process through the CLI) on a short demo log: (exit status, out dir, log).
+def demo_log_settings() -> dict:
+    """make_demo_log's arguments of the short demo log (for a copy in another format)."""
+    return dict(DEMO_LOG)
+
+
+@pytest.fixture(scope="session")
+def demo_log_mcap(tmp_path_factory) -> Path:
+    """The short RGB-D demo log as MCAP, rendered once per session (~11 s on two cores).
+
+    Read-only for every user: the runs on it write elsewhere, and tests that edit a log copy it."""
+    from slam_lcd.sim import make_demo_log
+
+    path = tmp_path_factory.mktemp("demo_log") / "demo.mcap"
+    make_demo_log(path, "mcap", **DEMO_LOG)
+    return path
+
+
+# --------------------------------------------------------------------------- a run's outputs (issue 19)
+@pytest.fixture(scope="session")
+def report_run(tmp_path_factory, demo_log_mcap):
+    """`slam-lcd run` (ORB, in-process through the CLI) on the short demo log: (exit status, out dir, log).
 
     One run shared by the tests of what a run writes (report.json/html, corrected.mcap,
     loop pictures, plots): ORB keeps it under a minute on two cores."""
     from slam_lcd.cli.main import main
-    from slam_lcd.sim import make_demo_log
 
     root = tmp_path_factory.mktemp("report_run")
-    log = root / "demo.mcap"
-    make_demo_log(log, "mcap", frames=REPORT_RUN_FRAMES, seed=1, depth=True, width=320, height=240)
+    log = demo_log_mcap
     out = root / "out"
     rc = main(["run", str(log), "--out", str(out), "--features", "orb", "--no-feature-cache", "--no-progress",
                "--set", "eval.rpe_delta=2.0"])

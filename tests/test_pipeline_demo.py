@@ -13,18 +13,16 @@ import pytest
 from slam_lcd.config import load_config
 from slam_lcd.io.trajectory_files import read_tum
 
-FRAMES = 470  # a little more than one lap of the block: the start is revisited
-SIZE = dict(width=320, height=240)
-
 
 @pytest.fixture(scope="module")
-def demo_logs(tmp_path_factory):
+def demo_logs(tmp_path_factory, demo_log_mcap, demo_log_settings):
+    """The same demo log in every format; the MCAP one is the session's (conftest), the same settings."""
     from slam_lcd.sim import make_demo_log
 
     root = tmp_path_factory.mktemp("demo")
-    logs = {}
-    for fmt, name in (("mcap", "demo.mcap"), ("rosbag2", "demo_rosbag2"), ("rosbag1", "demo.bag")):
-        make_demo_log(root / name, fmt, frames=FRAMES, seed=1, depth=True, **SIZE)
+    logs = {"mcap": demo_log_mcap}
+    for fmt, name in (("rosbag2", "demo_rosbag2"), ("rosbag1", "demo.bag")):
+        make_demo_log(root / name, fmt, **demo_log_settings)
         logs[fmt] = root / name
     return logs
 

@@ -9,12 +9,8 @@ from slam_lcd.io.trajectory_files import read_tum
 
 
 @pytest.fixture(scope="module")
-def short_log(tmp_path_factory):
-    from slam_lcd.sim import make_demo_log
-
-    path = tmp_path_factory.mktemp("overlap") / "demo.mcap"
-    make_demo_log(path, "mcap", frames=470, seed=1, depth=True, width=320, height=240)
-    return path
+def short_log(demo_log_mcap):
+    return demo_log_mcap  # conftest: 470 frames, seed 1, RGB-D, 320x240, rendered once per session
 
 
 @pytest.fixture(scope="module")
