@@ -195,6 +195,12 @@ def rot_to_quat(R: np.ndarray, w_nonnegative: bool = False) -> np.ndarray:
     """
     m = np.asarray(R, dtype=np.float64)
     single = m.ndim == 2
+    if single and m.shape == (3, 3):
+        q = _rot_to_quat_one(m.tolist())
+        if q is not None:
+            if w_nonnegative and q[3] < 0:
+                q = [-v for v in q]
+            return np.array(q)
     m = m.reshape(-1, 3, 3)
     d0, d1, d2 = m[:, 0, 0], m[:, 1, 1], m[:, 2, 2]
     tr = d0 + d1 + d2
@@ -219,6 +225,30 @@ def rot_to_quat(R: np.ndarray, w_nonnegative: bool = False) -> np.ndarray:
     if w_nonnegative:
         q[q[:, 3] < 0] *= -1.0
     return q[0] if single else q
+
+
+def _rot_to_quat_one(m: list) -> list | None:
+    """:func:`rot_to_quat` of one matrix (nested lists) in plain floats: the same operations in
+    the same order, so the same bits, ~50x faster than the array path for a single pose (a log
+    writer converts one pose per message). None where the array path must decide (s == 0)."""
+    (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = m
+    tr = a00 + a11 + a22
+    cands = (tr, a00, a11, a22)
+    case = max(range(4), key=lambda k: (cands[k], -k))  # np.argmax: the first of equal maxima
+    val = (tr, 2 * a00 - tr, 2 * a11 - tr, 2 * a22 - tr)[case]
+    s = 2.0 * math.sqrt(max(1.0 + val, 0.0))
+    if not s > 0.0:
+        return None
+    if case == 0:
+        q = [(a21 - a12) / s, (a02 - a20) / s, (a10 - a01) / s, 0.25 * s]
+    elif case == 1:
+        q = [0.25 * s, (a01 + a10) / s, (a02 + a20) / s, (a21 - a12) / s]
+    elif case == 2:
+        q = [(a01 + a10) / s, 0.25 * s, (a12 + a21) / s, (a02 - a20) / s]
+    else:
+        q = [(a02 + a20) / s, (a12 + a21) / s, 0.25 * s, (a10 - a01) / s]
+    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    return [v / n for v in q]
 
 
 def quat_slerp(q0: np.ndarray, q1: np.ndarray, a: float) -> np.ndarray:

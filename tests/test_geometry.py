@@ -128,3 +128,19 @@ def test_two_pose_interpolation_matches_scipy_slerp():
             t = [np.interp(qq, x, P[:, k, 3]) for k in range(3)]
             assert np.allclose(got[:3, :3], R, atol=1e-8) and np.allclose(got[:3, 3], t, atol=1e-9)
             assert np.array_equal(got[3], [0, 0, 0, 1])
+
+
+def test_rot_to_quat_of_one_matrix_is_the_batch_answer_bit_for_bit():
+    """The single-matrix path (plain floats, what log writers call per message) gives the array
+    path's bits, at 180 degrees, near identity and on matrices a little off orthonormal too."""
+    from scipy.spatial.transform import Rotation
+
+    rs = Rotation.random(5000, random_state=3).as_matrix()
+    edge = [np.eye(3), np.diag([1.0, -1, -1]), np.diag([-1.0, 1, -1]), np.diag([-1.0, -1, 1]),
+            *Rotation.from_rotvec(np.random.default_rng(0).normal(size=(50, 3)) * 1e-9).as_matrix(),
+            *np.round(rs[:200], 3)]
+    rs = np.concatenate([rs, np.array(edge)])
+    for w_nonnegative in (False, True):
+        batch = g.rot_to_quat(rs, w_nonnegative=w_nonnegative)
+        one = np.array([g.rot_to_quat(r, w_nonnegative=w_nonnegative) for r in rs])
+        assert np.array_equal(batch, one)
