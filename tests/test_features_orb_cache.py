@@ -106,3 +106,27 @@ def test_fingerprint_ignores_device_but_not_settings(kind):
         b = random_superpoint(descriptor_sampling="bicubic")
     assert a.fingerprint != b.fingerprint
     assert a.fingerprint == (load_extractor(FeaturesConfig(kind="orb")) if kind == "orb" else random_superpoint()).fingerprint
+
+
+def test_an_orb_run_does_not_import_torch(tmp_path):
+    """ORB through the runner (the offline fallback, the baseline, a batch of ORB logs) leaves torch
+    unimported: a fresh process each time would pay its ~3 s import for nothing."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from slam_lcd.sim import make_demo_log
+
+    log = tmp_path / "d.mcap"
+    make_demo_log(log, "mcap", frames=20, width=160, height=120)
+    code = ("import sys; from pathlib import Path; from slam_lcd.config import load_config; "
+            "from slam_lcd.runner import run_log; "
+            "cfg = load_config('default', ['features.kind=orb', 'features.feature_cache=false', 'run.plots=false']); "
+            f"r = run_log(Path({str(log)!r}), Path({str(tmp_path / 'out')!r}), cfg, progress=False); "
+            "print(r.n_keyframes, 'torch' in sys.modules)")
+    repo = Path(__file__).resolve().parent.parent
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         env={**os.environ, "PYTHONPATH": str(repo)})
+    n_keyframes, torch_loaded = out.stdout.split()[-2:]
+    assert int(n_keyframes) > 0 and torch_loaded == "False", out.stdout

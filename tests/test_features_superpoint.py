@@ -281,7 +281,7 @@ def test_bfloat16_encoder_keeps_the_keypoints_and_descriptors(superpoint_weights
     hardware; one of each where oneDNN emulates it (~5 s per frame on an AVX2-only CPU)."""
     import cv2
 
-    from slam_lcd.features.extract import bfloat16_is_native
+    from slam_lcd.features.superpoint_extractor import bfloat16_is_native
 
     per_source = 3 if bfloat16_is_native(torch.device("cpu")) else 1
     frames = [p for d in ("kitti", "tum_fr2_desk")

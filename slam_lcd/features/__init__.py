@@ -17,7 +17,7 @@ _LAZY = {
     "FeatureCache": ".cache",
     "Extractor": ".extract",
     "OrbExtractor": ".extract",
-    "SuperPointExtractor": ".extract",
+    "SuperPointExtractor": ".superpoint_extractor",
     "load_extractor": ".extract",
     "SuperPoint": ".superpoint",
     "resolve_weights": ".weights",
