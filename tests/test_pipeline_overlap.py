@@ -14,25 +14,33 @@ def short_log(demo_log_mcap):
 
 
 @pytest.fixture(scope="module")
-def runs(short_log, tmp_path_factory):
+def runs(short_log, report_run, tmp_path_factory):
+    """{extract_ahead: (keyframes, accepted loops, out dir)}: 0 run here; 2 (the default) is the
+    session's report run of the same log and features (conftest), whose other options (plots,
+    corrected.mcap, the RPE delta) change what is written beside, not the loops or the trajectory."""
+    import json
+
     from slam_lcd.runner import run_log
 
-    out = {}
-    for ahead in (0, 2):
-        cfg = load_config("default", ["features.kind=orb", "features.feature_cache=false", f"run.extract_ahead={ahead}",
-                                      "run.plots=false", "run.write_mcap=false"])
-        d = tmp_path_factory.mktemp(f"ahead{ahead}")
-        out[ahead] = (run_log(short_log, d, cfg, progress=False), d)
-    return out
+    rc, report_dir, log = report_run
+    assert rc == 0 and log == short_log
+    rep = json.loads((report_dir / "report.json").read_text())
+    assert rep["config"]["run"]["extract_ahead"] == 2 and rep["config"]["features"]["kind"] == "orb"
+    cfg = load_config("default", ["features.kind=orb", "features.feature_cache=false", "run.extract_ahead=0",
+                                  "run.plots=false", "run.write_mcap=false"])
+    d = tmp_path_factory.mktemp("ahead0")
+    res = run_log(short_log, d, cfg, progress=False)
+    return {0: (res.n_keyframes, res.loops_accepted, d),
+            2: (rep["keyframes"], rep["loops"]["accepted"], report_dir)}
 
 
 def test_same_keyframes_loops_and_trajectory_whatever_the_lookahead(runs):
-    ref_res, ref_dir = runs[0]
+    ref_kf, ref_loops_accepted, ref_dir = runs[0]
     ref = read_tum(ref_dir / "corrected.tum")
     ref_loops = (ref_dir / "loops.csv").read_text()
-    assert ref_res.loops_accepted >= 1
-    for ahead, (res, d) in runs.items():
-        assert res.n_keyframes == ref_res.n_keyframes, ahead
+    assert ref_loops_accepted >= 1
+    for ahead, (n_kf, _, d) in runs.items():
+        assert n_kf == ref_kf, ahead
         assert (d / "loops.csv").read_text() == ref_loops, ahead
         t = read_tum(d / "corrected.tum")
         assert np.array_equal(t.stamps, ref.stamps) and np.allclose(t.poses, ref.poses, atol=1e-12), ahead
