@@ -9,12 +9,7 @@ from slam_lcd.io.trajectory_files import read_tum
 
 
 @pytest.fixture(scope="module")
-def short_log(demo_log_mcap):
-    return demo_log_mcap  # conftest: 470 frames, seed 1, RGB-D, 320x240, rendered once per session
-
-
-@pytest.fixture(scope="module")
-def runs(short_log, report_run, tmp_path_factory):
+def runs(demo_log_mcap, report_run, tmp_path_factory):
     """{extract_ahead: (keyframes, accepted loops, out dir)}: 0 run here; 2 (the default) is the
     session's report run of the same log and features (conftest), whose other options (plots,
     corrected.mcap, the RPE delta) change what is written beside, not the loops or the trajectory."""
@@ -23,13 +18,13 @@ def runs(short_log, report_run, tmp_path_factory):
     from slam_lcd.runner import run_log
 
     rc, report_dir, log = report_run
-    assert rc == 0 and log == short_log
+    assert rc == 0 and log == demo_log_mcap
     rep = json.loads((report_dir / "report.json").read_text())
     assert rep["config"]["run"]["extract_ahead"] == 2 and rep["config"]["features"]["kind"] == "orb"
     cfg = load_config("default", ["features.kind=orb", "features.feature_cache=false", "run.extract_ahead=0",
                                   "run.plots=false", "run.write_mcap=false"])
     d = tmp_path_factory.mktemp("ahead0")
-    res = run_log(short_log, d, cfg, progress=False)
+    res = run_log(demo_log_mcap, d, cfg, progress=False)
     return {0: (res.n_keyframes, res.loops_accepted, d),
             2: (rep["keyframes"], rep["loops"]["accepted"], report_dir)}
 
@@ -79,7 +74,7 @@ def test_plugin_reports_every_loop_once_with_lookahead():
     assert counts[0] == counts[2] and counts[0]
 
 
-def test_parallel_extraction_workers_give_the_same_run(short_log, tmp_path, superpoint_weights):
+def test_parallel_extraction_workers_give_the_same_run(demo_log_mcap, tmp_path, superpoint_weights):
     """run.extract_workers=2: two SuperPoint keyframes at once, each forward on one thread; the
     same keyframes, loops and trajectory as one worker, and torch's thread count is restored."""
     import torch
@@ -93,7 +88,7 @@ def test_parallel_extraction_workers_give_the_same_run(short_log, tmp_path, supe
                                       "features.device=cpu", "run.extract_ahead=2", f"run.extract_workers={workers}",
                                       "run.plots=false", "run.write_mcap=false", "run.loop_pictures=false"])
         d = tmp_path / f"w{workers}"
-        out[workers] = (run_log(short_log, d, cfg, progress=False), d)
+        out[workers] = (run_log(demo_log_mcap, d, cfg, progress=False), d)
         assert torch.get_num_threads() == before
     (r1, d1), (r2, d2) = out[1], out[2]
     assert r2.n_keyframes == r1.n_keyframes and r2.loops_accepted == r1.loops_accepted

@@ -182,22 +182,20 @@ class RayEngine(Engine):
         shared_ref = ray.put(shared)
         queue = list(tasks)
         limit = self.workers or len(queue)
-        inflight: dict = {}
-        submitted: dict[str, int] = {}  # when each log was handed to Ray (see stopped_row)
+        inflight: dict = {}  # ref -> (task, when it was handed to Ray: see stopped_row)
 
         def submit():
             while queue and len(inflight) < limit:
                 t = queue.pop(0)
-                inflight[remote.remote(t, shared_ref)] = t
-                submitted[t.name] = time.time_ns()
+                inflight[remote.remote(t, shared_ref)] = (t, time.time_ns())
 
         submit()
         try:
             while inflight:
                 done, _ = ray.wait(list(inflight), num_returns=1)
                 for ref in done:
-                    t = inflight.pop(ref)
-                    on_row(_ray_row(ray, ref, t, shared.config, submitted[t.name]))
+                    t, since = inflight.pop(ref)
+                    on_row(_ray_row(ray, ref, t, shared.config, since))
                 submit()
         except KeyboardInterrupt:
             queue.clear()
@@ -207,8 +205,7 @@ class RayEngine(Engine):
             done, _ = ray.wait(refs, num_returns=len(refs), timeout=RAY_STOP_WAIT_S) if refs else ([], [])
             finished = set(done)
             for ref in refs:
-                t = inflight.pop(ref)
-                since = submitted[t.name]
+                t, since = inflight.pop(ref)
                 on_row(_ray_row(ray, ref, t, shared.config, since) if ref in finished
                        else stopped_row(t, shared.config, since))
             raise
