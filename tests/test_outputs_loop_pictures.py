@@ -157,3 +157,21 @@ def test_many_loops_each_get_a_picture_in_order_and_the_contact_sheet_keeps_at_m
     tile_h = round(img.shape[0] * 360 / 128)
     assert sheet.shape[1] == 4 * (360 + 8)
     assert sheet.shape[0] == (CONTACT_SHEET_MAX // 4) * (tile_h + 8)
+
+
+def test_scaled_pictures_are_the_area_mean_of_the_picture():
+    """The contact-sheet tiles are halved first (OpenCV's fast whole-number path): the same picture as one
+    area resize, up to the rounding of the halved image."""
+    from slam_lcd.outputs.loop_pictures import _scaled
+
+    rng = np.random.default_rng(0)
+    pic = cv2.GaussianBlur((rng.random((542, 1280, 3)) * 255).astype(np.uint8), (0, 0), 4)  # a textured scene
+    pic = cv2.normalize(pic, None, 0, 255, cv2.NORM_MINMAX)
+    pic[100:300, 200:900] = (40, 200, 60)
+    cv2.polylines(pic, list(rng.integers(0, 540, (80, 2, 2)).astype(np.int32)), False, (0, 220, 255), 1, cv2.LINE_AA)
+    for width, mean_max in ((360, 1.5), (240, 3.0), (700, 0.0), (1280, 0.0)):  # 360: the tiles; >= half: one resize
+        ref = cv2.resize(pic, (width, round(542 * width / 1280)), interpolation=cv2.INTER_AREA)
+        got = _scaled(pic, width)
+        assert got.shape == ref.shape and got.dtype == np.uint8
+        diff = np.abs(got.astype(int) - ref)
+        assert diff.mean() <= mean_max and np.percentile(diff, 99) <= 16, (width, diff.mean())

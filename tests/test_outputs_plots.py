@@ -75,3 +75,50 @@ def test_export_to_ros1_bag_and_rosbag2(to, name, tmp_path, capsys):
     with AnyReader([out]) as r:
         counts = {c.topic: c.msgcount for c in r.connections}
     assert counts == {"/slam_lcd/trajectory": 50, "/tf": 50, "/slam_lcd/trajectory/path": 1}
+
+
+def test_many_loops_are_one_line_per_kind_whose_pieces_are_the_loops():
+    """3,000 loops are drawn as one line per kind (matplotlib's cost is per artist), each loop a piece of it."""
+    gt, odom, corr = _circle(), _circle(noise=0.3, seed=1), _circle(noise=0.05, seed=2)
+    rng = np.random.default_rng(3)
+    pairs = rng.integers(0, len(corr), (3000, 2))
+    acc = [(corr.positions[i], corr.positions[j]) for i, j in pairs]
+    rej = acc[:7]
+    fig = plot_run_trajectories(ground_truth=gt, odometry=odom, corrected=corr, accepted_edges=acc,
+                                rejected_edges=rej, mode="xy")
+    ax = fig.axes[0]
+    loops = [ln for ln in ax.lines if "loops" in ln.get_label()]
+    assert sorted(ln.get_label() for ln in loops) == ["accepted loops (3000)", "rejected loops (7)"]
+    accepted = next(ln for ln in loops if ln.get_label().startswith("accepted"))
+    x, y = np.asarray(accepted.get_xdata(), float), np.asarray(accepted.get_ydata(), float)
+    assert len(x) == 3 * 3000 - 1 and np.isnan(x[2::3]).all() and np.isnan(y[2::3]).all()
+    ends = np.stack([x, y], axis=1)[np.arange(len(x)) % 3 != 2].reshape(-1, 2, 2)
+    expected = np.array([(a[:2], b[:2]) for a, b in acc])
+    np.testing.assert_array_equal(ends, expected)
+
+
+def test_no_loops_draw_no_loop_line():
+    gt, odom, corr = _circle(), _circle(noise=0.3, seed=1), _circle(noise=0.05, seed=2)
+    fig = plot_run_trajectories(ground_truth=gt, odometry=odom, corrected=corr, mode="xyz")
+    assert not [ln for ln in fig.axes[0].lines if "loops" in ln.get_label()]
+
+
+def test_the_plot_module_loads_in_the_background_and_a_failure_is_silent():
+    """run_log imports matplotlib while the log streams (the outputs at the end are the run's critical path);
+    a module that cannot be imported there is left to the plots, which say what went wrong."""
+    import subprocess
+    import sys
+
+    code = ("import sys, time\n"
+            "from slam_lcd.runner import _import_in_background\n"
+            "assert 'matplotlib' not in sys.modules\n"
+            "_import_in_background('slam_lcd.eval.plots')\n"
+            "_import_in_background('slam_lcd.no_such_module')\n"
+            "t0 = time.time()\n"
+            "while 'slam_lcd.eval.plots' not in sys.modules and time.time() - t0 < 60:\n"
+            "    time.sleep(0.01)\n"
+            "import slam_lcd.eval.plots\n"
+            "assert 'matplotlib' in sys.modules and hasattr(slam_lcd.eval.plots, 'plot_run_trajectories')\n"
+            "print('ok')\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr

@@ -22,6 +22,16 @@ from .metrics import AteResult  # noqa: E402
 _PLANES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2)}
 
 
+def _separated_segments(edges) -> np.ndarray:
+    """Segments (a, b) as one (3n - 1, 3) polyline a0 b0 NaN a1 b1 NaN ...: drawn as n separate pieces.
+
+    Why: one ``plot`` call per loop made one artist per loop, and matplotlib's cost is per artist
+    (3,000 loops: 2.9 s for the figure; one artist: 0.3 s)."""
+    ends = np.asarray(edges, np.float64).reshape(-1, 2, 3)
+    gaps = np.full((len(ends), 1, 3), np.nan)
+    return np.concatenate([ends, gaps], axis=1).reshape(-1, 3)[:-1]
+
+
 def auto_plane(positions: np.ndarray) -> str:
     """The coordinate plane with the largest extent ('xy' for robots, 'xz' for KITTI cameras)."""
     if len(positions) == 0:
@@ -235,9 +245,9 @@ def plot_run_trajectories(
         ax.plot(*xy(p), "-", color="tab:blue", linewidth=1.4, label="corrected")
     for edges, style, colour, name in ((accepted_edges, "-", "tab:green", "accepted loops"),
                                        (rejected_edges, "--", "tab:red", "rejected loops")):
-        for i, (pa, pb) in enumerate(edges):
-            ax.plot(*xy(np.array([pa, pb])), style, color=colour, linewidth=1.0, alpha=0.8,
-                    label=f"{name} ({len(edges)})" if i == 0 else None)
+        if len(edges):  # one line whose pieces a NaN separates: an hour-long log's thousands of loops are one artist
+            ax.plot(*xy(_separated_segments(edges)), style, color=colour, linewidth=1.0, alpha=0.8,
+                    label=f"{name} ({len(edges)})")
     names = "xyz"
     ax.set_xlabel(f"{names[axes[0]]} [m]")
     ax.set_ylabel(f"{names[axes[1]]} [m]")

@@ -333,7 +333,15 @@ def _make_picture(folder: Path, album: KeyframeAlbum, row: dict, verdict: str, l
 
 
 def _scaled(img: np.ndarray, width: int) -> np.ndarray:
-    return cv2.resize(img, (width, max(1, round(img.shape[0] * width / img.shape[1]))), interpolation=cv2.INTER_AREA)
+    """``img`` scaled to ``width`` by area averaging, halved first while it stays at least twice as wide.
+
+    Why: OpenCV's area averaging has a fast path for whole-number factors only; 1280 -> 360 px took
+    1.7 ms a picture, 1280 -> 640 -> 360 takes ~0.5 ms (each output pixel is still the mean of the
+    source pixels it covers, up to the rounding of the intermediate image)."""
+    size = (width, max(1, round(img.shape[0] * width / img.shape[1])))
+    while img.shape[1] >= 2 * width and img.shape[0] >= 2 * size[1]:
+        img = cv2.resize(img, (img.shape[1] // 2, img.shape[0] // 2), interpolation=cv2.INTER_AREA)
+    return cv2.resize(img, size, interpolation=cv2.INTER_AREA)
 
 
 def _write_picture(path: Path, img: np.ndarray) -> None:
