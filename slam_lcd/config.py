@@ -98,6 +98,11 @@ class RunConfig:
     # out between them (on 2 cores: one each, no barrier between the cores after every operator;
     # the 2-lap demo 45.5 s -> 41.5 s, same results). At most extract_ahead; 0 = torch's thread count
     extract_workers: int = 2
+    # messages of the log read (decompressed, checked, deserialised) this many ahead in a thread
+    # of its own once loop detection hardly waits for features (features cached, a GPU, many
+    # cores), so that the reading overlaps it (slam_lcd/io/prefetch.py, runner._reading_ahead_pays);
+    # 0 = always read in the main thread
+    read_ahead: int = 64
 
 
 @dataclass

@@ -167,6 +167,7 @@ RANGES: dict[str, str] = {
     "run.extract_ahead": "[0, 64]",
     "run.lcd_threads": "[0, 64]",
     "run.extract_workers": "[0, 64]",
+    "run.read_ahead": "[0, 4096]",
     # batch
     "batch.cpus_per_task": "(0, inf)",
     "batch.gpus_per_task": "[0, inf)",

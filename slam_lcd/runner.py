@@ -24,6 +24,7 @@ import numpy as np
 from .config import Config, validate_config
 from .errors import DamagedImageError, FileMissingError, PipelineError, stamp_text
 from .io import open_log
+from .io.prefetch import prefetched
 from .io.raw_spool import RawSpool
 from .io.trajectory_files import read_trajectory
 from .outputs.corrected_log import copied_topics
@@ -219,6 +220,25 @@ def _import_in_background(module: str) -> None:
     threading.Thread(target=load, name="slam-lcd-import", daemon=True).start()
 
 
+_READ_AHEAD_AFTER = 10  # keyframes whose features loop detection has waited for before it is judged
+_READ_AHEAD_MAX_WAIT = 0.1  # the share of the stream's time spent waiting for features below which it pays
+
+
+def _reading_ahead_pays(pipe, since: float) -> bool:
+    """Whether the log should now be read in a thread of its own (``run.read_ahead``).
+
+    Why judged while the log streams: reading ahead pays when the main thread (reading, loop
+    detection, back end) is what the run waits for: features cached, a GPU, many cores. When
+    the extraction is (SuperPoint on two CPU cores: loop detection waits ~half the time for
+    features) a fourth busy thread costs more hand-overs and memory than it overlaps (the
+    2-lap demo: wall x1.007-1.02, +100 MB). Without background extraction (``run.extract_ahead
+    = 0``) nothing is waited for and the log is read inline, as before."""
+    n = pipe.timer.calls.get("features_wait", 0)
+    if n < _READ_AHEAD_AFTER:
+        return False
+    return pipe.timer.seconds["features_wait"] < _READ_AHEAD_MAX_WAIT * (time.perf_counter() - since)
+
+
 def _log_frames(first: dict, topics: Topics) -> dict:
     """The odometry's frame_id and child_frame_id and the ground truth's frame_id (from their first messages)."""
     frames = {}
@@ -272,8 +292,13 @@ def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame,
     bar = progress_bar(total=reader.topics[topics.image].count, desc="frames", unit="img", enabled=progress)
     raw = dict(raw_topics=spool.wanted, raw_sink=spool.add) if spool is not None and spool.wanted else {}
     read_all = False
+    # read inline until reading ahead pays (see _reading_ahead_pays)
+    stream = prefetched(reader.messages(topics.wanted(), **raw), depth=max(1, cfg.run.read_ahead), threaded=False)
+    since = time.perf_counter()
     try:
-        for m in reader.messages(topics.wanted(), **raw):
+        for m in stream:
+            if cfg.run.read_ahead > 0 and not stream.threaded and _reading_ahead_pays(pipe, since):
+                stream.start()
             if m.topic == topics.odom:
                 with at_message(m, log_path):
                     T, cov = decode_pose_of(m)
@@ -336,6 +361,7 @@ def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame,
         result.interrupted = True
         log.warning("interrupted: writing the partial result")
     finally:
+        stream.close()  # the reading stops before the spool is finished
         bar.close()
         if spool is not None:
             spool.finish(complete=read_all)

@@ -84,3 +84,26 @@ def test_odometry_break_becomes_large_noise_link_not_a_jump():
     before = [k for k in pipe.keyframes if k.stamp == t0 + 19 * 100_000_000]
     assert len(before) == 1, "the frame before the break is promoted to a keyframe"
     assert len(pipe.graph) == len(pipe.keyframes)
+
+
+def test_reading_ahead_in_a_thread_changes_nothing_in_the_outputs(small_log, tmp_path, monkeypatch):
+    """run.read_ahead (the log read in a thread of its own, here from the first message on) against
+    reading in the main thread."""
+    import slam_lcd.runner as runner
+    from slam_lcd.io.prefetch import Prefetched
+    from slam_lcd.runner import run_log
+
+    monkeypatch.setattr(runner, "_READ_AHEAD_AFTER", 0)
+    monkeypatch.setattr(runner, "_READ_AHEAD_MAX_WAIT", float("inf"))
+    started = []
+    real_start = Prefetched.start
+    monkeypatch.setattr(Prefetched, "start", lambda self: (started.append(1), real_start(self)))
+    outs = {}
+    for ahead in (0, 3):
+        out = tmp_path / f"ahead{ahead}"
+        res = run_log(small_log, out, _orb_config(f"run.read_ahead={ahead}"), progress=False)
+        outs[ahead] = (res.n_frames, res.n_keyframes, (out / "corrected.tum").read_text(),
+                       (out / "loops.csv").read_text(), (out / "keyframes_corrected.tum").read_text())
+    assert len(started) == 1  # only the run with read_ahead > 0 read in a thread
+    assert outs[0] == outs[3]
+    assert outs[0][0] == 80
