@@ -173,12 +173,12 @@ def _mcap_chunks(buf: bytes):
     return out
 
 
-def damage_zstd_chunk(src: Path, dst: Path) -> Path:
-    """Copy of MCAP ``src`` whose first zstd chunk no longer decompresses (frame header zeroed)."""
+def damage_zstd_chunk(src: Path, dst: Path, which: int = 0) -> Path:
+    """Copy of MCAP ``src`` whose first (``which``: that) zstd chunk no longer decompresses (frame header zeroed)."""
     buf = bytearray(Path(src).read_bytes())
     chunks = [c for c in _mcap_chunks(buf) if c[1] == "zstd"]
     assert chunks, "the source MCAP has no zstd chunk"
-    _, _, data, _ = chunks[0]
+    _, _, data, _ = chunks[which]
     buf[data:data + 8] = bytes(8)
     Path(dst).write_bytes(bytes(buf))
     return dst

@@ -107,3 +107,49 @@ def test_reading_ahead_in_a_thread_changes_nothing_in_the_outputs(small_log, tmp
     assert len(started) == 1  # only the run with read_ahead > 0 read in a thread
     assert outs[0] == outs[3]
     assert outs[0][0] == 80
+
+
+
+@pytest.fixture
+def read_ahead_from_the_start(monkeypatch):
+    """The log read in a thread from its first message on (the runner's judgement bypassed)."""
+    import slam_lcd.runner as runner
+
+    monkeypatch.setattr(runner, "_READ_AHEAD_AFTER", 0)
+    monkeypatch.setattr(runner, "_READ_AHEAD_MAX_WAIT", float("inf"))
+
+
+def test_interrupt_while_the_log_is_read_ahead(small_log, tmp_path, monkeypatch, read_ahead_from_the_start):
+    """Ctrl-C in the main thread stops the reading thread; the partial result is as consistent as without it."""
+    import threading
+
+    from slam_lcd.pipeline import Pipeline
+    from slam_lcd.runner import run_log
+
+    real = Pipeline.add_image
+    calls = {"n": 0}
+
+    def interrupted(self, *a, **k):
+        calls["n"] += 1
+        if calls["n"] == 40:
+            raise KeyboardInterrupt
+        return real(self, *a, **k)
+
+    monkeypatch.setattr(Pipeline, "add_image", interrupted)
+    res = run_log(small_log, tmp_path, _orb_config(), progress=False)
+    assert res.interrupted and res.n_frames == 39
+    assert not [t for t in threading.enumerate() if t.name == "slam-lcd-reader"]  # stopped, not left running
+    odo, cor = read_tum(tmp_path / "odometry.tum"), read_tum(tmp_path / "corrected.tum")
+    assert len(odo) == len(cor) > 0 and np.array_equal(odo.stamps, cor.stamps)
+
+
+def test_damage_found_by_the_reading_thread_is_the_same_typed_error(small_log, tmp_path, read_ahead_from_the_start):
+    from bad_input_files import damage_zstd_chunk
+
+    from slam_lcd.errors import CorruptLogError
+    from slam_lcd.runner import run_log
+
+    bad = damage_zstd_chunk(small_log, tmp_path / "late_damage.mcap", which=-1)  # found mid-run, by the thread
+    with pytest.raises(CorruptLogError, match="damaged data") as e:
+        run_log(bad, tmp_path / "out", _orb_config(), progress=False)
+    assert "late_damage.mcap" in str(e.value)
