@@ -220,23 +220,39 @@ def _import_in_background(module: str) -> None:
     threading.Thread(target=load, name="slam-lcd-import", daemon=True).start()
 
 
-_READ_AHEAD_AFTER = 10  # keyframes whose features loop detection has waited for before it is judged
-_READ_AHEAD_MAX_WAIT = 0.1  # the share of the stream's time spent waiting for features below which it pays
+_READ_AHEAD_AFTER = 10  # judged over the last this many keyframes whose features loop detection waited for
+_READ_AHEAD_MAX_WAIT = 0.1  # the share of their time spent waiting for features below which reading ahead pays
 
 
-def _reading_ahead_pays(pipe, since: float) -> bool:
+class _ReadAheadJudge:
     """Whether the log should now be read in a thread of its own (``run.read_ahead``).
 
     Why judged while the log streams: reading ahead pays when the main thread (reading, loop
     detection, back end) is what the run waits for: features cached, a GPU, many cores. When
     the extraction is (SuperPoint on two CPU cores: loop detection waits ~half the time for
     features) a fourth busy thread costs more hand-overs and memory than it overlaps (the
-    2-lap demo: wall x1.007-1.02, +100 MB). Without background extraction (``run.extract_ahead
-    = 0``) nothing is waited for and the log is read inline, as before."""
-    n = pipe.timer.calls.get("features_wait", 0)
-    if n < _READ_AHEAD_AFTER:
-        return False
-    return pipe.timer.seconds["features_wait"] < _READ_AHEAD_MAX_WAIT * (time.perf_counter() - since)
+    2-lap demo: wall x1.007-1.02, +100 MB). The share is that of the last
+    :data:`_READ_AHEAD_AFTER` keyframes, so a slow first forward (a GPU's start-up) does not
+    weigh on it for the rest of the run. Without background extraction (``run.extract_ahead =
+    0``) nothing is waited for and the log is read inline, as before."""
+
+    def __init__(self, pipe):
+        from collections import deque
+
+        self.timer = pipe.timer
+        self.seen = 0
+        self.marks: deque = deque(maxlen=_READ_AHEAD_AFTER + 1)  # (time, seconds waited so far)
+
+    def pays(self) -> bool:
+        n = self.timer.calls.get("features_wait", 0)
+        if n == self.seen:
+            return False
+        self.seen = n
+        self.marks.append((time.perf_counter(), self.timer.seconds["features_wait"]))
+        if len(self.marks) < self.marks.maxlen:
+            return False
+        (t0, w0), (t1, w1) = self.marks[0], self.marks[-1]
+        return w1 - w0 < _READ_AHEAD_MAX_WAIT * (t1 - t0)
 
 
 def _log_frames(first: dict, topics: Topics) -> dict:
@@ -292,12 +308,12 @@ def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame,
     bar = progress_bar(total=reader.topics[topics.image].count, desc="frames", unit="img", enabled=progress)
     raw = dict(raw_topics=spool.wanted, raw_sink=spool.add) if spool is not None and spool.wanted else {}
     read_all = False
-    # read inline until reading ahead pays (see _reading_ahead_pays)
+    # read inline until reading ahead pays (see _ReadAheadJudge)
     stream = prefetched(reader.messages(topics.wanted(), **raw), depth=max(1, cfg.run.read_ahead), threaded=False)
-    since = time.perf_counter()
+    judge = _ReadAheadJudge(pipe) if cfg.run.read_ahead > 0 else None
     try:
         for m in stream:
-            if cfg.run.read_ahead > 0 and not stream.threaded and _reading_ahead_pays(pipe, since):
+            if judge is not None and not stream.threaded and judge.pays():
                 stream.start()
             if m.topic == topics.odom:
                 with at_message(m, log_path):

@@ -114,19 +114,29 @@ def test_close_of_an_inline_reader_closes_its_source():
         next(it)
 
 
-def test_reading_ahead_starts_only_once_loop_detection_hardly_waits_for_features():
+def test_reading_ahead_starts_only_once_loop_detection_hardly_waits_for_features(monkeypatch):
     from types import SimpleNamespace
 
-    from slam_lcd.runner import _READ_AHEAD_AFTER, _reading_ahead_pays
+    import slam_lcd.runner as runner
     from slam_lcd.stage_timer import StageTimer
 
+    clock = {"t": 0.0}
+    monkeypatch.setattr(runner.time, "perf_counter", lambda: clock["t"])
     timer = StageTimer()
-    pipe = SimpleNamespace(timer=timer)
-    since = time.perf_counter() - 10.0  # the stream began 10 s ago
-    assert not _reading_ahead_pays(pipe, since)  # nothing waited for yet (or no background extraction)
-    for _ in range(_READ_AHEAD_AFTER):
-        with timer("features_wait"):
-            pass
-    assert _reading_ahead_pays(pipe, since)  # features were there each time: the main thread is the bottleneck
-    timer.seconds["features_wait"] = 4.0  # 40 % of the stream waiting: the extraction is
-    assert not _reading_ahead_pays(pipe, since)
+    judge = runner._ReadAheadJudge(SimpleNamespace(timer=timer))
+    n = runner._READ_AHEAD_AFTER
+
+    def keyframe(waited: float, took: float = 1.0) -> bool:
+        clock["t"] += took
+        timer.seconds["features_wait"] += waited
+        timer.calls["features_wait"] += 1
+        return judge.pays()
+
+    assert not judge.pays()  # nothing waited for yet (or no background extraction)
+    assert not keyframe(5.0)  # a slow first forward (a GPU starting up) ...
+    assert not any(keyframe(0.5) for _ in range(n))  # ... then the extraction is the bottleneck: half the time
+    # keyframes that do not wait: the share over the last ten falls 0.5 -> 0.45 -> ... and is
+    # below a tenth once a single waiting keyframe is left in the window (0.5 s of 10 s)
+    assert not any(keyframe(0.0) for _ in range(n - 2))
+    assert keyframe(0.0)  # the main thread is the bottleneck now
+    assert not judge.pays()  # judged once per keyframe, not per message

@@ -93,8 +93,7 @@ def test_reading_ahead_in_a_thread_changes_nothing_in_the_outputs(small_log, tmp
     from slam_lcd.io.prefetch import Prefetched
     from slam_lcd.runner import run_log
 
-    monkeypatch.setattr(runner, "_READ_AHEAD_AFTER", 0)
-    monkeypatch.setattr(runner, "_READ_AHEAD_MAX_WAIT", float("inf"))
+    monkeypatch.setattr(runner._ReadAheadJudge, "pays", lambda self: True)
     started = []
     real_start = Prefetched.start
     monkeypatch.setattr(Prefetched, "start", lambda self: (started.append(1), real_start(self)))
@@ -115,8 +114,7 @@ def read_ahead_from_the_start(monkeypatch):
     """The log read in a thread from its first message on (the runner's judgement bypassed)."""
     import slam_lcd.runner as runner
 
-    monkeypatch.setattr(runner, "_READ_AHEAD_AFTER", 0)
-    monkeypatch.setattr(runner, "_READ_AHEAD_MAX_WAIT", float("inf"))
+    monkeypatch.setattr(runner._ReadAheadJudge, "pays", lambda self: True)
 
 
 def test_interrupt_while_the_log_is_read_ahead(small_log, tmp_path, monkeypatch, read_ahead_from_the_start):
