@@ -24,9 +24,18 @@ def _orb_config(*extra):
     return load_config("default", ["features.kind=orb", "features.feature_cache=false", *extra])
 
 
-def test_interrupt_writes_consistent_partial_result(small_log, tmp_path, monkeypatch):
+@pytest.mark.parametrize("reading", ["inline", "thread"])
+def test_interrupt_writes_consistent_partial_result(small_log, tmp_path, monkeypatch, reading):
+    """Ctrl-C mid-log; with ``thread`` the log is read ahead from its first message on, and the
+    interrupt also stops the reading thread (not left running)."""
+    import threading
+
+    import slam_lcd.runner as runner
     from slam_lcd.pipeline import Pipeline
     from slam_lcd.runner import run_log
+
+    if reading == "thread":
+        monkeypatch.setattr(runner._ReadAheadJudge, "pays", lambda self: True)
 
     calls = {"n": 0}
     real = Pipeline.add_image
@@ -45,6 +54,7 @@ def test_interrupt_writes_consistent_partial_result(small_log, tmp_path, monkeyp
     odo, cor = read_tum(tmp_path / "odometry.tum"), read_tum(tmp_path / "corrected.tum")
     assert len(odo) == len(cor) > 0 and np.array_equal(odo.stamps, cor.stamps)
     assert odo.stamps[-1] < 1_700_000_000_000_000_000 + 5_000_000_000  # stopped early (80 frames = 8 s)
+    assert not [t for t in threading.enumerate() if t.name == "slam-lcd-reader"]
 
 
 def test_log_without_odometry_uses_visual_odometry(small_log, tmp_path):
@@ -115,30 +125,6 @@ def read_ahead_from_the_start(monkeypatch):
     import slam_lcd.runner as runner
 
     monkeypatch.setattr(runner._ReadAheadJudge, "pays", lambda self: True)
-
-
-def test_interrupt_while_the_log_is_read_ahead(small_log, tmp_path, monkeypatch, read_ahead_from_the_start):
-    """Ctrl-C in the main thread stops the reading thread; the partial result is as consistent as without it."""
-    import threading
-
-    from slam_lcd.pipeline import Pipeline
-    from slam_lcd.runner import run_log
-
-    real = Pipeline.add_image
-    calls = {"n": 0}
-
-    def interrupted(self, *a, **k):
-        calls["n"] += 1
-        if calls["n"] == 40:
-            raise KeyboardInterrupt
-        return real(self, *a, **k)
-
-    monkeypatch.setattr(Pipeline, "add_image", interrupted)
-    res = run_log(small_log, tmp_path, _orb_config(), progress=False)
-    assert res.interrupted and res.n_frames == 39
-    assert not [t for t in threading.enumerate() if t.name == "slam-lcd-reader"]  # stopped, not left running
-    odo, cor = read_tum(tmp_path / "odometry.tum"), read_tum(tmp_path / "corrected.tum")
-    assert len(odo) == len(cor) > 0 and np.array_equal(odo.stamps, cor.stamps)
 
 
 def test_damage_found_by_the_reading_thread_is_the_same_typed_error(small_log, tmp_path, read_ahead_from_the_start):
