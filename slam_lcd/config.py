@@ -100,7 +100,7 @@ class RunConfig:
     extract_workers: int = 2
     # messages of the log read (decompressed, checked, deserialised) this many ahead in a thread
     # of its own once loop detection hardly waits for features (features cached, a GPU, many
-    # cores), so that the reading overlaps it (slam_lcd/io/prefetch.py, runner._reading_ahead_pays);
+    # cores), so that the reading overlaps it (slam_lcd/io/prefetch.py, runner._ReadAheadJudge);
     # 0 = always read in the main thread
     read_ahead: int = 64
 

@@ -24,18 +24,25 @@ def _orb_config(*extra):
     return load_config("default", ["features.kind=orb", "features.feature_cache=false", *extra])
 
 
+@pytest.fixture
+def read_ahead_from_the_start(monkeypatch):
+    """The log read in a thread from its first message on (the runner's judgement bypassed)."""
+    import slam_lcd.runner as runner
+
+    monkeypatch.setattr(runner._ReadAheadJudge, "pays", lambda self: True)
+
+
 @pytest.mark.parametrize("reading", ["inline", "thread"])
-def test_interrupt_writes_consistent_partial_result(small_log, tmp_path, monkeypatch, reading):
+def test_interrupt_writes_consistent_partial_result(small_log, tmp_path, monkeypatch, request, reading):
     """Ctrl-C mid-log; with ``thread`` the log is read ahead from its first message on, and the
     interrupt also stops the reading thread (not left running)."""
     import threading
 
-    import slam_lcd.runner as runner
     from slam_lcd.pipeline import Pipeline
     from slam_lcd.runner import run_log
 
     if reading == "thread":
-        monkeypatch.setattr(runner._ReadAheadJudge, "pays", lambda self: True)
+        request.getfixturevalue("read_ahead_from_the_start")
 
     calls = {"n": 0}
     real = Pipeline.add_image
@@ -96,14 +103,13 @@ def test_odometry_break_becomes_large_noise_link_not_a_jump():
     assert len(pipe.graph) == len(pipe.keyframes)
 
 
-def test_reading_ahead_in_a_thread_changes_nothing_in_the_outputs(small_log, tmp_path, monkeypatch):
+def test_reading_ahead_in_a_thread_changes_nothing_in_the_outputs(small_log, tmp_path, monkeypatch,
+                                                                  read_ahead_from_the_start):
     """run.read_ahead (the log read in a thread of its own, here from the first message on) against
     reading in the main thread."""
-    import slam_lcd.runner as runner
     from slam_lcd.io.prefetch import Prefetched
     from slam_lcd.runner import run_log
 
-    monkeypatch.setattr(runner._ReadAheadJudge, "pays", lambda self: True)
     started = []
     real_start = Prefetched.start
     monkeypatch.setattr(Prefetched, "start", lambda self: (started.append(1), real_start(self)))
@@ -116,15 +122,6 @@ def test_reading_ahead_in_a_thread_changes_nothing_in_the_outputs(small_log, tmp
     assert len(started) == 1  # only the run with read_ahead > 0 read in a thread
     assert outs[0] == outs[3]
     assert outs[0][0] == 80
-
-
-
-@pytest.fixture
-def read_ahead_from_the_start(monkeypatch):
-    """The log read in a thread from its first message on (the runner's judgement bypassed)."""
-    import slam_lcd.runner as runner
-
-    monkeypatch.setattr(runner._ReadAheadJudge, "pays", lambda self: True)
 
 
 def test_damage_found_by_the_reading_thread_is_the_same_typed_error(small_log, tmp_path, read_ahead_from_the_start):
