@@ -1,4 +1,4 @@
-"""The grid-bucketed graph verification against the all-pairs reference it replaced.
+"""The fast graph verification (sweep-and-prune crossing tests) against the all-pairs reference it replaced.
 
 Crossing counts and booleans must equal the brute force on random, integer-grid (collinear,
 duplicate) and real point sets; ``verify_graph`` must return the same verdicts (every field)
@@ -72,27 +72,35 @@ def test_crossings_of_a_planar_graph_drawn_elsewhere():
         assert crossing_counts(src, edges).sum() == 0  # planar where it was built
 
 
-def test_small_drawings_all_pairs_and_grid_paths_agree(monkeypatch):
-    """Up to ``_ALL_PAIRS_MAX`` segments crosses_any tests every pair; the grid path gives the same answer there."""
+def test_pairs_tested_in_blocks_give_the_same_answer(monkeypatch):
+    """Drawings whose overlapping pairs exceed one block (``_PAIR_CHUNK``): split over blocks, the same answer.
+
+    Long segments across the whole image (a drawing scrambled by wrong matches, a sheaf of
+    near-parallel lines) are the sweep's worst case, where the pairs approach all pairs.
+    """
     from slam_lcd.lcd import segments
 
     rng = np.random.default_rng(9)
     drawings = []
-    for n, wrong in [(20, 0.0), (40, 0.1), (60, 0.5), (85, 0.05)]:  # 40-250 edges
+    for n, wrong in [(20, 0.0), (40, 0.1), (60, 0.5), (85, 0.05), (120, 1.0)]:
         src = rng.uniform([0, 0], [640, 480], (n, 2))
         _, edges = planar_graph(src, 3.0)
         dst = src + rng.normal(0, 1.0, (n, 2))
         bad = rng.choice(n, int(wrong * n), replace=False)
         dst[bad] = rng.uniform([0, 0], [640, 480], (len(bad), 2))
-        assert 2 <= len(edges) <= segments._ALL_PAIRS_MAX
         drawings.append((dst, edges))
     edges = rng.integers(0, 30, (200, 2))
     drawings.append((rng.integers(0, 10, (30, 2)).astype(np.float64), edges[edges[:, 0] != edges[:, 1]]))
-    cases = [(pts, edges, ref.crossing_edges(pts, edges) > 0) for pts, edges in drawings]
-    for limit in (segments._ALL_PAIRS_MAX, 0):  # 0: the grid path for every size
-        monkeypatch.setattr(segments, "_ALL_PAIRS_MAX", limit)
+    t = np.linspace(0, 1, 60)  # a sheaf: every segment's box overlaps every other's
+    sheaf = np.concatenate([np.stack([t * 5, np.zeros(60)], 1), np.stack([600 - t * 5, 480 + 3 * t], 1)])
+    drawings.append((sheaf, np.column_stack([np.arange(60), 60 + rng.permutation(60)])))
+    cases = [(pts, edges, ref.crossing_edges(pts, edges)) for pts, edges in drawings]
+    assert cases[-1][2].sum() > 0  # the sheaf's segments do cross
+    for chunk in (segments._PAIR_CHUNK, 7, 1):
+        monkeypatch.setattr(segments, "_PAIR_CHUNK", chunk)
         for pts, edges, expect in cases:
-            assert np.array_equal(crosses_any(pts, edges), expect)
+            assert np.array_equal(crossing_counts(pts, edges), expect)
+            assert np.array_equal(crosses_any(pts, edges), expect > 0)
 
 
 def test_planar_graph_and_empty_inputs_unchanged():
