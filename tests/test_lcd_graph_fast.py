@@ -1,4 +1,4 @@
-"""The fast graph verification (sweep-and-prune crossing tests) against the all-pairs reference it replaced.
+"""The fast graph verification (sweep and grid crossing tests) against the all-pairs reference it replaced.
 
 Crossing counts and booleans must equal the brute force on random, integer-grid (collinear,
 duplicate) and real point sets; ``verify_graph`` must return the same verdicts (every field)
@@ -72,17 +72,19 @@ def test_crossings_of_a_planar_graph_drawn_elsewhere():
         assert crossing_counts(src, edges).sum() == 0  # planar where it was built
 
 
-def test_pairs_tested_in_blocks_give_the_same_answer(monkeypatch):
-    """Drawings whose overlapping pairs exceed one block (``_PAIR_CHUNK``): split over blocks, the same answer.
+def test_every_path_of_crosses_any_gives_the_same_answer(monkeypatch):
+    """The sweep (step 0), all pairs (step 1) and the neighbour/direct/grid passes (steps 2-4) agree
+    with the reference on clean, partly and fully scrambled drawings and a sheaf, whole or in blocks.
 
     Long segments across the whole image (a drawing scrambled by wrong matches, a sheaf of
-    near-parallel lines) are the sweep's worst case, where the pairs approach all pairs.
+    near-parallel lines) are the sweep's worst case, where its pairs approach all pairs: there
+    the dispatch leaves the sweep for the passes (``_SWEEP_MAX_PAIRS``).
     """
     from slam_lcd.lcd import segments
 
     rng = np.random.default_rng(9)
     drawings = []
-    for n, wrong in [(20, 0.0), (40, 0.1), (60, 0.5), (85, 0.05), (120, 1.0)]:
+    for n, wrong in [(20, 0.0), (40, 0.1), (60, 0.5), (85, 0.05), (120, 1.0), (300, 0.02), (300, 0.6)]:
         src = rng.uniform([0, 0], [640, 480], (n, 2))
         _, edges = planar_graph(src, 3.0)
         dst = src + rng.normal(0, 1.0, (n, 2))
@@ -95,12 +97,43 @@ def test_pairs_tested_in_blocks_give_the_same_answer(monkeypatch):
     sheaf = np.concatenate([np.stack([t * 5, np.zeros(60)], 1), np.stack([600 - t * 5, 480 + 3 * t], 1)])
     drawings.append((sheaf, np.column_stack([np.arange(60), 60 + rng.permutation(60)])))
     cases = [(pts, edges, ref.crossing_edges(pts, edges)) for pts, edges in drawings]
-    assert cases[-1][2].sum() > 0  # the sheaf's segments do cross
-    for chunk in (segments._PAIR_CHUNK, 7, 1):
-        monkeypatch.setattr(segments, "_PAIR_CHUNK", chunk)
-        for pts, edges, expect in cases:
-            assert np.array_equal(crossing_counts(pts, edges), expect)
-            assert np.array_equal(crosses_any(pts, edges), expect > 0)
+    assert cases[-1][2].sum() > 0 and any(len(e) > segments._ALL_PAIRS_MAX for _, e, _ in cases)
+    paths = {"dispatch": {}, "sweep": {"_SWEEP_MAX_PAIRS": 10**9}, "all pairs, then passes": {"_SWEEP_MAX_PAIRS": -1},
+             "passes": {"_SWEEP_MAX_PAIRS": -1, "_ALL_PAIRS_MAX": 0}}
+    for settings in paths.values():
+        for chunk in (segments._PAIR_CHUNK, 7):
+            monkeypatch.setattr(segments, "_PAIR_CHUNK", chunk)
+            for name, value in settings.items():
+                monkeypatch.setattr(segments, name, value)
+            for pts, edges, expect in cases:
+                assert np.array_equal(crosses_any(pts, edges), expect > 0)
+                assert np.array_equal(crossing_counts(pts, edges), expect)
+            monkeypatch.undo()
+
+
+def test_the_sweep_is_left_for_scrambled_drawings(monkeypatch):
+    """A drawing through wrong matches has long segments whose boxes overlap nearly all others:
+    the sweep would form nearly all pairs, so crosses_any takes the passes there (and the sweep
+    for a drawing through right matches)."""
+    from slam_lcd.lcd import segments
+
+    rng = np.random.default_rng(21)
+    src = rng.uniform([0, 0], [640, 480], (300, 2))
+    _, edges = planar_graph(src, 3.0)
+    right = src + rng.normal(0, 1.0, src.shape)
+    scrambled = rng.uniform([0, 0], [640, 480], src.shape)
+    swept = []
+    real_sweep = segments._Sweep.overlapping_pairs
+
+    def spy(self):
+        swept.append(True)
+        return real_sweep(self)
+
+    monkeypatch.setattr(segments._Sweep, "overlapping_pairs", spy)
+    crosses_any(right, edges)
+    assert swept == [True]
+    crosses_any(scrambled, edges)
+    assert swept == [True]
 
 
 def test_planar_graph_and_empty_inputs_unchanged():

@@ -122,8 +122,8 @@ def _signed_area2(pts: np.ndarray, tri: np.ndarray) -> np.ndarray:
 def crossing_edges(points: np.ndarray, edges: np.ndarray) -> np.ndarray:
     """For each edge (drawn as a segment between ``points``), how many other edges it properly crosses.
 
-    Edges sharing an end point never count as crossing. Sweep and prune over the segments'
-    boxes (:mod:`slam_lcd.lcd.segments`), the same counts as testing all pairs.
+    Edges sharing an end point never count as crossing. Grid broad phase
+    (:mod:`slam_lcd.lcd.segments`), the same counts as testing all pairs.
     """
     return crossing_counts(points, edges)
 
