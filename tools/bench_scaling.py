@@ -38,7 +38,7 @@ duration and against the bare SuperPoint forward (``forward_raw``, the same mode
 of its keyframes, measured in the same run.
 
     python tools/bench_scaling.py log [--laps 10] [--work DIR] [--weights W]
-    python tools/bench_scaling.py demo [--work DIR] [--weights W]
+    python tools/bench_scaling.py demo [--work DIR] [--weights W] [--repeat N]
 """
 from __future__ import annotations
 
@@ -348,14 +348,19 @@ def _demo_log(path: Path, laps: float, seed: int) -> Path:
     return path
 
 
+def _config_sets(args, cache_dir: Path, extra: list[str] = ()) -> list[str]:
+    """Overrides of the default config: the feature cache in ``cache_dir``, ``extra``, ``--set``, the weights given."""
+    sets = [f"features.cache_dir={cache_dir}", *extra, *args.set]
+    if args.weights:
+        sets.append(f"features.weights={args.weights}")
+    return sets
+
+
 def _config(args, cache_dir: Path, extra: list[str] = ()):
     """The default config, with the feature cache in ``cache_dir`` (and the weights given)."""
     from slam_lcd.config import load_config
 
-    sets = [f"features.cache_dir={cache_dir}", *extra, *args.set]
-    if args.weights:
-        sets.append(f"features.weights={args.weights}")
-    return load_config("default", sets)
+    return load_config("default", _config_sets(args, cache_dir, extra))
 
 
 def _bare_forward_seconds(log: Path, stamps: np.ndarray, weights, sample: int, features_conf) -> tuple[float, int, float]:
@@ -408,17 +413,77 @@ def _run(log: Path, out_dir: Path, cfg, gt_topic: str | None):
     return res, time.perf_counter() - t0
 
 
+_FRESH_RUN = """
+import json, sys, time
+from pathlib import Path
+from slam_lcd.config import load_config
+from slam_lcd.runner import run_log
+log, out, sets = sys.argv[1], sys.argv[2], json.loads(sys.argv[3])
+cfg = load_config("default", sets)
+t0 = time.perf_counter()
+res = run_log(Path(log), Path(out), cfg, gt_topic="/ground_truth/pose", progress=False)
+wall = time.perf_counter() - t0
+keys = ("log_duration_s", "n_keyframes", "loops_accepted", "false_loops_accepted", "ate_before", "ate_after", "stages")
+fields = {k: getattr(res, k) for k in keys}
+fields["keyframe_seconds"] = [{"rss_kb": r.get("rss_kb", 0)} for r in res.keyframe_seconds]
+print("RESULT " + json.dumps({"wall": wall, **fields}))
+"""
+
+
+def _run_in_fresh_process(log: Path, out_dir: Path, args, cache_dir: Path):
+    """``_run`` in a new Python process (slam_lcd's runner imported before the clock starts, as in ``_run``)."""
+    import json
+    import subprocess
+    import sys
+    from types import SimpleNamespace
+
+    sets = _config_sets(args, cache_dir)
+    done = subprocess.run([sys.executable, "-c", _FRESH_RUN, str(log), str(out_dir), json.dumps(sets)],
+                          check=True, capture_output=True, text=True)
+    line = next(ln for ln in done.stdout.splitlines() if ln.startswith("RESULT "))
+    fields = json.loads(line[len("RESULT "):])
+    return SimpleNamespace(**fields), fields["wall"]
+
+
 def bench_demo(args) -> None:
-    """2-lap demo, empty feature cache: wall time vs the log's duration and vs bare SuperPoint."""
+    """2-lap demo, empty feature cache: wall time vs the log's duration and vs bare SuperPoint.
+
+    With ``--repeat N`` the run and the bare forward alternate N times (run, forward, run,
+    forward, ...), each run in a Python process of its own (so each pays its imports, as the
+    first run of a process does) with a fresh empty cache; a run's ratio is taken against the mean
+    of the bare forwards measured just before and just after it (the first run: just after), so
+    a drift of the machine's speed between the two measurements cancels, and the median of the
+    N ratios is printed.
+    """
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
     log = Path(args.log) if args.log else _demo_log(work / "demo_2laps.mcap", 2.0, args.seed)
-    cache = Path(tempfile.mkdtemp(prefix="cache-", dir=work))  # empty feature cache
-    out = work / "out_demo"
-    cfg = _config(args, cache)
-    res, wall = _run(log, out, cfg, "/ground_truth/pose")
-    stamps = _keyframe_stamps(out)
-    sp, n, sp_full = _bare_forward_seconds(log, stamps, args.weights, args.forward_sample, cfg.features)
+    walls, bares, ratios = [], [], []
+    for rep in range(max(1, args.repeat)):
+        cache = Path(tempfile.mkdtemp(prefix="cache-", dir=work))  # empty feature cache
+        out = work / ("out_demo" if rep == 0 else f"out_demo_{rep + 1}")
+        cfg = _config(args, cache)
+        if args.repeat > 1:  # each run in a process of its own: every run pays its imports, as a user's does
+            res, wall = _run_in_fresh_process(log, out, args, cache)
+        else:
+            res, wall = _run(log, out, cfg, "/ground_truth/pose")
+        stamps = _keyframe_stamps(out)
+        sp, n, sp_full = _bare_forward_seconds(log, stamps, args.weights, args.forward_sample, cfg.features)
+        before = bares[-1] if bares else sp
+        walls.append(wall)
+        bares.append(sp)
+        ratios.append(wall / (0.5 * (before + sp)))
+        _print_demo_run(log, res, cfg, wall, stamps, sp, n, sp_full)
+        if args.repeat > 1:
+            print(f"  run {rep + 1} of {args.repeat}: wall / mean(bare forward before, after) = {ratios[-1]:.3f}", flush=True)
+    if len(walls) > 1:
+        print(f"\n{len(walls)} runs in turn with the bare forward: wall median {np.median(walls):.1f} s "
+              f"({', '.join(f'{w:.1f}' for w in walls)}), bare forward median {np.median(bares):.1f} s "
+              f"({', '.join(f'{b:.1f}' for b in bares)}), wall / forward median {np.median(ratios):.3f} "
+              f"({', '.join(f'{r:.3f}' for r in ratios)})")
+
+
+def _print_demo_run(log: Path, res, cfg, wall: float, stamps, sp: float, n: int, sp_full: float) -> None:
     print(f"\n2-lap demo, empty feature cache ({log.name}, {res.log_duration_s:.1f} s of log; "
           f"SuperPoint encoder in {cfg.features.precision})")
     print(f"  keyframes {res.n_keyframes}, loops accepted {res.loops_accepted}, false {res.false_loops_accepted}, "
@@ -514,6 +579,8 @@ def main(argv=None) -> None:
         p.add_argument("--forward-sample", type=int, default=60,
                        help="demo: keyframes whose bare forward is timed (mean scaled to all; default 60)")
         p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE", help="config override")
+        p.add_argument("--repeat", type=int, default=1,
+                       help="demo: runs alternating with the bare forward; the median ratio is printed (default 1)")
         p.set_defaults(func=func)
     args = ap.parse_args(argv)
     args.func(args)
