@@ -17,6 +17,7 @@ import dataclasses
 import logging
 import os
 import time
+from collections import deque
 from pathlib import Path
 
 import numpy as np
@@ -237,8 +238,6 @@ class _ReadAheadJudge:
     0``) nothing is waited for and the log is read inline, as before."""
 
     def __init__(self, pipe):
-        from collections import deque
-
         self.timer = pipe.timer
         self.seen = 0
         self.marks: deque = deque(maxlen=_READ_AHEAD_AFTER + 1)  # (time, seconds waited so far)

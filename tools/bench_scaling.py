@@ -414,15 +414,13 @@ def _run(log: Path, out_dir: Path, cfg, gt_topic: str | None):
 
 
 _FRESH_RUN = """
-import json, sys, time
+import json, sys
 from pathlib import Path
+sys.path.insert(0, sys.argv[1])
+import bench_scaling as bench
 from slam_lcd.config import load_config
-from slam_lcd.runner import run_log
-log, out, sets = sys.argv[1], sys.argv[2], json.loads(sys.argv[3])
-cfg = load_config("default", sets)
-t0 = time.perf_counter()
-res = run_log(Path(log), Path(out), cfg, gt_topic="/ground_truth/pose", progress=False)
-wall = time.perf_counter() - t0
+log, out, sets = sys.argv[2], sys.argv[3], json.loads(sys.argv[4])
+res, wall = bench._run(Path(log), Path(out), load_config("default", sets), "/ground_truth/pose")
 keys = ("log_duration_s", "n_keyframes", "loops_accepted", "false_loops_accepted", "ate_before", "ate_after", "stages")
 fields = {k: getattr(res, k) for k in keys}
 fields["keyframe_seconds"] = [{"rss_kb": r.get("rss_kb", 0)} for r in res.keyframe_seconds]
@@ -431,15 +429,15 @@ print("RESULT " + json.dumps({"wall": wall, **fields}))
 
 
 def _run_in_fresh_process(log: Path, out_dir: Path, args, cache_dir: Path):
-    """``_run`` in a new Python process (slam_lcd's runner imported before the clock starts, as in ``_run``)."""
+    """:func:`_run` in a new Python process (the runner is imported before its clock starts, as in one process)."""
     import json
     import subprocess
     import sys
     from types import SimpleNamespace
 
     sets = _config_sets(args, cache_dir)
-    done = subprocess.run([sys.executable, "-c", _FRESH_RUN, str(log), str(out_dir), json.dumps(sets)],
-                          check=True, capture_output=True, text=True)
+    done = subprocess.run([sys.executable, "-c", _FRESH_RUN, str(Path(__file__).resolve().parent), str(log),
+                           str(out_dir), json.dumps(sets)], check=True, capture_output=True, text=True)
     line = next(ln for ln in done.stdout.splitlines() if ln.startswith("RESULT "))
     fields = json.loads(line[len("RESULT "):])
     return SimpleNamespace(**fields), fields["wall"]

@@ -105,9 +105,6 @@ class _Segments:
         out[box] = s_ij & s_ji
         return out
 
-    def sweep(self) -> "_Sweep":
-        return _Sweep(self)
-
 
 class _Sweep:
     """Sweep and prune over the segments' padded boxes (step 0 of the module note).
@@ -279,7 +276,7 @@ def crosses_any(points: np.ndarray, edges: np.ndarray) -> np.ndarray:
     if m < 2:
         return crossed
     segs = _Segments(points, edges)
-    sweep = segs.sweep()
+    sweep = _Sweep(segs)
     if sweep.pairs <= _SWEEP_MAX_PAIRS * m:  # step 0: the boxes overlap little
         for i, j in sweep.overlapping_pairs():
             _test_and_mark(segs, i, j, crossed)
