@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..column_best import first_in_column
 from .arrays import grow_in_place
 from .descriptors import default_match_distance, group_sums, normalise_rows
 from .word_index import WordIndex, exact_nearest
@@ -42,7 +43,7 @@ def mutual_nn_unit(d1: np.ndarray, d2: np.ndarray, ratio: float | None, max_dist
     nn12 = s.argmax(axis=1)
     i1 = np.arange(n1)
     best = s[i1, nn12]
-    keep = _first_row_of_column_max(s, nn12, best)
+    keep = first_in_column(s, nn12, best, largest=True)
     d_best = np.sqrt(np.maximum(2.0 - 2.0 * best, 0.0))
     if ratio is not None and n2 > 1:
         s[i1, nn12] = -np.inf
@@ -52,29 +53,6 @@ def mutual_nn_unit(d1: np.ndarray, d2: np.ndarray, ratio: float | None, max_dist
         keep &= d_best < max_distance
     m = np.stack([i1[keep], nn12[keep]], axis=1).astype(np.int64)
     return (m, d_best[keep].astype(np.float32)) if return_distances else m
-
-
-def _first_row_of_column_max(s: np.ndarray, nn12: np.ndarray, best: np.ndarray) -> np.ndarray:
-    """``s.argmax(axis=0)[nn12] == arange(len(s))``: is row i the (first) best row of its best column?
-
-    The same answer from a column *max*, which numpy reduces along contiguous rows (a column
-    argmax walks the matrix with a stride: ~5x slower at 1000 x 1000, the second largest cost of
-    growing the words after the product). A row whose best equals its column's max is the
-    column's argmax unless an earlier row ties that max. Ties are rare (duplicate descriptors): one
-    count over the whole matrix says whether any column reaches its max twice; only then are the
-    tied columns resolved by an argmax of their own.
-    """
-    col_max = s.max(axis=0)
-    keep = best == col_max[nn12]
-    if keep.any() and np.count_nonzero(s == col_max) > s.shape[1]:  # some column's max is reached twice
-        cols = np.unique(nn12[keep])
-        ties = (s[:, cols] == col_max[cols]).sum(axis=0) > 1
-        if ties.any():
-            tied = cols[ties]
-            first = s[:, tied].argmax(axis=0)
-            rows = np.flatnonzero(keep & np.isin(nn12, tied))
-            keep[rows] = first[np.searchsorted(tied, nn12[rows])] == rows
-    return keep
 
 
 def _member_sums(desc: np.ndarray, inv: np.ndarray, per: np.ndarray) -> np.ndarray:
