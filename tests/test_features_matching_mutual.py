@@ -28,7 +28,7 @@ def _reference(d1, d2, max_distance):
     (squared distances formed in the matcher's order, so that exact copies round alike)."""
     a, b = d1.astype(np.float32), d2.astype(np.float32)
     sq = a @ b.T
-    sq *= -2.0
+    sq *= -2.0  # the matcher scales a instead: the same bits
     sq += np.einsum("ij,ij->i", a, a)[:, None]
     sq += np.einsum("ij,ij->i", b, b)[None, :]
     sq = np.maximum(sq, 0.0)

@@ -88,8 +88,7 @@ def _nearest_two(d1: np.ndarray, d2: np.ndarray, k: int, column_second: bool = F
         return nn12, dist[:, 0].astype(np.float64), second, back[nn12, 0] == rows, None
     a = np.asarray(d1, dtype=np.float32)
     b = np.asarray(d2, dtype=np.float32)
-    sq = a @ b.T
-    sq *= -2.0
+    sq = (a * np.float32(-2.0)) @ b.T  # scaling by -2 is exact: the same bits as scaling the product, on fewer numbers
     sq += np.einsum("ij,ij->i", a, a)[:, None]
     sq += np.einsum("ij,ij->i", b, b)[None, :]
     np.maximum(sq, 0.0, out=sq)
