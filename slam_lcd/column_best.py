@@ -15,14 +15,9 @@ from __future__ import annotations
 import numpy as np
 
 
-def first_in_column(s: np.ndarray, cols: np.ndarray, vals: np.ndarray, largest: bool,
-                    col_best: np.ndarray | None = None) -> np.ndarray:
-    """``(s.argmax if largest else s.argmin)(axis=0)[cols] == arange(len(s))`` for ``vals = s[arange, cols]``.
-
-    ``col_best``: the columns' extremes when the caller has them already.
-    """
-    if col_best is None:
-        col_best = s.max(axis=0) if largest else s.min(axis=0)
+def first_in_column(s: np.ndarray, cols: np.ndarray, vals: np.ndarray, largest: bool) -> np.ndarray:
+    """``(s.argmax if largest else s.argmin)(axis=0)[cols] == arange(len(s))`` for ``vals = s[arange, cols]``."""
+    col_best = s.max(axis=0) if largest else s.min(axis=0)
     keep = vals == col_best[cols]
     if keep.any() and np.count_nonzero(s == col_best) > s.shape[1]:  # some column's extreme is reached twice
         tied_cols = np.unique(cols[keep])

@@ -100,9 +100,7 @@ def _nearest_two(d1: np.ndarray, d2: np.ndarray, k: int, column_second: bool = F
     if column_second:  # each column without its first best row (a mutual pair's own entry)
         first_rows = np.flatnonzero(mutual)
         sq[first_rows, nn12[first_rows]] = np.inf
-        col_second = np.full(sq.shape[1], np.inf)
-        if len(sq) > 1:
-            col_second = np.sqrt(sq.min(0)).astype(np.float64)
+        col_second = np.sqrt(sq.min(0)).astype(np.float64) if len(sq) > 1 else np.full(sq.shape[1], np.inf)
     second = None
     if k == 2:  # second smallest of each row: the smallest once the best is masked (cheaper than a partition)
         sq[rows, nn12] = np.inf
