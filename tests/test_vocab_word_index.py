@@ -287,3 +287,38 @@ def test_word_arrays_grow_in_place_and_keep_their_words():
     assert not w._centres[w.n_words:].any()
     w.add_image(unit(rng.normal(size=(50, 32))))
     assert w.n_words == len(before[0]) + 50
+
+
+def _grow_with_a_missed_image(gap: bool):
+    """Images of a sliding window over landmarks; image 9 misses 60 landmarks that images 8 and 10 see.
+
+    Returns (graph searches of image 10, image 10's words of the missed landmarks, image 8's words of
+    them, image 10's nearest words by exhaustive search).
+    """
+    rng = np.random.default_rng(5)
+    landmarks = clustered_words(rng, 2400)
+    missed = np.arange(420, 480)
+    words = IncrementalWords(32, radius=0.7, index=WordIndex(32, min_words=500, pca_dims=16, hint_gap=gap))
+    out = {}
+    for k in range(11):
+        ids = np.arange(40 * k, 40 * k + 400)
+        if k == 9:
+            ids = ids[~np.isin(ids, missed)]
+        u = unit(landmarks[ids] + 0.02 * rng.normal(size=(len(ids), 32)))
+        before = words.index.n_searched
+        if k == 10:
+            out["exhaustive"] = exact_nearest(words.centres, u)[0][np.isin(ids, missed)]
+        w = words.add_image(u)
+        out[k] = (words.index.n_searched - before, w[np.isin(ids, missed)])
+    assert words.index.active
+    return out[10][0], out[10][1], out[8][1], out["exhaustive"]
+
+
+def test_a_feature_missed_for_one_image_is_decided_by_its_track_not_a_graph_search():
+    searched_gap, words_gap, words_before, exhaustive = _grow_with_a_missed_image(gap=True)
+    searched_plain, words_plain, _, _ = _grow_with_a_missed_image(gap=False)
+    # the 60 landmarks image 9 missed match image 8's features: hints instead of 60 graph searches
+    assert searched_plain - searched_gap == 60
+    # the same words either way: the track's word, which is the nearest word
+    assert np.array_equal(words_gap, words_plain)
+    assert np.array_equal(words_gap, words_before) and np.array_equal(words_gap, exhaustive)

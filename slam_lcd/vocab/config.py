@@ -67,6 +67,9 @@ class VocabConfig:
     ann_hint_images: int = 8
     # ... and only when the match is closer than this (a far match says little about the feature's neighbourhood)
     ann_hint_max_distance: float = 0.5
+    # ... and a feature that matches none of the previous image's features but one of the image before's
+    # that the previous image missed (a landmark lost for one image) is decided the same way
+    ann_hint_gap: bool = True
     # re-fit the projection and rebuild the graph when the vocabulary has grown by this factor (0: never)
     ann_rebuild_growth: float = 0.0
     # how the graph stores the projected words: "sq8" (8-bit codes per dimension) or "flat" (float32)

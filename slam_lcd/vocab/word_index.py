@@ -34,7 +34,10 @@ proposes a few candidate words per descriptor and the winner is chosen exactly a
 - **Tracked features** (``hints``): a feature matched to one of the previous image's features
   is decided among that feature's best candidates and its word (they were the nearest words a
   descriptor ~0.35 away had), plus the fresh words, without a graph search; every
-  ``ann_hint_images`` images a track searches the graph again.
+  ``ann_hint_images`` images a track searches the graph again. A feature that matches nothing in
+  the previous image but one of the image before's that the previous image missed (a landmark
+  lost for one image, ``ann_hint_gap``) is decided the same way: a match between those two small
+  sets replaces ~30% of the graph searches on the synthetic stream (docs/vocab.md).
 - **Growth.** With ``ann_rebuild_growth`` > 1 the projection and the graph are re-fitted when
   the vocabulary has grown by that factor (a cost linear in the words, so constant per word
   added); by default the graph just grows.
@@ -112,7 +115,8 @@ class WordIndex:
 
     def __init__(self, dim: int, *, min_words: int = 5000, pca_dims: int = 64, hnsw_m: int = 16,
                  ef_search: int = 16, candidates: int = 12, fresh_images: int = 2, hint_images: int = 8,
-                 hint_max_distance: float = 0.5, rebuild_growth: float = 0.0, storage: str = "sq8"):
+                 hint_max_distance: float = 0.5, rebuild_growth: float = 0.0, storage: str = "sq8",
+                 hint_gap: bool = True):
         if pca_dims < 1 or hnsw_m < 2 or ef_search < 1 or candidates < 1 or fresh_images < 0 or hint_images < 0 \
                 or not (rebuild_growth == 0 or rebuild_growth > 1):
             raise ConfigError("vocab.ann_*: pca_dims, ef_search and candidates must be >= 1, hnsw_m >= 2, "
@@ -129,6 +133,7 @@ class WordIndex:
         self.hint_images = int(hint_images)
         self.hint_candidates = min(_HINT_CANDIDATES, self.candidates)
         self.hint_max_distance = float(hint_max_distance)
+        self.hint_gap = bool(hint_gap)
         self.rebuild_growth = float(rebuild_growth)
         self.storage = storage
         self.graph = None  # faiss IndexHNSWSQ / IndexHNSWFlat over the projected words [0, n_indexed)
@@ -145,7 +150,7 @@ class WordIndex:
         return cls(dim, min_words=conf.ann_min_words, pca_dims=conf.ann_pca_dims, hnsw_m=conf.ann_hnsw_m,
                    ef_search=conf.ann_ef_search, candidates=conf.ann_candidates, fresh_images=conf.ann_fresh_images,
                    hint_images=conf.ann_hint_images, hint_max_distance=conf.ann_hint_max_distance,
-                   rebuild_growth=conf.ann_rebuild_growth, storage=conf.ann_storage)
+                   rebuild_growth=conf.ann_rebuild_growth, storage=conf.ann_storage, hint_gap=conf.ann_hint_gap)
 
     @property
     def active(self) -> bool:

@@ -97,6 +97,9 @@ class IncrementalWords:
         self._prev_words: np.ndarray | None = None
         self._prev_cands: np.ndarray | None = None  # each previous feature's candidate words (index mode)
         self._prev_age: np.ndarray | None = None  # images since that feature's candidates came from the index
+        # (index mode, ``index.hint_gap``) the features of the image before the previous one that no
+        # feature of the previous image matched: (unit descriptors, candidates, words, ages)
+        self._gap: tuple | None = None
         self._match_cache: tuple | None = None  # (n_images, descriptors, matches to the previous image)
         self._search_cache: tuple | None = None  # (version, descriptors, ids, sims, candidates, age)
 
@@ -179,9 +182,32 @@ class IncrementalWords:
                 search = np.ones(n, dtype=bool)
                 search[i] = False
                 age[i] = self._prev_age[j] + 1
+                if self._gap is not None:
+                    self._gap_hints(desc, hints, search, age)
             ids, sims, cands = self.index.nearest(self.centres, desc, hints, search)
         self._search_cache = (self.version, desc, ids, sims, cands, age)
         return ids, sims, cands, age
+
+    def _gap_hints(self, desc: np.ndarray, hints: np.ndarray, search: np.ndarray, age: np.ndarray) -> None:
+        """Hints for features lost for one image: rows still to search, matched to the features of the
+        image before the previous one that the previous image did not match (a landmark missed once).
+
+        Same rule as a match to the previous image (mutual nearest neighbours, ratio and distance
+        tests, then ``hint_max_distance`` and the track's age), between the two small sets only:
+        a few hundred rows against the few hundred lost features, instead of a graph search each.
+        """
+        g_desc, g_cands, g_words, g_age = self._gap
+        rows = np.flatnonzero(search)
+        if len(rows) == 0 or len(g_desc) == 0:
+            return
+        m, dist = mutual_nn_unit(desc[rows], g_desc, self.ratio, self.max_distance, return_distances=True)
+        ok = (g_age[m[:, 1]] < self.index.hint_images) & (dist < self.index.hint_max_distance)
+        i, j = rows[m[ok, 0]], m[ok, 1]
+        kc = g_cands.shape[1]
+        hints[i, :kc] = g_cands[j]
+        hints[i, kc] = g_words[j]
+        search[i] = False
+        age[i] = g_age[j] + 2
 
     def _nearest_rows(self, desc: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Nearest words of ``desc[rows]`` (exhaustive search, or the cached answer for ``desc``)."""
@@ -232,6 +258,11 @@ class IncrementalWords:
         if self.index is not None:
             self.index.update(self.centres, touched)
         self.n_images += 1
+        self._gap = None
+        if cands is not None and self.index.hint_gap and self._prev_cands is not None:
+            lost = np.ones(len(self._prev_desc), dtype=bool)
+            lost[m[:, 1]] = False
+            self._gap = (self._prev_desc[lost], self._prev_cands[lost], self._prev_words[lost], self._prev_age[lost])
         self._prev_desc, self._prev_words = desc, words
         self._prev_cands, self._prev_age = cands, age
         self._match_cache = self._search_cache = None
