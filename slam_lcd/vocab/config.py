@@ -64,7 +64,7 @@ class VocabConfig:
     ann_fresh_images: int = 2
     # a feature matched to the previous image is decided among its match's best words (and the
     # match's word) instead of searching the graph, for up to this many images in a row (0: always search)
-    ann_hint_images: int = 8
+    ann_hint_images: int = 16
     # ... and only when the match is closer than this (a far match says little about the feature's neighbourhood)
     ann_hint_max_distance: float = 0.5
     # ... and a feature that matches none of the previous image's features but one of the image before's

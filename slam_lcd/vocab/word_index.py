@@ -114,7 +114,7 @@ class WordIndex:
     """Sub-linear nearest-word search over centres that grow and move (see the module doc)."""
 
     def __init__(self, dim: int, *, min_words: int = 5000, pca_dims: int = 64, hnsw_m: int = 16,
-                 ef_search: int = 16, candidates: int = 12, fresh_images: int = 2, hint_images: int = 8,
+                 ef_search: int = 16, candidates: int = 12, fresh_images: int = 2, hint_images: int = 16,
                  hint_max_distance: float = 0.5, rebuild_growth: float = 0.0, storage: str = "sq8",
                  hint_gap: bool = True):
         if pca_dims < 1 or hnsw_m < 2 or ef_search < 1 or candidates < 1 or fresh_images < 0 or hint_images < 0 \
