@@ -181,16 +181,10 @@ class IncrementalWords:
             age = np.zeros(n, dtype=np.int64)
             m, dist = self._match(desc)
             if self._prev_cands is not None and len(m):
-                i, j = m[:, 0], m[:, 1]
-                ok = (self._prev_age[j] < self.index.hint_images) & (dist < self.index.hint_max_distance)
-                i, j = i[ok], j[ok]
-                kc = self._prev_cands.shape[1]
-                hints = np.full((n, kc + 1), -1, dtype=np.int64)
-                hints[i, :kc] = self._prev_cands[j]
-                hints[i, kc] = self._prev_words[j]
+                hints = np.full((n, self._prev_cands.shape[1] + 1), -1, dtype=np.int64)
                 search = np.ones(n, dtype=bool)
-                search[i] = False
-                age[i] = self._prev_age[j] + 1
+                self._hand_over(m[:, 0], m[:, 1], dist, (self._prev_cands, self._prev_words, self._prev_age), 1,
+                                hints, search, age)
                 if self._gap is not None:
                     self._gap_hints(desc, hints, search, age)
             ids, sims, cands = self.index.nearest(self.centres, desc, hints, search)
@@ -210,13 +204,23 @@ class IncrementalWords:
         if len(rows) == 0 or len(g_desc) == 0:
             return
         m, dist = mutual_nn_unit(desc[rows], g_desc, self.ratio, self.max_distance, return_distances=True)
-        ok = (g_age[m[:, 1]] < self.index.hint_images) & (dist < self.index.hint_max_distance)
-        i, j = rows[m[ok, 0]], m[ok, 1]
-        kc = g_cands.shape[1]
-        hints[i, :kc] = g_cands[j]
-        hints[i, kc] = g_words[j]
+        self._hand_over(rows[m[:, 0]], m[:, 1], dist, (g_cands, g_words, g_age), 2, hints, search, age)
+
+    def _hand_over(self, i: np.ndarray, j: np.ndarray, dist: np.ndarray, track: tuple, steps: int,
+                   hints: np.ndarray, search: np.ndarray, age: np.ndarray) -> None:
+        """Rows ``i`` matched (at ``dist``) to features ``j`` of an earlier image ``steps`` images back
+        take those features' candidates and word as hints instead of a graph search, when the match is
+        closer than ``hint_max_distance`` and the candidates are younger than ``hint_images`` images.
+        ``track``: (candidates, words, ages) of that image's features.
+        """
+        cands, words, ages = track
+        ok = (ages[j] < self.index.hint_images) & (dist < self.index.hint_max_distance)
+        i, j = i[ok], j[ok]
+        kc = cands.shape[1]
+        hints[i, :kc] = cands[j]
+        hints[i, kc] = words[j]
         search[i] = False
-        age[i] = g_age[j] + 2
+        age[i] = ages[j] + steps
 
     def _nearest_rows(self, desc: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Nearest words of ``desc[rows]`` (exhaustive search, or the cached answer for ``desc``)."""
