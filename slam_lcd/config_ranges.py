@@ -84,6 +84,7 @@ RANGES: dict[str, str] = {
     "vocab.ann_pca_dims": "[1, 4096]",
     "vocab.ann_hnsw_m": "[2, 256]",
     "vocab.ann_ef_search": "[1, inf)",
+    "vocab.ann_ef_construction": "[1, inf)",
     "vocab.ann_candidates": "[1, inf)",
     "vocab.ann_fresh_images": "[0, inf)",
     "vocab.ann_hint_images": "[0, inf)",

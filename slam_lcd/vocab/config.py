@@ -58,6 +58,8 @@ class VocabConfig:
     ann_hnsw_m: int = 16
     # beam width of a graph search (more: higher recall, slower)
     ann_ef_search: int = 16
+    # beam width while a word is inserted into the graph (faiss default 40; more: better links, slower)
+    ann_ef_construction: int = 40
     # words per descriptor taken from the graph and re-ranked exactly against the current centres
     ann_candidates: int = 12
     # words founded in the last this-many images are searched exhaustively (their centres still move most)

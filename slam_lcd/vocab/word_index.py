@@ -57,8 +57,6 @@ from .descriptors import nearest_by_dot
 
 # the graph is built once at least this many settled words exist (the projection needs data)
 _MIN_BUILD_WORDS = 64
-# beam width while inserting a word (faiss default 40)
-_EF_CONSTRUCTION = 40
 # candidates a tracked feature hands to its match in the next image
 _HINT_CANDIDATES = 4
 # how the graph stores each word's projected position: 8-bit codes (a quarter of the memory, searched
@@ -116,10 +114,10 @@ class WordIndex:
     def __init__(self, dim: int, *, min_words: int = 5000, pca_dims: int = 64, hnsw_m: int = 16,
                  ef_search: int = 16, candidates: int = 12, fresh_images: int = 2, hint_images: int = 16,
                  hint_max_distance: float = 0.5, rebuild_growth: float = 0.0, storage: str = "sq8",
-                 hint_gap: bool = True):
-        if pca_dims < 1 or hnsw_m < 2 or ef_search < 1 or candidates < 1 or fresh_images < 0 or hint_images < 0 \
+                 hint_gap: bool = True, ef_construction: int = 40):
+        if pca_dims < 1 or hnsw_m < 2 or ef_search < 1 or ef_construction < 1 or candidates < 1 or fresh_images < 0 or hint_images < 0 \
                 or not (rebuild_growth == 0 or rebuild_growth > 1):
-            raise ConfigError("vocab.ann_*: pca_dims, ef_search and candidates must be >= 1, hnsw_m >= 2, "
+            raise ConfigError("vocab.ann_*: pca_dims, ef_search, ef_construction and candidates must be >= 1, hnsw_m >= 2, "
                               "fresh_images and hint_images >= 0, rebuild_growth 0 (never) or > 1")
         if storage not in _STORAGES:
             raise ConfigError(f"vocab.ann_storage: {storage!r} is not one of {', '.join(_STORAGES)}")
@@ -128,6 +126,7 @@ class WordIndex:
         self.pca_dims = min(int(pca_dims), dim)
         self.hnsw_m = int(hnsw_m)
         self.ef_search = int(ef_search)
+        self.ef_construction = int(ef_construction)
         self.candidates = int(candidates)
         self.fresh_images = int(fresh_images)
         self.hint_images = int(hint_images)
@@ -150,7 +149,8 @@ class WordIndex:
         return cls(dim, min_words=conf.ann_min_words, pca_dims=conf.ann_pca_dims, hnsw_m=conf.ann_hnsw_m,
                    ef_search=conf.ann_ef_search, candidates=conf.ann_candidates, fresh_images=conf.ann_fresh_images,
                    hint_images=conf.ann_hint_images, hint_max_distance=conf.ann_hint_max_distance,
-                   rebuild_growth=conf.ann_rebuild_growth, storage=conf.ann_storage, hint_gap=conf.ann_hint_gap)
+                   rebuild_growth=conf.ann_rebuild_growth, storage=conf.ann_storage, hint_gap=conf.ann_hint_gap,
+                   ef_construction=conf.ann_ef_construction)
 
     @property
     def active(self) -> bool:
@@ -274,7 +274,7 @@ class WordIndex:
             self.graph.train(np.ascontiguousarray(sample @ self.proj))
         else:
             self.graph = faiss.IndexHNSWFlat(self.pca_dims, self.hnsw_m, faiss.METRIC_INNER_PRODUCT)
-        self.graph.hnsw.efConstruction = _EF_CONSTRUCTION
+        self.graph.hnsw.efConstruction = self.ef_construction
         self.n_indexed = 0
         self._index_up_to(centres, end)
         self.built_at = len(centres)
