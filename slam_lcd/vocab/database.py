@@ -361,7 +361,8 @@ class BowDatabase:
             if self.words is None:
                 self.words = IncrementalWords(u.shape[1], self.conf.match_ratio, self.conf.match_max_distance,
                                               self._desc_kind, radius=self.conf.online_word_radius,
-                                              index=WordIndex.from_config(u.shape[1], self.conf))
+                                              index=WordIndex.from_config(u.shape[1], self.conf),
+                                              product=self.conf.match_product)
             bow = BowVector.from_word_ids(self.words.add_image(u))
         self._insert(kf_id, stamp_ns, bow)
         return bow

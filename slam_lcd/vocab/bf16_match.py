@@ -1,0 +1,164 @@
+"""Mutual nearest-neighbour matching of unit vectors from a bfloat16 product, with exact decisions.
+
+Why: growing the online words matches every keyframe's ~1000 descriptors to the previous
+keyframe's (and the lost ones to the keyframe before). The float32 product of that match is
+~0.5 GFLOP, ~4.8 ms on one core, the largest single step of a keyframe's word search. On CPUs with
+AMX or AVX512-BF16 the same product in bfloat16 takes ~0.5 ms, but rounds: inputs to 8 significant
+bits, the result to bfloat16. Used naively that would change which descriptors match.
+
+It does not here, because the rounded product only *selects*; every decision is taken on float32
+values. For unit vectors a, b with bfloat16 roundings â, b̂ (unit roundoff u = 2^-8),
+``|â·b̂ - a·b| <= (2u + u²) Σ|a_i b_i| <= 2u + u²``, the float32 accumulation adds ~256 * 2^-24 and
+the bfloat16 result another 2^-9: :data:`ERROR_BOUND` covers all of it with room. A pair can only be
+accepted when its similarity exceeds ``s_min = 1 - max_distance² / 2`` (the distance test), so only
+the few pairs whose rounded similarity exceeds ``s_min - ERROR_BOUND`` (about one per matched row)
+are scored in float32, and the matching rule (mutual nearest neighbours with the lowest index on
+ties, ratio and distance tests, as :func:`slam_lcd.vocab.words.mutual_nn_unit`) is applied to them:
+
+- a row's best column passes the distance test only if it is one of its candidates, and then the
+  column's best row is among that column's candidates too (it is at least as similar);
+- the ratio test needs the second best: a non-candidate is at most ``s_min`` similar, so a row whose
+  test is decided by that bound (nearly all: a match is ~0.35 away, the bound is 0.8) needs nothing
+  more; the rare row it does not decide gets its whole row in float32.
+
+The answer is therefore the float32 rule's, up to exact ties of float32 values summed in another
+order (the product's own rounding differs between BLAS kernels in the same way).
+"""
+from __future__ import annotations
+
+import contextlib
+import functools
+
+import numpy as np
+
+# bound on |bfloat16 product - exact dot product| for unit vectors: 2u + u² (inputs, u = 2^-8) +
+# 2^-9 (the bfloat16 result) + float32 accumulation, rounded up with room for rows a few ulps off unit
+ERROR_BOUND = 0.0125
+# rows are padded to a multiple of this (see to_bf16)
+_PAD = 128
+
+
+@functools.lru_cache(maxsize=1)
+def bf16_fast() -> bool:
+    """True when this CPU multiplies bfloat16 in hardware (AMX or AVX512-BF16): only then is the
+    bfloat16 product faster than float32 (emulated, it is slower)."""
+    try:
+        import torch
+
+        caps = torch.cpu.get_capabilities()
+    except Exception:  # noqa: BLE001 - no torch or an older one: the float32 product
+        return False
+    return bool(caps.get("amx_bf16") or caps.get("avx512_bf16"))
+
+
+@functools.lru_cache(maxsize=1)
+def _openmp():
+    """The process's OpenMP runtimes (torch's among them), looked up once; None without threadpoolctl."""
+    try:
+        from threadpoolctl import ThreadpoolController
+    except ImportError:  # pragma: no cover - threadpoolctl is a dependency
+        return None
+    return ThreadpoolController().select(user_api="openmp")
+
+
+def one_thread():
+    """Context: torch's operations in the calling thread on one OpenMP thread (other threads unchanged).
+
+    Why: these are ~0.5 ms operations; split over two threads they wait for cores that numpy's BLAS
+    and faiss workers still spin on, measured 9 ms for a conversion that takes 0.1 ms on one thread.
+    ``torch.set_num_threads`` would change every thread (SuperPoint's forward runs in another one);
+    OpenMP's thread count set here is the calling thread's own, restored on exit.
+    """
+    omp = _openmp()
+    return omp.limit(limits=1) if omp is not None else contextlib.nullcontext()
+
+
+def to_bf16(u: np.ndarray, columns: bool = False):
+    """``u`` as a bfloat16 torch tensor: rows (n', D), or with ``columns`` its transpose (D, n') laid
+    out contiguously (the right operand's layout: a transposed view is multiplied ~2.5x slower).
+
+    ``n'`` is ``n`` rounded up to a multiple of :data:`_PAD` with zero rows: the CPU kernels are
+    compiled per shape (~10 ms each time, more than the product), so shapes must repeat; a zero row's
+    products are 0, below every threshold, and never become candidates.
+    """
+    import torch
+
+    n = len(u)
+    with one_thread():
+        t = torch.zeros((-(-max(n, 1) // _PAD) * _PAD, u.shape[1]), dtype=torch.bfloat16)
+        t[:n] = torch.from_numpy(np.ascontiguousarray(u, dtype=np.float32))
+        return t.T.contiguous() if columns else t
+
+
+def transposed(h):
+    """``to_bf16(u)`` -> ``to_bf16(u, columns=True)`` without converting again."""
+    with one_thread():
+        return h.T.contiguous()
+
+
+def _dist(s: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.maximum(2.0 - 2.0 * s, 0.0))
+
+
+def mutual_nn_unit_bf16(d1: np.ndarray, d2: np.ndarray, ratio: float | None, max_distance: float,
+                        h1=None, h2=None) -> tuple[np.ndarray, np.ndarray]:
+    """Matches (row of d1, row of d2) and their distances, as ``mutual_nn_unit(..., return_distances=True)``.
+
+    ``d1``, ``d2``: unit float32 rows; ``h1``, ``h2``: ``to_bf16(d1)`` and ``to_bf16(d2, columns=True)``
+    when the caller has them already.
+    """
+    import torch
+
+    n1, n2 = len(d1), len(d2)
+    s_min = 1.0 - 0.5 * max_distance * max_distance
+    h1 = to_bf16(d1) if h1 is None else h1
+    h2 = to_bf16(d2, columns=True) if h2 is None else h2
+    # threshold in bfloat16 below s_min - ERROR_BOUND (spacing below 1 is at most 2^-8: room of 0.004)
+    thr = torch.tensor(s_min - ERROR_BOUND - 0.004, dtype=torch.float32).to(torch.bfloat16)
+    if float(thr) <= 0:
+        raise ValueError("mutual_nn_unit_bf16 needs max_distance < 1.4 (a positive similarity bound)")
+    # positive bfloat16 values order as their int16 bit patterns, negative ones below every positive
+    # pattern: one integer comparison in numpy (torch's bfloat16 comparison and nonzero are ~10x slower)
+    with one_thread():
+        bits = torch.mm(h1, h2).view(torch.int16).numpy()
+    flat = np.flatnonzero(bits > int(thr.view(torch.int16)))
+    rows, cols = np.divmod(flat, bits.shape[1])
+    # any pair left out is at most this similar (its rounded product <= thr)
+    upper = float(thr) + ERROR_BOUND
+    if not len(rows):
+        return np.zeros((0, 2), dtype=np.int64), np.zeros(0, np.float32)
+    sims = np.einsum("ij,ij->i", d1[rows], d2[cols])
+    # per row: best first (highest similarity, then lowest column); per column the same by row
+    order = np.lexsort((cols, -sims, rows))
+    r, c, s = rows[order], cols[order], sims[order]
+    first = np.flatnonzero(np.r_[True, r[1:] != r[:-1]])
+    counts = np.diff(np.r_[first, len(r)])
+    best_r, best_c, best_s = r[first], c[first], s[first]
+    second = np.full(len(first), -np.inf, dtype=np.float32)
+    has2 = counts > 1
+    second[has2] = s[first[has2] + 1]
+    corder = np.lexsort((rows, -sims, cols))
+    cc, cr = cols[corder], rows[corder]
+    cfirst = np.flatnonzero(np.r_[True, cc[1:] != cc[:-1]])
+    col_best_row = np.full(n2, -1, dtype=np.int64)
+    col_best_row[cc[cfirst]] = cr[cfirst]
+    d_best = _dist(best_s)
+    keep = (d_best < max_distance) & (col_best_row[best_c] == best_r)
+    if ratio is not None and n2 > 1:
+        # the true second best is max(second, something <= upper): decided by the bounds unless
+        # second < upper and the test passes with second but not with upper
+        d_sec_known = _dist(np.maximum(second, upper))  # smallest the second's distance can be
+        sure = second >= upper
+        ok = d_best < ratio * np.maximum(d_sec_known, 1e-12)
+        unsure = keep & ~sure & ~ok
+        if unsure.any():
+            i = best_r[unsure]
+            full = d1[i] @ d2.T
+            full[np.arange(len(i)), best_c[unsure]] = -np.inf
+            ok[unsure] = d_best[unsure] < ratio * np.maximum(_dist(full.max(axis=1)), 1e-12)
+            sure[unsure] = True
+        exact = sure & has2
+        ok[exact] = d_best[exact] < ratio * np.maximum(_dist(second[exact]), 1e-12)
+        keep &= ok
+    m = np.stack([best_r[keep], best_c[keep]], axis=1).astype(np.int64)
+    return m, d_best[keep].astype(np.float32)
