@@ -192,8 +192,15 @@ def grow(stream: PlaceStream, n: int, conf, checkpoints: list[int], label: str, 
          window: int = 100, vocab=None) -> list[dict]:
     """Grow one database to ``n`` keyframes; one row of figures per checkpoint."""
     from slam_lcd.vocab import BowDatabase
+    from slam_lcd.vocab.bf16_match import bf16_fast
     from slam_lcd.vocab.descriptors import as_unit_vectors
 
+    # the libraries the database loads on first use (faiss for the graph, torch for the bfloat16 match:
+    # ~250 MB of code and pools once per process, in a run loaded before the first keyframe) are loaded
+    # before the baseline, so that memory per keyframe is what the keyframes add
+    import faiss  # noqa: F401
+
+    bf16_fast()
     rss0 = rss_prev = rss_bytes()
     kf_prev = 0
     db = BowDatabase(vocab, conf)

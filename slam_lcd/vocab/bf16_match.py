@@ -100,14 +100,42 @@ def _dist(s: np.ndarray) -> np.ndarray:
     return np.sqrt(np.maximum(2.0 - 2.0 * s, 0.0))
 
 
+class ProductBuffers:
+    """The product's output and its threshold mask, kept from one call to the next.
+
+    Why: both are megabytes (1152 x 1152 entries), and a fresh array of that size is new memory
+    each time: its first touch faults every page in, which measured longer than the product itself.
+    One flat buffer each, grown when needed; a call takes a view of the shape it needs.
+    """
+
+    def __init__(self):
+        self._out = None  # torch bfloat16, flat
+        self._mask = np.empty(0, dtype=bool)
+
+    def product(self, torch, h1, h2):
+        size = h1.shape[0] * h2.shape[1]
+        if self._out is None or self._out.numel() < size:
+            self._out = torch.empty(size, dtype=torch.bfloat16)
+        out = self._out[:size].view(h1.shape[0], h2.shape[1])
+        return torch.mm(h1, h2, out=out)
+
+    def mask(self, shape) -> np.ndarray:
+        size = shape[0] * shape[1]
+        if len(self._mask) < size:
+            self._mask = np.empty(size, dtype=bool)
+        return self._mask[:size].reshape(shape)
+
+
 def mutual_nn_unit_bf16(d1: np.ndarray, d2: np.ndarray, ratio: float | None, max_distance: float,
-                        h1=None, h2=None) -> tuple[np.ndarray, np.ndarray]:
+                        h1=None, h2=None, buffers: ProductBuffers | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Matches (row of d1, row of d2) and their distances, as ``mutual_nn_unit(..., return_distances=True)``.
 
     ``d1``, ``d2``: unit float32 rows; ``h1``, ``h2``: ``to_bf16(d1)`` and ``to_bf16(d2, columns=True)``
-    when the caller has them already.
+    when the caller has them already; ``buffers``: kept by a caller that matches again and again.
     """
     import torch
+
+    buffers = ProductBuffers() if buffers is None else buffers
 
     n1, n2 = len(d1), len(d2)
     s_min = 1.0 - 0.5 * max_distance * max_distance
@@ -120,9 +148,9 @@ def mutual_nn_unit_bf16(d1: np.ndarray, d2: np.ndarray, ratio: float | None, max
     # positive bfloat16 values order as their int16 bit patterns, negative ones below every positive
     # pattern: one integer comparison in numpy (torch's bfloat16 comparison and nonzero are ~10x slower)
     with one_thread():
-        bits = torch.mm(h1, h2).view(torch.int16).numpy()
-    flat = np.flatnonzero(bits > int(thr.view(torch.int16)))
-    rows, cols = np.divmod(flat, bits.shape[1])
+        bits = buffers.product(torch, h1, h2).view(torch.int16).numpy()
+    mask = np.greater(bits, np.int16(int(thr.view(torch.int16))), out=buffers.mask(bits.shape))
+    rows, cols = np.divmod(np.flatnonzero(mask), bits.shape[1])
     # any pair left out is at most this similar (its rounded product <= thr)
     upper = float(thr) + ERROR_BOUND
     if not len(rows):

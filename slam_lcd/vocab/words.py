@@ -20,7 +20,7 @@ import numpy as np
 from ..column_best import first_in_column
 from ..errors import ConfigError
 from .arrays import grow_in_place
-from .bf16_match import bf16_fast, mutual_nn_unit_bf16, to_bf16, transposed
+from .bf16_match import ProductBuffers, bf16_fast, mutual_nn_unit_bf16, to_bf16, transposed
 from .descriptors import default_match_distance, group_sums, normalise_rows
 from .word_index import WordIndex, exact_nearest
 
@@ -115,6 +115,7 @@ class IncrementalWords:
         self.n_images = 0
         self._prev_desc: np.ndarray | None = None
         self._prev_bf16 = None  # with ``bf16``: the previous descriptors as bfloat16 columns (to_bf16)
+        self._bf16_buffers = ProductBuffers() if self.bf16 else None
         self._prev_words: np.ndarray | None = None
         self._prev_cands: np.ndarray | None = None  # each previous feature's candidate words (index mode)
         self._prev_age: np.ndarray | None = None  # images since that feature's candidates came from the index
@@ -166,7 +167,8 @@ class IncrementalWords:
         if len(desc) and self._prev_desc is not None and len(self._prev_desc):
             if self.bf16:
                 h = to_bf16(desc)
-                m, dist = mutual_nn_unit_bf16(desc, self._prev_desc, self.ratio, self.max_distance, h, self._prev_bf16)
+                m, dist = mutual_nn_unit_bf16(desc, self._prev_desc, self.ratio, self.max_distance, h, self._prev_bf16,
+                                              self._bf16_buffers)
             else:
                 m, dist = mutual_nn_unit(desc, self._prev_desc, self.ratio, self.max_distance, return_distances=True)
         else:
