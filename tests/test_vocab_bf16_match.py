@@ -31,7 +31,8 @@ def test_bf16_candidates_give_the_float32_matches(noise, ratio, max_distance):
     assert np.allclose(d16, d32, atol=1e-5)
 
 
-def test_ratio_test_near_its_bound_is_decided_on_float32_rows():
+@pytest.mark.parametrize("third", [False, True])
+def test_ratio_test_near_its_bound_is_decided_on_float32_rows(third):
     # each query has its best match just inside the distance bound and a rival at about best / ratio:
     # the bfloat16 bounds cannot decide the ratio test, the float32 row must (and the outcome still
     # equals the float32 rule)
@@ -44,7 +45,12 @@ def test_ratio_test_near_its_bound_is_decided_on_float32_rows():
     query = e1.astype(np.float32)
     best = (np.cos(angle(d_best))[:, None] * e1 + np.sin(angle(d_best))[:, None] * e2).astype(np.float32)
     rival = (np.cos(angle(d_rival))[:, None] * e1 + np.sin(angle(d_rival))[:, None] * e3).astype(np.float32)
-    cols = np.concatenate([best, rival])
+    cols = [best, rival]
+    if third:  # a third neighbour around the candidate threshold: sometimes a candidate, sometimes not
+        e4 = np.linalg.qr(rng.standard_normal((n, 64, 4)))[0][:, :, 3]
+        d_third = rng.uniform(0.92, 0.96, n)
+        cols.append((np.cos(angle(d_third))[:, None] * e1 + np.sin(angle(d_third))[:, None] * e4).astype(np.float32))
+    cols = np.concatenate(cols)
     m32 = mutual_nn_unit(query, cols, 0.9, 0.9)
     m16, _ = mutual_nn_unit_bf16(query, cols, 0.9, 0.9)
     assert 0 < len(m32) < n  # the ratio test rejected some and kept others

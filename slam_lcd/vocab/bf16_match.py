@@ -163,7 +163,7 @@ def mutual_nn_unit_bf16(d1: np.ndarray, d2: np.ndarray, ratio: float | None, max
     counts = np.diff(np.r_[first, len(r)])
     best_r, best_c, best_s = r[first], c[first], s[first]
     second = np.full(len(first), -np.inf, dtype=np.float32)
-    has2 = counts > 1
+    has2 = counts > 1  # a second candidate: the second best if it is at least ``upper``
     second[has2] = s[first[has2] + 1]
     corder = np.lexsort((rows, -sims, cols))
     cc, cr = cols[corder], rows[corder]
@@ -173,20 +173,17 @@ def mutual_nn_unit_bf16(d1: np.ndarray, d2: np.ndarray, ratio: float | None, max
     d_best = _dist(best_s)
     keep = (d_best < max_distance) & (col_best_row[best_c] == best_r)
     if ratio is not None and n2 > 1:
-        # the true second best is max(second, something <= upper): decided by the bounds unless
-        # second < upper and the test passes with second but not with upper
+        # the true second best is max(second, something <= upper): when second >= upper it is the
+        # true second and this test is exact; otherwise the test is sure to pass if it passes with
+        # upper, and a row for which it does not is decided on its float32 row
         d_sec_known = _dist(np.maximum(second, upper))  # smallest the second's distance can be
-        sure = second >= upper
         ok = d_best < ratio * np.maximum(d_sec_known, 1e-12)
-        unsure = keep & ~sure & ~ok
+        unsure = keep & (second < upper) & ~ok
         if unsure.any():
             i = best_r[unsure]
             full = d1[i] @ d2.T
             full[np.arange(len(i)), best_c[unsure]] = -np.inf
             ok[unsure] = d_best[unsure] < ratio * np.maximum(_dist(full.max(axis=1)), 1e-12)
-            sure[unsure] = True
-        exact = sure & has2
-        ok[exact] = d_best[exact] < ratio * np.maximum(_dist(second[exact]), 1e-12)
         keep &= ok
     m = np.stack([best_r[keep], best_c[keep]], axis=1).astype(np.int64)
     return m, d_best[keep].astype(np.float32)
