@@ -195,12 +195,12 @@ def grow(stream: PlaceStream, n: int, conf, checkpoints: list[int], label: str, 
     from slam_lcd.vocab.bf16_match import bf16_fast
     from slam_lcd.vocab.descriptors import as_unit_vectors
 
-    # the libraries the database loads on first use (faiss for the graph, torch for the bfloat16 match:
-    # ~250 MB of code and pools once per process, in a run loaded before the first keyframe) are loaded
-    # before the baseline, so that memory per keyframe is what the keyframes add
+    # the libraries of a SuperPoint run are loaded before the baseline, so that memory per keyframe is
+    # what the keyframes add: faiss (the graph, loaded on first use) and torch (~190 MB once per
+    # process; with torch loaded, ``match_product: auto`` takes the bfloat16 match, as in such a run)
     import faiss  # noqa: F401
 
-    bf16_fast()
+    bf16_fast()  # imports torch
     rss0 = rss_prev = rss_bytes()
     kf_prev = 0
     db = BowDatabase(vocab, conf)

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import sys
 
 import numpy as np
 
@@ -49,6 +50,13 @@ def bf16_fast() -> bool:
     except Exception:  # noqa: BLE001 - no torch or an older one: the float32 product
         return False
     return bool(caps.get("amx_bf16") or caps.get("avx512_bf16"))
+
+
+def bf16_auto() -> bool:
+    """``match_product: auto``: bfloat16 when torch is already loaded (a SuperPoint run) and the CPU
+    multiplies bfloat16 in hardware. A process without torch (an ORB run, a database used on its own)
+    keeps float32 rather than loading ~190 MB of torch for one product."""
+    return "torch" in sys.modules and bf16_fast()
 
 
 @functools.lru_cache(maxsize=1)

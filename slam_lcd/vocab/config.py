@@ -15,7 +15,8 @@ class VocabConfig:
     match_max_distance: float | None = None
     # similarity product of that match: "float32"; "bfloat16" (candidates from a bfloat16 product,
     # every decision on float32 values: the same matches, docs/vocab.md); "auto": bfloat16 where the
-    # CPU multiplies it in hardware (AMX, AVX512-BF16), float32 elsewhere
+    # CPU multiplies it in hardware (AMX, AVX512-BF16) and torch is loaded (SuperPoint runs; an ORB
+    # run stays free of torch), float32 elsewhere
     match_product: Literal["auto", "float32", "bfloat16"] = "auto"
     # --- tree over the words ---
     # 'dp': Dirichlet-process mixture level by level up to a root; 'hkmeans': DBoW2-style k^L

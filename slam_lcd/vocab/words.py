@@ -20,7 +20,7 @@ import numpy as np
 from ..column_best import first_in_column
 from ..errors import ConfigError
 from .arrays import grow_in_place
-from .bf16_match import ProductBuffers, bf16_fast, mutual_nn_unit_bf16, to_bf16, transposed
+from .bf16_match import ProductBuffers, bf16_auto, mutual_nn_unit_bf16, to_bf16, transposed
 from .descriptors import default_match_distance, group_sums, normalise_rows
 from .word_index import WordIndex, exact_nearest
 
@@ -90,7 +90,8 @@ class IncrementalWords:
     ``index``: the nearest-word search used with ``radius`` (default: exact search).
     ``product``: the similarity product of the match to the previous image: ``float32``, or
     ``bfloat16`` candidates scored in float32 (:mod:`slam_lcd.vocab.bf16_match`: the same matches,
-    ~2-5x less time where the CPU multiplies bfloat16 in hardware); ``auto`` takes ``bfloat16`` there.
+    ~2-5x less time where the CPU multiplies bfloat16 in hardware); ``auto`` takes ``bfloat16`` there
+    when torch is loaded already (:func:`~slam_lcd.vocab.bf16_match.bf16_auto`).
     """
 
     def __init__(self, dim: int, ratio: float | None = 0.9, max_distance: float | None = None,
@@ -101,7 +102,7 @@ class IncrementalWords:
         self.dim = dim
         self.ratio = ratio
         self.max_distance = default_match_distance(kind) if max_distance is None else max_distance
-        self.bf16 = (product == "bfloat16" or (product == "auto" and bf16_fast())) and self.max_distance < 1.4
+        self.bf16 = (product == "bfloat16" or (product == "auto" and bf16_auto())) and self.max_distance < 1.4
         self.radius = radius
         self.index = index
         self.version = 0  # bumped whenever words move or are founded (invalidates cached searches)
