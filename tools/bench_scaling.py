@@ -192,15 +192,13 @@ def grow(stream: PlaceStream, n: int, conf, checkpoints: list[int], label: str, 
          window: int = 100, vocab=None) -> list[dict]:
     """Grow one database to ``n`` keyframes; one row of figures per checkpoint."""
     from slam_lcd.vocab import BowDatabase
-    from slam_lcd.vocab.bf16_match import bf16_fast
     from slam_lcd.vocab.descriptors import as_unit_vectors
 
     # the libraries of a SuperPoint run are loaded before the baseline, so that memory per keyframe is
     # what the keyframes add: faiss (the graph, loaded on first use) and torch (~190 MB once per
     # process; with torch loaded, ``match_product: auto`` takes the bfloat16 match, as in such a run)
     import faiss  # noqa: F401
-
-    bf16_fast()  # imports torch
+    import torch  # noqa: F401
     rss0 = rss_prev = rss_bytes()
     kf_prev = 0
     db = BowDatabase(vocab, conf)

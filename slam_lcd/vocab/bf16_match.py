@@ -32,9 +32,13 @@ import sys
 
 import numpy as np
 
+from .descriptors import unit_distance
+
 # bound on |bfloat16 product - exact dot product| for unit vectors: 2u + u² (inputs, u = 2^-8) +
 # 2^-9 (the bfloat16 result) + float32 accumulation, rounded up with room for rows a few ulps off unit
 ERROR_BOUND = 0.0125
+# the similarity threshold (s_min - ERROR_BOUND, below) is positive only for match distances under this
+MAX_DISTANCE = 1.4
 # rows are padded to a multiple of this (see to_bf16)
 _PAD = 128
 
@@ -104,10 +108,6 @@ def transposed(h):
         return h.T.contiguous()
 
 
-def _dist(s: np.ndarray) -> np.ndarray:
-    return np.sqrt(np.maximum(2.0 - 2.0 * s, 0.0))
-
-
 class ProductBuffers:
     """The product's output and its threshold mask, kept from one call to the next.
 
@@ -145,14 +145,14 @@ def mutual_nn_unit_bf16(d1: np.ndarray, d2: np.ndarray, ratio: float | None, max
 
     buffers = ProductBuffers() if buffers is None else buffers
 
+    if not max_distance < MAX_DISTANCE:
+        raise ValueError(f"mutual_nn_unit_bf16 needs max_distance < {MAX_DISTANCE} (a positive similarity bound)")
     n1, n2 = len(d1), len(d2)
     s_min = 1.0 - 0.5 * max_distance * max_distance
     h1 = to_bf16(d1) if h1 is None else h1
     h2 = to_bf16(d2, columns=True) if h2 is None else h2
     # threshold in bfloat16 below s_min - ERROR_BOUND (spacing below 1 is at most 2^-8: room of 0.004)
     thr = torch.tensor(s_min - ERROR_BOUND - 0.004, dtype=torch.float32).to(torch.bfloat16)
-    if float(thr) <= 0:
-        raise ValueError("mutual_nn_unit_bf16 needs max_distance < 1.4 (a positive similarity bound)")
     # positive bfloat16 values order as their int16 bit patterns, negative ones below every positive
     # pattern: one integer comparison in numpy (torch's bfloat16 comparison and nonzero are ~10x slower)
     with one_thread():
@@ -178,20 +178,20 @@ def mutual_nn_unit_bf16(d1: np.ndarray, d2: np.ndarray, ratio: float | None, max
     cfirst = np.flatnonzero(np.r_[True, cc[1:] != cc[:-1]])
     col_best_row = np.full(n2, -1, dtype=np.int64)
     col_best_row[cc[cfirst]] = cr[cfirst]
-    d_best = _dist(best_s)
+    d_best = unit_distance(best_s)
     keep = (d_best < max_distance) & (col_best_row[best_c] == best_r)
     if ratio is not None and n2 > 1:
         # the true second best is max(second, something <= upper): when second >= upper it is the
         # true second and this test is exact; otherwise the test is sure to pass if it passes with
         # upper, and a row for which it does not is decided on its float32 row
-        d_sec_known = _dist(np.maximum(second, upper))  # smallest the second's distance can be
+        d_sec_known = unit_distance(np.maximum(second, upper))  # smallest the second's distance can be
         ok = d_best < ratio * np.maximum(d_sec_known, 1e-12)
         unsure = keep & (second < upper) & ~ok
         if unsure.any():
             i = best_r[unsure]
             full = d1[i] @ d2.T
             full[np.arange(len(i)), best_c[unsure]] = -np.inf
-            ok[unsure] = d_best[unsure] < ratio * np.maximum(_dist(full.max(axis=1)), 1e-12)
+            ok[unsure] = d_best[unsure] < ratio * np.maximum(unit_distance(full.max(axis=1)), 1e-12)
         keep &= ok
     m = np.stack([best_r[keep], best_c[keep]], axis=1).astype(np.int64)
     return m, d_best[keep].astype(np.float32)

@@ -29,7 +29,7 @@ from ..errors import InputError
 from ..types import LoopCandidate
 from .arrays import grow_in_place
 from .config import VocabConfig
-from .descriptors import as_unit_vectors, descriptor_kind
+from .descriptors import as_unit_vectors, descriptor_kind, unit_distance
 from .vocabulary import Vocabulary
 from .word_index import WordIndex
 from .words import IncrementalWords
@@ -343,7 +343,7 @@ class BowDatabase:
         # online: nearest existing word, as add() would assign it; a feature farther than the word
         # radius would found a new word that no keyframe holds yet, so it is left out
         best, sim = self.words.nearest(self._unit(d))
-        dist = np.sqrt(np.maximum(2.0 - 2.0 * sim, 0.0))
+        dist = unit_distance(sim)
         return BowVector.from_word_ids(best[dist < self.conf.online_word_radius])
 
     # ------------------------------------------------------------------- add

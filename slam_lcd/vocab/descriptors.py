@@ -38,6 +38,11 @@ def normalise_rows(x: np.ndarray) -> np.ndarray:
     return x / np.maximum(np.linalg.norm(x, axis=1, keepdims=True), 1e-12)
 
 
+def unit_distance(similarity):
+    """Euclidean distance of unit vectors from their dot product, ``sqrt(2 - 2 s)`` (rounding below 0 clipped)."""
+    return np.sqrt(np.maximum(2.0 - 2.0 * similarity, 0.0))
+
+
 def default_match_distance(kind: str) -> float:
     """Distance bound on unit vectors: 0.8 for SuperPoint, 1.0 (= Hamming 64/256) for ORB."""
     return 1.0 if kind == "binary" else 0.8

@@ -20,8 +20,8 @@ import numpy as np
 from ..column_best import first_in_column
 from ..errors import ConfigError
 from .arrays import grow_in_place
-from .bf16_match import ProductBuffers, bf16_auto, mutual_nn_unit_bf16, to_bf16, transposed
-from .descriptors import default_match_distance, group_sums, normalise_rows
+from .bf16_match import MAX_DISTANCE, ProductBuffers, bf16_auto, mutual_nn_unit_bf16, to_bf16, transposed
+from .descriptors import default_match_distance, group_sums, normalise_rows, unit_distance
 from .word_index import WordIndex, exact_nearest
 
 
@@ -48,10 +48,10 @@ def mutual_nn_unit(d1: np.ndarray, d2: np.ndarray, ratio: float | None, max_dist
     i1 = np.arange(n1)
     best = s[i1, nn12]
     keep = first_in_column(s, nn12, best, largest=True)
-    d_best = np.sqrt(np.maximum(2.0 - 2.0 * best, 0.0))
+    d_best = unit_distance(best)
     if ratio is not None and n2 > 1:
         s[i1, nn12] = -np.inf
-        d_second = np.sqrt(np.maximum(2.0 - 2.0 * s.max(axis=1), 0.0))
+        d_second = unit_distance(s.max(axis=1))
         keep &= d_best < ratio * np.maximum(d_second, 1e-12)
     if max_distance is not None:
         keep &= d_best < max_distance
@@ -102,7 +102,7 @@ class IncrementalWords:
         self.dim = dim
         self.ratio = ratio
         self.max_distance = default_match_distance(kind) if max_distance is None else max_distance
-        self.bf16 = (product == "bfloat16" or (product == "auto" and bf16_auto())) and self.max_distance < 1.4
+        self.bf16 = (product == "bfloat16" or (product == "auto" and bf16_auto())) and self.max_distance < MAX_DISTANCE
         self.radius = radius
         self.index = index
         self.version = 0  # bumped whenever words move or are founded (invalidates cached searches)
@@ -266,7 +266,7 @@ class IncrementalWords:
                 best, sim = ids[free], sims[free]
             else:
                 best, sim = self._nearest_rows(desc, free) if len(free) else (free, np.zeros(0, np.float32))
-            dist = np.sqrt(np.maximum(2.0 - 2.0 * sim, 0.0))
+            dist = unit_distance(sim)
             near = dist < self.radius
             words[free[near]] = best[near]
         new = np.flatnonzero(words < 0)
