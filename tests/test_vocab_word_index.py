@@ -322,3 +322,42 @@ def test_a_feature_missed_for_one_image_is_decided_by_its_track_not_a_graph_sear
     # the same words either way: the track's word, which is the nearest word
     assert np.array_equal(words_gap, words_plain)
     assert np.array_equal(words_gap, words_before) and np.array_equal(words_gap, exhaustive)
+
+
+
+def _revisit(query: bool):
+    """A database over a sliding window of landmarks (images 0-29), then a revisit of images 5-6's
+    place: image 30 sees image 5's landmarks, image 31 image 6's (40 of them not in image 30).
+
+    ``query``: the loop detector's order (query each image, then add it); without queries there is
+    no previous best keyframe and so no pool. Returns (graph searches of image 31, image 31's words
+    of its 40 entering landmarks, image 6's words of them, image 31's nearest words of them by
+    exhaustive search).
+    """
+    rng = np.random.default_rng(11)
+    landmarks = clustered_words(rng, 1700)
+    db = BowDatabase(None, VocabConfig(idf_source="database", ann_min_words=500, ann_pca_dims=16))
+    entering = np.arange(40 * 6 + 360, 40 * 6 + 400)
+    out = {}
+    for k in range(32):
+        ids = np.arange(40 * k, 40 * k + 400) if k < 30 else np.arange(40 * (k - 25), 40 * (k - 25) + 400)
+        u = unit(landmarks[ids] + 0.02 * rng.normal(size=(len(ids), 32)))
+        before = db.words.index.n_searched if db.words is not None else 0
+        if k == 31:
+            out["exhaustive"] = exact_nearest(db.words.centres, u)[0][np.isin(ids, entering)]
+        if query and len(db):
+            db.query(u, top_k=3, exclude_recent_n=5)
+        db.add(k, k * 10**9, u)
+        out[k] = (db.words.index.n_searched - before, db.words._prev_words[np.isin(ids, entering)])
+    assert db.words.index.active
+    return out[31][0], out[31][1], out[6][1], out["exhaustive"]
+
+
+def test_landmarks_entering_the_view_on_a_revisit_take_the_retrieved_places_words():
+    searched_pool, words_pool, words_before, exhaustive = _revisit(query=True)
+    searched_plain, words_plain, _, _ = _revisit(query=False)
+    # image 30's query ranks image 5 first: image 31's 40 entering landmarks are decided among the
+    # words of images 4-7 instead of 40 graph searches; the same words, those of the first visit
+    assert searched_plain - searched_pool == 40
+    assert np.array_equal(words_pool, words_plain)
+    assert np.array_equal(words_pool, words_before) and np.array_equal(words_pool, exhaustive)

@@ -77,6 +77,9 @@ class VocabConfig:
     # ... and a feature that matches none of the previous image's features but one of the image before's
     # that the previous image missed (a landmark lost for one image) is decided the same way
     ann_hint_gap: bool = True
+    # ... and a feature still to search whose best word among those of the keyframes around the previous
+    # keyframe's best query result lies within online_word_radius takes it (a revisit: landmarks entering the view)
+    ann_pool: bool = True
     # re-fit the projection and rebuild the graph when the vocabulary has grown by this factor (0: never)
     ann_rebuild_growth: float = 0.0
     # how the graph stores the projected words: "sq8" (8-bit codes per dimension) or "flat" (float32)

@@ -34,6 +34,10 @@ from .vocabulary import Vocabulary
 from .word_index import WordIndex
 from .words import IncrementalWords
 
+# keyframes before / after the previous query's best whose words form the next search's pool (_pool)
+_POOL_BEFORE = 1
+_POOL_AFTER = 2
+
 
 @dataclass
 class BowVector:
@@ -278,6 +282,11 @@ class BowDatabase:
         self._bow_words: list[np.ndarray] = []  # int32 word ids per keyframe (BowVector on access)
         self._bow_counts: list[np.ndarray] = []
         self._last_unit: tuple | None = None  # (descriptors, key, result) of the last conversion (_once)
+        # online: the best keyframe (index) of the last query since the last add, and of the one before
+        # that add: the keyframes around it lend their words to the next keyframe's search (_pool)
+        self._query_best: int | None = None
+        self._pool_at: int | None = None
+        self._pool_cache: tuple | None = None  # (pool_at, keyframes, pool)
 
     def __len__(self) -> int:
         return len(self.kf_ids)
@@ -342,7 +351,7 @@ class BowDatabase:
             return BowVector.from_word_ids(np.zeros(0, dtype=np.int64))
         # online: nearest existing word, as add() would assign it; a feature farther than the word
         # radius would found a new word that no keyframe holds yet, so it is left out
-        best, sim = self.words.nearest(self._unit(d))
+        best, sim = self.words.nearest(self._unit(d), self._pool())
         dist = unit_distance(sim)
         return BowVector.from_word_ids(best[dist < self.conf.online_word_radius])
 
@@ -363,9 +372,27 @@ class BowDatabase:
                                               self._desc_kind, radius=self.conf.online_word_radius,
                                               index=WordIndex.from_config(u.shape[1], self.conf),
                                               product=self.conf.match_product)
-            bow = BowVector.from_word_ids(self.words.add_image(u))
+            bow = BowVector.from_word_ids(self.words.add_image(u, self._pool()))
         self._insert(kf_id, stamp_ns, bow)
+        self._pool_at, self._query_best = self._query_best, None
         return bow
+
+    def _pool(self) -> np.ndarray | None:
+        """Words of the keyframes around the one the previous keyframe's query ranked first (online mode).
+
+        Why: a keyframe that matched an earlier place is followed by keyframes that see that place's
+        next landmarks; those words let most of the next keyframe's untracked features skip the
+        graph search (:meth:`IncrementalWords._pool_hints`). Keyframes ``_POOL_BEFORE`` before to
+        ``_POOL_AFTER`` after it (a revisit may run either way along the old route).
+        """
+        j = self._pool_at
+        if j is None or self.vocab is not None or not self.conf.ann_pool:
+            return None
+        c = self._pool_cache
+        if c is None or c[0] != j or c[1] != len(self):
+            parts = self._bow_words[max(0, j - _POOL_BEFORE): j + _POOL_AFTER + 1]
+            c = self._pool_cache = (j, len(self), np.unique(np.concatenate(parts)).astype(np.int64))
+        return c[2]
 
     def add_bow(self, kf_id: int, stamp_ns: int, bow: BowVector) -> BowVector:
         """Insert a keyframe whose bag of words is already known (word ids of this database's vocabulary)."""
@@ -507,5 +534,6 @@ class BowDatabase:
         if len(cand) > top_k:
             cand = cand[np.argpartition(-s[cand], top_k - 1)[:top_k]]
         cand = cand[np.argsort(-s[cand], kind="stable")]
+        self._query_best = int(cand[0])
         qid = -1 if query_id is None else int(query_id)
         return [LoopCandidate(query_id=qid, match_id=int(self.kf_ids[i]), bow_score=float(s[i])) for i in cand]
