@@ -248,7 +248,9 @@ _HEAD = (f"{'path':10s} {'kf':>6s} {'words':>8s} {'quant':>7s} {'query':>7s} {'i
 def _fmt(r: dict) -> str:
     ix = r["index"]
     share = ix.get("hinted", 0) / max(1, ix.get("hinted", 0) + ix.get("searched", 0))
-    ixs = f"graph: {ix['indexed']} words, {share:.0%} of lookups by track hints" if ix["active"] else \
+    pooled = ix.get("pooled", 0) / max(1, ix.get("hinted", 0) + ix.get("searched", 0))
+    ixs = (f"graph: {ix['indexed']} words, {share:.0%} of lookups by hints ({pooled:.0%} from the revisited "
+           f"place's words)") if ix["active"] else \
         (f"trained tree, depth {ix['tree']}" if "tree" in ix else "exact")
     return (f"{r['path']:10s} {r['keyframes']:6d} {r['words']:8d} {r['quantise']:7.2f} {r['query']:7.2f} "
             f"{r['insert']:7.2f} {r['total']:7.2f}       {r['rss_kb_per_kf']:6.1f} {r['rss_kb_marginal']:6.1f} "

@@ -147,7 +147,8 @@ class WordIndex:
         self.built_at = 0  # word count at the last fit
         self.n_builds = 0
         self.n_searched = 0  # descriptors that searched the graph
-        self.n_hinted = 0  # descriptors decided among their match's candidates
+        self.n_hinted = 0  # descriptors decided among hints: their match's candidates or a pool's words
+        self.n_pooled = 0  # ... of which by a pool's words (IncrementalWords._pool_hints)
         self._image_ends: deque[int] = deque(maxlen=self.fresh_images + 1)  # word count after each image
 
     @classmethod
@@ -318,4 +319,4 @@ class WordIndex:
 
     def stats(self) -> dict:
         return {"active": self.active, "indexed": self.n_indexed, "builds": self.n_builds,
-                "searched": self.n_searched, "hinted": self.n_hinted}
+                "searched": self.n_searched, "hinted": self.n_hinted, "pooled": self.n_pooled}

@@ -260,6 +260,7 @@ class IncrementalWords:
         hints[rows, :kc] = cand
         hints[rows, kc:] = -1
         search[rows] = False
+        self.index.n_pooled += len(rows)
 
     def _hand_over(self, i: np.ndarray, j: np.ndarray, dist: np.ndarray, track: tuple, steps: int,
                    hints: np.ndarray, search: np.ndarray, age: np.ndarray) -> None:
