@@ -78,7 +78,8 @@ class VocabConfig:
     # that the previous image missed (a landmark lost for one image) is decided the same way
     ann_hint_gap: bool = True
     # ... and a feature still to search whose best word among those of the keyframes around the previous
-    # keyframe's best query result lies within online_word_radius takes it (a revisit: landmarks entering the view)
+    # keyframe's best query result lies within online_word_radius takes it (a revisit: landmarks entering the view);
+    # float descriptors (SuperPoint) only: ORB words are less distinct, the corridor's ORB run took a false loop with it
     ann_pool: bool = True
     # re-fit the projection and rebuild the graph when the vocabulary has grown by this factor (0: never)
     ann_rebuild_growth: float = 0.0

@@ -383,10 +383,13 @@ class BowDatabase:
         Why: a keyframe that matched an earlier place is followed by keyframes that see that place's
         next landmarks; those words let most of the next keyframe's untracked features skip the
         graph search (:meth:`IncrementalWords._pool_hints`). Keyframes ``_POOL_BEFORE`` before to
-        ``_POOL_AFTER`` after it (a revisit may run either way along the old route).
+        ``_POOL_AFTER`` after it (a revisit may run either way along the old route). Float
+        descriptors only: with ORB's binary words (less distinct; the word radius is ~31 of 256 bits)
+        a pool from an aliased place lent its words to the next query, and the corridor's ORB run
+        accepted a false loop (precision 1.0 -> 0.977); ORB keeps the graph search.
         """
         j = self._pool_at
-        if j is None or self.vocab is not None or not self.conf.ann_pool:
+        if j is None or self.vocab is not None or not self.conf.ann_pool or self._desc_kind != "float":
             return None
         c = self._pool_cache
         if c is None or c[0] != j or c[1] != len(self):
