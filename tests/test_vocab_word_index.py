@@ -361,3 +361,20 @@ def test_landmarks_entering_the_view_on_a_revisit_take_the_retrieved_places_word
     assert searched_plain - searched_pool == 40
     assert np.array_equal(words_pool, words_plain)
     assert np.array_equal(words_pool, words_before) and np.array_equal(words_pool, exhaustive)
+
+
+def test_binary_descriptors_search_the_graph_without_a_pool():
+    # ORB words are less distinct: an aliased place's words must not decide the next query (the
+    # corridor's ORB run took a false loop with them); float descriptors get the pool
+    rng = np.random.default_rng(2)
+    pools = {}
+    for kind in ("binary", "float"):
+        db = BowDatabase(None, VocabConfig(idf_source="database"))
+        base = rng.integers(0, 256, (200, 32), dtype=np.uint8) if kind == "binary" else rng.normal(size=(200, 32))
+        for k in range(3):  # the same place three times: the queries find the earlier images
+            d = base.copy() if kind == "binary" else unit(base + 0.05 * rng.normal(size=base.shape))
+            if len(db):
+                db.query(d, top_k=1)
+            db.add(k, k * 10**9, d)
+        pools[kind] = db._pool()
+    assert pools["binary"] is None and pools["float"] is not None and len(pools["float"]) > 0
