@@ -314,14 +314,20 @@ def _grow_with_a_missed_image(gap: bool):
     return out[10][0], out[10][1], out[8][1], out["exhaustive"]
 
 
+def _fewer_searches_same_words(grow, fewer: int) -> None:
+    """``grow(on)`` -> (graph searches, words, words at the first sight, exhaustive nearest words) of the
+    landmarks under test, with the mechanism on and off: ``fewer`` searches fewer when on, and the
+    same words either way, which are the first sight's and the nearest ones."""
+    searched_on, words_on, words_before, exhaustive = grow(True)
+    searched_off, words_off, _, _ = grow(False)
+    assert searched_off - searched_on == fewer
+    assert np.array_equal(words_on, words_off)
+    assert np.array_equal(words_on, words_before) and np.array_equal(words_on, exhaustive)
+
+
 def test_a_feature_missed_for_one_image_is_decided_by_its_track_not_a_graph_search():
-    searched_gap, words_gap, words_before, exhaustive = _grow_with_a_missed_image(gap=True)
-    searched_plain, words_plain, _, _ = _grow_with_a_missed_image(gap=False)
     # the 60 landmarks image 9 missed match image 8's features: hints instead of 60 graph searches
-    assert searched_plain - searched_gap == 60
-    # the same words either way: the track's word, which is the nearest word
-    assert np.array_equal(words_gap, words_plain)
-    assert np.array_equal(words_gap, words_before) and np.array_equal(words_gap, exhaustive)
+    _fewer_searches_same_words(lambda on: _grow_with_a_missed_image(gap=on), 60)
 
 
 
@@ -354,13 +360,9 @@ def _revisit(query: bool):
 
 
 def test_landmarks_entering_the_view_on_a_revisit_take_the_retrieved_places_words():
-    searched_pool, words_pool, words_before, exhaustive = _revisit(query=True)
-    searched_plain, words_plain, _, _ = _revisit(query=False)
     # image 30's query ranks image 5 first: image 31's 40 entering landmarks are decided among the
     # words of images 4-7 instead of 40 graph searches; the same words, those of the first visit
-    assert searched_plain - searched_pool == 40
-    assert np.array_equal(words_pool, words_plain)
-    assert np.array_equal(words_pool, words_before) and np.array_equal(words_pool, exhaustive)
+    _fewer_searches_same_words(lambda on: _revisit(query=on), 40)
 
 
 def test_binary_descriptors_search_the_graph_without_a_pool():
