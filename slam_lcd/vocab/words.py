@@ -244,10 +244,10 @@ class IncrementalWords:
         exactly) lies within ``radius`` take those candidates as hints instead of a graph search.
 
         Why: on a revisit most rows left to search are landmarks entering the view again (or lost for
-        a few images); their words were seen in the keyframes around the place just retrieved. On the
-        synthetic 10,000-keyframe stream ~70% of the graph searches are replaced this way, and in
-        0.5% of those the exhaustive nearest word is another word (a near-duplicate of the same
-        landmark) than the pool's (docs/vocab.md).
+        a few images); their words were seen in the keyframes around the place just retrieved. On a
+        revisit of the synthetic stream 136 of ~200 graph searches per keyframe are replaced this way
+        (58 % of all searches over 3,000 keyframes), and for ~1 of those 136 the exhaustive nearest word
+        is another word (a near-duplicate of the same landmark) than the pool's (docs/vocab.md).
         """
         rows = np.flatnonzero(search)
         if len(rows) == 0:
