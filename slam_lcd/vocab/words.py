@@ -255,10 +255,8 @@ class IncrementalWords:
         cand = self.index.pool_candidates(desc[rows], pool)
         best, sim = self.index.decide(self.centres, desc[rows], cand)
         ok = (cand[:, 0] >= 0) & (unit_distance(sim) < self.radius)
-        rows, cand = rows[ok], cand[ok]
-        kc = cand.shape[1]
-        hints[rows, :kc] = cand
-        hints[rows, kc:] = -1
+        rows = rows[ok]
+        hints[rows, : cand.shape[1]] = cand[ok]  # a row still to search has no hints yet: the rest stays -1
         search[rows] = False
         self.index.n_pooled += len(rows)
 
