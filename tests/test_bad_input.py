@@ -375,6 +375,26 @@ def test_ctrl_c_while_the_command_line_loads_is_one_line(tmp_path, capfd, monkey
     assert_one_line(err, "interrupted")
 
 
+def test_ctrl_c_caught_in_string_evaluated_code_still_exits_130(demo, tmp_path):
+    """`python -m slam_lcd`: a Ctrl-C that ends code run from a string (``exec`` of source text, as
+    dataclasses and generated message types do) is caught by the command like any other, and the
+    process exits 130, not by SIGINT (CPython remembers such an interrupt and, under ``-m``,
+    re-raises the signal at exit unless the flag is cleared: the batch CLI died by SIGINT ~1 run in 4)."""
+    hook = tmp_path / "hook"
+    hook.mkdir()
+    (hook / "sitecustomize.py").write_text(
+        "import sys\n"
+        "class _Stop:\n"
+        "    def find_spec(self, name, path=None, target=None):\n"
+        "        if name == 'slam_lcd.io.mcap_backend':\n"
+        "            exec('raise KeyboardInterrupt', {})\n"
+        "        return None\n"
+        "sys.meta_path.insert(0, _Stop())\n")
+    rc, _, err = run_subprocess(["info", demo], extra_path=[hook])
+    assert rc == 130, err
+    assert_one_line(err, "interrupted")
+
+
 def test_atomic_writers_leave_no_temporary_files_when_interrupted(demo, tmp_path):
     """Item 3: an interrupted atomic write (file or log) leaves nothing beside its target."""
     from slam_lcd.atomic import atomic_write
