@@ -114,6 +114,21 @@ def _rerank(centres: np.ndarray, u: np.ndarray, cand: np.ndarray, keep: int):
     return ids, top.astype(np.float32), cand
 
 
+def _top_columns(s: np.ndarray, k: int) -> np.ndarray:
+    """Column indices of each row's ``k`` largest values (in descending order, lowest index on ties).
+
+    Why not ``np.argpartition``: for the pool's few (4) of ~1,600 columns, ``k`` passes of ``argmax``
+    (vectorised, and the winner masked) take 0.23 ms on 200 rows where ``argpartition`` took 1.3 ms.
+    ``s`` is overwritten.
+    """
+    out = np.empty((len(s), k), dtype=np.int64)
+    r = np.arange(len(s))
+    for i in range(k):
+        out[:, i] = at = s.argmax(axis=1)
+        s[r, at] = -np.inf
+    return out
+
+
 class WordIndex:
     """Sub-linear nearest-word search over centres that grow and move (see the module doc)."""
 
@@ -217,8 +232,7 @@ class WordIndex:
                 rows = faiss.downcast_index(self.graph.storage).sa_decode(np.ascontiguousarray(rows))
         s = np.ascontiguousarray(u, dtype=np.float32) @ self.proj @ rows.T
         kk = min(k, len(pool))
-        top = np.argpartition(-s, kk - 1, axis=1)[:, :kk] if len(pool) > kk else np.broadcast_to(np.arange(kk), (len(u), kk))
-        out[:, :kk] = pool[top]
+        out[:, :kk] = pool[_top_columns(s, kk)]
         return out
 
     def decide(self, centres: np.ndarray, u: np.ndarray, cand: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
