@@ -1,7 +1,9 @@
 """Shared fixtures: where the real data lives (``../shared`` or ``$SLAM_LCD_SHARED``)."""
 from __future__ import annotations
 
+import json
 import os
+import shutil
 from pathlib import Path
 
 import pytest
@@ -34,6 +36,30 @@ def superpoint_weights(shared) -> Path:
     if not p.is_file():
         pytest.skip(f"SuperPoint test checkpoint not found at {p}")
     return p
+
+
+def once_per_run(tmp_path_factory, name: str, build):
+    """``build(folder)``'s JSON-able result, built once per test run and shared by pytest-xdist's workers.
+
+    Why: a session fixture runs once per *worker*; the expensive read-only ones (a rendered demo
+    log, a run's outputs) are built by the first worker that needs them, under a file lock, in the
+    run's common temporary folder, and the others wait and read the result. Without xdist it is an
+    ordinary session folder. Tests must treat the folder as read-only.
+    """
+    if not os.environ.get("PYTEST_XDIST_WORKER"):
+        return build(tmp_path_factory.mktemp(name))
+    from filelock import FileLock
+
+    folder = tmp_path_factory.getbasetemp().parent / f"once-{name}"
+    with FileLock(f"{folder}.lock"):
+        done = folder.with_name(folder.name + ".json")
+        if done.is_file():
+            return json.loads(done.read_text())
+        shutil.rmtree(folder, ignore_errors=True)  # what a worker that failed to build left
+        folder.mkdir()
+        value = build(folder)
+        done.write_text(json.dumps(value))
+        return value
 
 
 # --------------------------------------------------------------------------- offline first run
@@ -116,9 +142,11 @@ def demo_log_mcap(tmp_path_factory) -> Path:
     Read-only for every user: the runs on it write elsewhere, and tests that edit a log copy it."""
     from slam_lcd.sim import make_demo_log
 
-    path = tmp_path_factory.mktemp("demo_log") / "demo.mcap"
-    make_demo_log(path, "mcap", **DEMO_LOG)
-    return path
+    def build(folder: Path) -> str:
+        make_demo_log(folder / "demo.mcap", "mcap", **DEMO_LOG)
+        return str(folder / "demo.mcap")
+
+    return Path(once_per_run(tmp_path_factory, "demo_log", build))
 
 
 # --------------------------------------------------------------------------- a run's outputs (issue 19)
@@ -130,9 +158,13 @@ def report_run(tmp_path_factory, demo_log_mcap):
     loop pictures, plots): ORB keeps it under a minute on two cores."""
     from slam_lcd.cli.main import main
 
-    root = tmp_path_factory.mktemp("report_run")
     log = demo_log_mcap
-    out = root / "out"
-    rc = main(["run", str(log), "--out", str(out), "--features", "orb", "--no-feature-cache", "--no-progress",
-               "--set", "eval.rpe_delta=2.0"])
-    return rc, out, log
+
+    def build(folder: Path) -> list:
+        out = folder / "out"
+        rc = main(["run", str(log), "--out", str(out), "--features", "orb", "--no-feature-cache", "--no-progress",
+                   "--set", "eval.rpe_delta=2.0"])
+        return [rc, str(out)]
+
+    rc, out = once_per_run(tmp_path_factory, "report_run", build)
+    return rc, Path(out), log
