@@ -94,17 +94,21 @@ def offline_demo(tmp_path_factory):
     import subprocess
     import sys
 
-    root = tmp_path_factory.mktemp("offline")
-    cache = root / "cache"
-    cache.mkdir()
-    assert not any(cache.iterdir())
-    env = offline_env(cache)
-    out = root / "demo_out"
-    # progress on (the default): stderr is a pipe, so the demo prints one line per stage, no bar
-    proc = subprocess.run([sys.executable, "-m", "slam_lcd", "demo", *OFFLINE_DEMO_ARGS, "--out", str(out)],
-                          env=env, capture_output=True, text=True, timeout=1200)
-    logs = sorted((cache / "demo").glob("*.mcap")) if (cache / "demo").is_dir() else []
-    return proc, out, (logs[0] if logs else None), env
+    def build(root: Path) -> dict:
+        cache = root / "cache"
+        cache.mkdir()
+        env = offline_env(cache)
+        out = root / "demo_out"
+        # progress on (the default): stderr is a pipe, so the demo prints one line per stage, no bar
+        proc = subprocess.run([sys.executable, "-m", "slam_lcd", "demo", *OFFLINE_DEMO_ARGS, "--out", str(out)],
+                              env=env, capture_output=True, text=True, timeout=1200)
+        logs = sorted((cache / "demo").glob("*.mcap")) if (cache / "demo").is_dir() else []
+        return {"args": proc.args, "returncode": proc.returncode, "stdout": proc.stdout, "stderr": proc.stderr,
+                "out": str(out), "log": str(logs[0]) if logs else None, "env": env}
+
+    r = once_per_run(tmp_path_factory, "offline", build)
+    proc = subprocess.CompletedProcess(r["args"], r["returncode"], r["stdout"], r["stderr"])
+    return proc, Path(r["out"]), (Path(r["log"]) if r["log"] else None), r["env"]
 
 
 # --------------------------------------------------------------------------- plugin (issue #17)
