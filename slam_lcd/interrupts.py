@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import signal
+import sys
 import threading
 
 
@@ -41,3 +42,48 @@ def defer_sigint():
         signal.signal(signal.SIGINT, previous)
         if received:
             raise KeyboardInterrupt
+
+
+_resend = threading.Event()  # set by the hook below: the helper thread sends SIGINT again
+_resender: threading.Thread | None = None
+
+
+def _resend_sigint() -> None:
+    while True:
+        _resend.wait()
+        _resend.clear()
+        signal.raise_signal(signal.SIGINT)
+
+
+def keep_lost_interrupts() -> None:
+    """Make a Ctrl-C that Python could not raise take effect anyway (a command line's set-up).
+
+    Why: a SIGINT is raised as ``KeyboardInterrupt`` at the next bytecode the main thread runs;
+    when that bytecode belongs to a weak-reference callback or a ``__del__`` (run whenever the
+    garbage collector frees something), Python prints "Exception ignored" and drops it, and the
+    command carried on to the end as if nobody had pressed Ctrl-C (once in 30 interrupted batch
+    runs under load). This hook, for ``sys.unraisablehook``, has such a ``KeyboardInterrupt``
+    sent back as a fresh SIGINT by a helper thread (sent from the hook itself it would be raised
+    in the hook and dropped again; a thread started there waits on the main thread, which would
+    take it there too). The main thread raises it in the code it returns to, or ``defer_sigint``
+    holds it; should it land in a finaliser again, it comes back again. Other unraisable
+    exceptions go to the hook that was there. Installed once per process.
+    """
+    global _resender
+    previous = sys.unraisablehook
+    if getattr(previous, "_slam_lcd_keeps_interrupts", False):
+        return
+    if _resender is None:
+        _resender = threading.Thread(target=_resend_sigint, name="slam-lcd-sigint", daemon=True)
+        _resender.start()
+
+    def hook(unraisable) -> None:
+        if (unraisable.exc_type is not None and issubclass(unraisable.exc_type, KeyboardInterrupt)
+                and threading.current_thread() is threading.main_thread()
+                and callable(signal.getsignal(signal.SIGINT))):
+            _resend.set()
+            return
+        previous(unraisable)
+
+    hook._slam_lcd_keeps_interrupts = True
+    sys.unraisablehook = hook

@@ -395,6 +395,28 @@ def test_ctrl_c_caught_in_string_evaluated_code_still_exits_130(demo, tmp_path):
     assert_one_line(err, "interrupted")
 
 
+def test_ctrl_c_lost_in_a_finaliser_still_stops_the_command(demo, tmp_path):
+    """A Ctrl-C that Python raises inside a ``__del__`` (or a weak-reference callback) is dropped by
+    Python ("Exception ignored"); the command line sends it back as a SIGINT, so the command stops
+    with exit 130 instead of running to the end (exit 0) as if nobody had pressed Ctrl-C."""
+    hook = tmp_path / "hook"
+    hook.mkdir()
+    (hook / "sitecustomize.py").write_text(
+        "import sys\n"
+        "class _Lost:\n"
+        "    def __del__(self):\n"
+        "        raise KeyboardInterrupt\n"
+        "class _Stop:\n"
+        "    def find_spec(self, name, path=None, target=None):\n"
+        "        if name == 'slam_lcd.io.mcap_backend':\n"
+        "            _Lost()  # freed at once: its __del__ raises where no one can catch it\n"
+        "        return None\n"
+        "sys.meta_path.insert(0, _Stop())\n")
+    rc, _, err = run_subprocess(["info", demo], extra_path=[hook])
+    assert rc == 130, err
+    assert_one_line(err, "interrupted")
+
+
 def test_atomic_writers_leave_no_temporary_files_when_interrupted(demo, tmp_path):
     """Item 3: an interrupted atomic write (file or log) leaves nothing beside its target."""
     from slam_lcd.atomic import atomic_write

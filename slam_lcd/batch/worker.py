@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import SlamLcdError
+from ..interrupts import keep_lost_interrupts
 from .rows import cancelled_row, error_row, interrupted_row, row_from_report, row_from_result
 
 
@@ -131,6 +132,7 @@ def pool_worker_init(stop_event, threads: int | None) -> None:
     except OSError:  # pragma: no cover - already a group leader
         pass
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    keep_lost_interrupts()  # the SIGINT a stop forwards must not be lost in a finaliser either
     _POOL["stop"] = stop_event
     if threads:
         for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):

@@ -70,6 +70,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from ..interrupts import keep_lost_interrupts
+
+    keep_lost_interrupts()  # a Ctrl-C that lands in a finaliser still stops the command
     try:
         parser = build_parser()  # imports every subcommand module: a Ctrl-C here is one line too
         args = parser.parse_args(argv)
