@@ -342,6 +342,24 @@ def test_pipeline_stays_consistent_when_interrupted_inside_the_back_end(demo, mo
     assert len(corrected) == len(pipe.odometry_trajectory()) and np.isfinite(corrected.poses).all()
 
 
+def interrupted_in_a_fresh_process(tmp_path, argv, module: str, action: str, prelude: str = "") -> None:
+    """``python -m slam_lcd ARGV`` in a fresh process where importing ``module`` runs ``action`` (one
+    line of a ``sitecustomize``, after ``prelude``): the command must exit 130 with one line."""
+    hook = tmp_path / "hook"
+    hook.mkdir()
+    (hook / "sitecustomize.py").write_text(
+        f"import sys\n{prelude}"
+        "class _Stop:\n"
+        "    def find_spec(self, name, path=None, target=None):\n"
+        f"        if name == {module!r}:\n"
+        f"            {action}\n"
+        "        return None\n"
+        "sys.meta_path.insert(0, _Stop())\n")
+    rc, _, err = run_subprocess(argv, extra_path=[hook])
+    assert rc == 130, err
+    assert_one_line(err, "interrupted")
+
+
 def test_ctrl_c_while_the_command_line_loads_is_one_line(tmp_path, capfd, monkeypatch):
     """Item 3: Ctrl-C during start-up (subcommand modules importing): one line, exit 130."""
     import importlib
@@ -360,19 +378,7 @@ def test_ctrl_c_while_the_command_line_loads_is_one_line(tmp_path, capfd, monkey
     assert rc == 130
     assert_one_line(err, "interrupted")
     # and in a fresh process, through python -m slam_lcd: the interrupt lands in an import of cli.main
-    hook = tmp_path / "hook"
-    hook.mkdir()
-    (hook / "sitecustomize.py").write_text(
-        "import sys\n"
-        "class _Stop:\n"
-        "    def find_spec(self, name, path=None, target=None):\n"
-        "        if name == 'slam_lcd.cli.util':\n"
-        "            raise KeyboardInterrupt\n"
-        "        return None\n"
-        "sys.meta_path.insert(0, _Stop())\n")
-    rc, _, err = run_subprocess(["info", tmp_path / "x.mcap"], extra_path=[hook])
-    assert rc == 130, err
-    assert_one_line(err, "interrupted")
+    interrupted_in_a_fresh_process(tmp_path, ["info", tmp_path / "x.mcap"], "slam_lcd.cli.util", "raise KeyboardInterrupt")
 
 
 def test_ctrl_c_caught_in_string_evaluated_code_still_exits_130(demo, tmp_path):
@@ -380,41 +386,17 @@ def test_ctrl_c_caught_in_string_evaluated_code_still_exits_130(demo, tmp_path):
     dataclasses and generated message types do) is caught by the command like any other, and the
     process exits 130, not by SIGINT (CPython remembers such an interrupt and, under ``-m``,
     re-raises the signal at exit unless the flag is cleared: the batch CLI died by SIGINT ~1 run in 4)."""
-    hook = tmp_path / "hook"
-    hook.mkdir()
-    (hook / "sitecustomize.py").write_text(
-        "import sys\n"
-        "class _Stop:\n"
-        "    def find_spec(self, name, path=None, target=None):\n"
-        "        if name == 'slam_lcd.io.mcap_backend':\n"
-        "            exec('raise KeyboardInterrupt', {})\n"
-        "        return None\n"
-        "sys.meta_path.insert(0, _Stop())\n")
-    rc, _, err = run_subprocess(["info", demo], extra_path=[hook])
-    assert rc == 130, err
-    assert_one_line(err, "interrupted")
+    interrupted_in_a_fresh_process(tmp_path, ["info", demo], "slam_lcd.io.mcap_backend",
+                                   "exec('raise KeyboardInterrupt', {})")
 
 
 def test_ctrl_c_lost_in_a_finaliser_still_stops_the_command(demo, tmp_path):
     """A Ctrl-C that Python raises inside a ``__del__`` (or a weak-reference callback) is dropped by
     Python ("Exception ignored"); the command line sends it back as a SIGINT, so the command stops
     with exit 130 instead of running to the end (exit 0) as if nobody had pressed Ctrl-C."""
-    hook = tmp_path / "hook"
-    hook.mkdir()
-    (hook / "sitecustomize.py").write_text(
-        "import sys\n"
-        "class _Lost:\n"
-        "    def __del__(self):\n"
-        "        raise KeyboardInterrupt\n"
-        "class _Stop:\n"
-        "    def find_spec(self, name, path=None, target=None):\n"
-        "        if name == 'slam_lcd.io.mcap_backend':\n"
-        "            _Lost()  # freed at once: its __del__ raises where no one can catch it\n"
-        "        return None\n"
-        "sys.meta_path.insert(0, _Stop())\n")
-    rc, _, err = run_subprocess(["info", demo], extra_path=[hook])
-    assert rc == 130, err
-    assert_one_line(err, "interrupted")
+    # freed at once: its __del__ raises where no one can catch it
+    interrupted_in_a_fresh_process(tmp_path, ["info", demo], "slam_lcd.io.mcap_backend", "_Lost()",
+                                   prelude="class _Lost:\n    def __del__(self):\n        raise KeyboardInterrupt\n")
 
 
 def test_atomic_writers_leave_no_temporary_files_when_interrupted(demo, tmp_path):
