@@ -347,8 +347,10 @@ def interrupted_in_a_fresh_process(tmp_path, argv, module: str, action: str, pre
     line of a ``sitecustomize``, after ``prelude``): the command must exit 130 with one line."""
     hook = tmp_path / "hook"
     hook.mkdir()
+    # SIGINT handled as a terminal gives it (a shell that starts the tests in the background hands them
+    # SIGINT ignored, and a process that ignores Ctrl-C has none to lose)
     (hook / "sitecustomize.py").write_text(
-        f"import sys\n{prelude}"
+        f"import signal, sys\nsignal.signal(signal.SIGINT, signal.default_int_handler)\n{prelude}"
         "class _Stop:\n"
         "    def find_spec(self, name, path=None, target=None):\n"
         f"        if name == {module!r}:\n"
