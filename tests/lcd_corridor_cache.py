@@ -16,8 +16,15 @@ def corridor_features(folder: str, kind: str, weights: str | None) -> tuple:
     from slam_lcd.features import FeatureCache, FeaturesConfig, load_extractor
     from slam_lcd.sensors.frames import folder_frames
 
+    import tempfile
+
+    from filelock import FileLock
+
     ex = load_extractor(FeaturesConfig(kind=kind), weights=weights, device="cpu")
     cache = FeatureCache(ex)
     names, _, frames = folder_frames(folder, exclude=[Path(folder) / "samples_GT.bmp"])
     assert names == [f"{i}.jpg" for i in range(1, 85)]
-    return tuple(cache.extract(Path(folder), "images", fr.stamp, fr.image) for fr in frames)  # index k: frame k+1
+    # one extracting process at a time (pytest-xdist's workers): with a cold cache the second waits and
+    # then reads the first one's cache entries instead of running SuperPoint on the same frames again
+    with FileLock(str(Path(tempfile.gettempdir()) / f"slam-lcd-tests-corridor-{kind}.lock")):
+        return tuple(cache.extract(Path(folder), "images", fr.stamp, fr.image) for fr in frames)  # index k: frame k+1
