@@ -13,12 +13,12 @@ from pathlib import Path
 @functools.lru_cache(maxsize=None)
 def corridor_features(folder: str, kind: str, weights: str | None) -> tuple:
     """Features of frames 1..84, read exactly as ``slam-lcd eval-lcd`` reads them (same cache entries)."""
-    from slam_lcd.features import FeatureCache, FeaturesConfig, load_extractor
-    from slam_lcd.sensors.frames import folder_frames
-
     import tempfile
 
     from filelock import FileLock
+
+    from slam_lcd.features import FeatureCache, FeaturesConfig, load_extractor
+    from slam_lcd.sensors.frames import folder_frames
 
     ex = load_extractor(FeaturesConfig(kind=kind), weights=weights, device="cpu")
     cache = FeatureCache(ex)

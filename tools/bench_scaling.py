@@ -274,8 +274,9 @@ _HEAD = (f"{'path':10s} {'kf':>6s} {'words':>8s} {'quant':>7s} {'query':>7s} {'i
 
 def _fmt(r: dict) -> str:
     ix = r["index"]
-    share = ix.get("hinted", 0) / max(1, ix.get("hinted", 0) + ix.get("searched", 0))
-    pooled = ix.get("pooled", 0) / max(1, ix.get("hinted", 0) + ix.get("searched", 0))
+    lookups = max(1, ix.get("hinted", 0) + ix.get("searched", 0))
+    share = ix.get("hinted", 0) / lookups
+    pooled = ix.get("pooled", 0) / lookups
     ixs = (f"graph: {ix['indexed']} words, {share:.0%} of lookups by hints ({pooled:.0%} from the revisited "
            f"place's words)") if ix["active"] else \
         (f"trained tree, depth {ix['tree']}" if "tree" in ix else "exact")
