@@ -25,7 +25,7 @@ def test_bf16_candidates_give_the_float32_matches(noise, ratio, max_distance):
     a = views(rng, landmarks, rng.choice(1500, 700, replace=False), noise)
     b = views(rng, landmarks, rng.choice(1500, 650, replace=False), noise)
     m32, d32 = mutual_nn_unit(a, b, ratio, max_distance, return_distances=True)
-    m16, d16 = mutual_nn_unit_bf16(a, b, ratio, max_distance, to_bf16(a), to_bf16(b, columns=True))
+    m16, d16 = mutual_nn_unit_bf16(a, b, ratio, max_distance, to_bf16(a), to_bf16(b))
     assert len(m32) > 0 or noise > 0.8 * max_distance
     assert np.array_equal(m16, m32)
     assert np.allclose(d16, d32, atol=1e-5)
@@ -62,7 +62,7 @@ def test_error_bound_holds_for_unit_vectors():
     a = as_unit_vectors(rng.standard_normal((300, 256)).astype(np.float32))
     b = as_unit_vectors(np.concatenate([a[:100] + 0.01 * rng.standard_normal((100, 256)).astype(np.float32),
                                         rng.standard_normal((200, 256)).astype(np.float32)]))
-    approx = (to_bf16(a) @ to_bf16(b, columns=True)).float().numpy()[:300, :300]
+    approx = (to_bf16(a) @ to_bf16(b).T).float().numpy()[:300, :300]
     assert np.abs(approx - a.astype(np.float64) @ b.T.astype(np.float64)).max() < ERROR_BOUND
 
 

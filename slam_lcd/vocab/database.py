@@ -328,7 +328,9 @@ class BowDatabase:
         """``compute(d)``, kept for the same array: the loop detector transforms a keyframe, then adds
         the same descriptors, so their conversion (online: unit vectors, and the word search keyed
         on them; with a vocabulary: the tree descent) is done once."""
-        key = (what, id(d), d.shape, float(np.sum(d, dtype=np.float64)))  # the sum catches a buffer refilled in place
+        # the sum catches a buffer refilled in place (in the array's own type: a float64 sum of 256k
+        # float32 values took ~0.26 ms, twice per keyframe)
+        key = (what, id(d), d.shape, float(d.sum()))
         c = self._last_unit
         if c is not None and c[0] is d and c[1] == key:
             return c[2]

@@ -27,8 +27,8 @@ def as_unit_vectors(desc: np.ndarray) -> np.ndarray:
         bits = np.unpackbits(d, axis=1).astype(np.float32)
         return (2.0 * bits - 1.0) / np.float32(np.sqrt(bits.shape[1]))
     out = d.astype(np.float32, copy=True)
-    norm = np.linalg.norm(out, axis=1, keepdims=True)
-    out /= np.maximum(norm, 1e-12)
+    norm = np.sqrt(np.einsum("ij,ij->i", out, out))  # no (N, D) temporary, unlike np.linalg.norm
+    out /= np.maximum(norm, 1e-12)[:, None]
     return out
 
 

@@ -101,7 +101,9 @@ def _rerank(centres: np.ndarray, u: np.ndarray, cand: np.ndarray, keep: int):
     cand = np.sort(cand, axis=1)
     cand[:, 1:][cand[:, 1:] == cand[:, :-1]] = -1  # duplicates count once
     valid = cand >= 0
-    sims = np.matmul(centres[np.where(valid, cand, 0)], u[:, :, None])[:, :, 0]
+    # np.take gathers the rows ~15 % faster than fancy indexing (the gather is most of the cost)
+    rows = np.take(centres, np.where(valid, cand, 0).ravel(), axis=0).reshape(cand.shape + (centres.shape[1],))
+    sims = np.matmul(rows, u[:, :, None])[:, :, 0]
     sims[~valid] = -np.inf
     at = sims.argmax(axis=1)  # ids ascend along each row: the lowest id among equal bests
     ids = cand[np.arange(n), at]
@@ -256,8 +258,10 @@ class WordIndex:
             yield rest, (hints[rest] if hints is not None else np.full((len(rest), 1), -1, dtype=np.int64))
 
     # ------------------------------------------------------------------ upkeep
-    def update(self, centres: np.ndarray, touched: np.ndarray) -> None:
-        """Called after each image: ``centres`` holds every word, ``touched`` the ids it moved or founded."""
+    def update(self, centres: np.ndarray, touched: np.ndarray, moved: np.ndarray | None = None) -> None:
+        """Called after each image: ``centres`` holds every word, ``touched`` the ids it moved or founded;
+        ``moved``, when given, is ``centres[touched]`` already at hand (saves gathering
+        ~1000 scattered rows again)."""
         n = len(centres)
         self._image_ends.append(n)
         due = self.graph is None or (self.rebuild_growth > 1 and n >= self.rebuild_growth * self.built_at)
@@ -266,9 +270,10 @@ class WordIndex:
             return
         if self.graph is None:
             return
-        old = touched[touched < self.n_indexed]
-        if len(old):  # moved words: their current projected position, written in place
-            self._write(old, centres[old] @ self.proj)
+        indexed = touched < self.n_indexed
+        if indexed.any():  # moved words: their current projected position, written in place
+            old = touched[indexed]
+            self._write(old, (centres[old] if moved is None else moved[indexed]) @ self.proj)
         self._index_up_to(centres, self._settled(n))
 
     def _settled(self, n: int) -> int:

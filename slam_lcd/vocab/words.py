@@ -8,8 +8,9 @@ follows the scene, not a k chosen in advance.
 
 Training keeps each word's member sum in float64 and normalises it (exactly reproducible). In
 online mode (``radius`` set: long runs, up to ~10^6 words) a word keeps its unit centre
-(float32) and the length of its member sum (float64) instead: the sum is ``centre * length``,
-so the running mean needs no float64 copy of every centre (1 kB instead of 3 kB per word). In online mode (``radius`` set) the nearest existing
+(float32) and the length of its member sum instead: the sum is ``centre * length``, updated in
+float32 (:func:`_moved_centres`), so the running mean needs no float64 copy of every centre (1 kB
+instead of 3 kB per word). In online mode the nearest existing
 word of an unmatched feature comes from a :class:`~slam_lcd.vocab.word_index.WordIndex`
 (exact for small vocabularies, sub-linear above a size).
 """
@@ -20,7 +21,7 @@ import numpy as np
 from ..column_best import first_in_column
 from ..errors import ConfigError
 from .arrays import grow_in_place
-from .bf16_match import MAX_DISTANCE, ProductBuffers, bf16_auto, mutual_nn_unit_bf16, to_bf16, transposed
+from .bf16_match import MAX_DISTANCE, ProductBuffers, bf16_auto, mutual_nn_unit_bf16, to_bf16
 from .descriptors import default_match_distance, group_sums, normalise_rows, unit_distance
 from .word_index import WordIndex, exact_nearest
 
@@ -59,26 +60,30 @@ def mutual_nn_unit(d1: np.ndarray, d2: np.ndarray, ratio: float | None, max_dist
     return (m, d_best[keep].astype(np.float32)) if return_distances else m
 
 
-def _moved_sums(centres: np.ndarray, lengths: np.ndarray, desc: np.ndarray, inv: np.ndarray,
-                per: np.ndarray) -> np.ndarray:
-    """Member sums of the touched words after this image: ``centre * length`` plus the new members, float64.
+def _moved_centres(centres: np.ndarray, lengths: np.ndarray, desc: np.ndarray, inv: np.ndarray,
+                   per: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(unit centres, member-sum lengths) of the touched words after this image, float32.
 
-    ``inv``: row of ``desc`` -> touched word, ``per``: rows per touched word. Most words get one
-    member per image: those rows are added in place; the rest are summed first (``np.add.at``),
-    then added, so every value is ``centre * length + (sum of the new members)`` as one float64
-    expression would give it, in one (words, D) array (the temporaries of that expression cost
-    ~2 ms per keyframe at 1000 words x 256: memory, not arithmetic).
+    ``centres``, ``lengths``: the touched words' before (a gathered copy, overwritten);
+    ``inv``: row of ``desc`` -> touched word, ``per``: rows per touched word. The member sum is
+    ``centre * length`` plus the new members; most words get one member per image (added in
+    place), the rest are accumulated with ``np.add.at``.
+
+    Why float32: the sum of a word's members is only ever normalised again, and float32 keeps
+    its direction to ~1e-7, far below the ~0.3 spread of the members themselves; the float64
+    expression took ~2.5x longer per keyframe (twice the bytes for every pass over ~1000 x 256
+    values, plus a conversion each way), which was ~10 % of a keyframe's database time.
     """
-    sums = np.multiply(centres, lengths[:, None])
+    sums = centres
+    sums *= lengths.astype(np.float32)[:, None]
     single = per[inv] == 1
     sums[inv[single]] += desc[single]
     if not single.all():
         multi = ~single
-        words, at = np.unique(inv[multi], return_inverse=True)
-        extra = np.zeros((len(words), desc.shape[1]), dtype=np.float64)
-        np.add.at(extra, at, desc[multi].astype(np.float64))
-        sums[words] += extra
-    return sums
+        np.add.at(sums, inv[multi], desc[multi])
+    length = np.sqrt(np.einsum("ij,ij->i", sums, sums))
+    sums *= (np.float32(1.0) / np.maximum(length, np.float32(1e-12)))[:, None]
+    return sums, length
 
 
 class IncrementalWords:
@@ -115,7 +120,7 @@ class IncrementalWords:
         self.n_words = 0
         self.n_images = 0
         self._prev_desc: np.ndarray | None = None
-        self._prev_bf16 = None  # with ``bf16``: the previous descriptors as bfloat16 columns (to_bf16)
+        self._prev_bf16 = None  # with ``bf16``: the previous descriptors as bfloat16 rows (to_bf16)
         self._bf16_buffers = ProductBuffers() if self.bf16 else None
         self._prev_words: np.ndarray | None = None
         self._prev_cands: np.ndarray | None = None  # each previous feature's candidate words (index mode)
@@ -311,23 +316,21 @@ class IncrementalWords:
             self._grow(self.n_words + len(new))
             words[new] = np.arange(self.n_words, self.n_words + len(new))
             self.n_words += len(new)
-        touched = words[:0]
+        touched, moved = words[:0], None
         if n:
             touched, inv, per = np.unique(words, return_inverse=True, return_counts=True)
             if self._sums is not None:
                 self._sums[touched] += group_sums(desc, inv, len(touched))
                 self._centres[touched] = normalise_rows(self._sums[touched])
             else:
-                sums = _moved_sums(self._centres[touched], self._lengths[touched], desc, inv, per)
-                length = np.sqrt(np.add.reduce(sums * sums, axis=1))  # np.linalg.norm's own expression
-                self._lengths[touched] = length
-                sums /= np.maximum(length, 1e-12)[:, None]
-                self._centres[touched] = sums
+                moved, self._lengths[touched] = _moved_centres(self._centres[touched], self._lengths[touched], desc,
+                                                               inv, per)
+                self._centres[touched] = moved
             self._counts[touched] += per
             self._images[touched] += 1
             self.version += 1
         if self.index is not None:
-            self.index.update(self.centres, touched)
+            self.index.update(self.centres, touched, moved)
         self.n_images += 1
         self._gap = None
         if cands is not None and self.index.hint_gap and self._prev_cands is not None:
@@ -336,7 +339,7 @@ class IncrementalWords:
             self._gap = (self._prev_desc[lost], self._prev_cands[lost], self._prev_words[lost], self._prev_age[lost])
         if self.bf16:
             h = self._match_cache[4] if self._match_cache is not None else None
-            self._prev_bf16 = to_bf16(desc, columns=True) if h is None else transposed(h)
+            self._prev_bf16 = to_bf16(desc) if h is None else h
         self._prev_desc, self._prev_words = desc, words
         self._prev_cands, self._prev_age = cands, age
         self._match_cache = self._search_cache = None
