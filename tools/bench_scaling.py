@@ -258,6 +258,7 @@ def grow(stream: PlaceStream, n: int, conf, checkpoints: list[int], label: str, 
                    "index": db.words.index.stats() if vocab is None else {"active": False, "tree": vocab.depth},
                    "total_median": float(np.median(times[lo:k + 1].sum(axis=1)) * 1e3), "reference_ms": reference.ms()}
             row["total"] = row["quantise"] + row["query"] + row["insert"]
+            row["kinds"] = _by_kind(times, stream.revisit_of, k + 1)
             if measure_recall and vocab is not None:
                 row["agree"], row["nearest_recall"], row["exhaustive_ms"] = _tree_agreement(vocab, next_desc)
             elif measure_recall:
@@ -266,6 +267,40 @@ def grow(stream: PlaceStream, n: int, conf, checkpoints: list[int], label: str, 
             rss_prev, kf_prev = rss_bytes(), k + 1
             print(_fmt(row), flush=True)
     return rows
+
+
+def _by_kind(times: np.ndarray, revisit_of: np.ndarray, end: int, span: int = 1000) -> dict:
+    """Mean total ms per keyframe over the ``span`` keyframes before ``end``: all, new-route ones (first
+    visit: ~110 words founded, ~200 graph searches each) and revisits (few of either).
+
+    Why: the stream explores 300 keyframes of new route, then revisits up to 700, so a short window
+    before a checkpoint falls in one kind (the 100 before 10,000 are revisits) and says little about
+    the other; 1,000 keyframes hold a whole explore-and-revisit cycle.
+    """
+    lo = max(0, end - span)
+    tot = times[lo:end].sum(axis=1) * 1e3
+    new = revisit_of[lo:end] < 0
+    return {"span": end - lo, "all": float(tot.mean()), "new": float(tot[new].mean()) if new.any() else float("nan"),
+            "n_new": int(new.sum()), "revisit": float(tot[~new].mean()) if (~new).any() else float("nan")}
+
+
+def _print_kinds(rows: list[dict]) -> None:
+    print("mean ms per keyframe over the 1,000 keyframes before each checkpoint, by kind (new route: founds "
+          "words; revisit: finds old ones):")
+    for r in rows:
+        c = r["kinds"]
+        print(f"  {r['keyframes']:6d} kf: all {c['all']:6.2f} | new route {c['new']:6.2f} ({c['n_new']} kf) | "
+              f"revisit {c['revisit']:6.2f} ({c['span'] - c['n_new']} kf)")
+
+
+def _print_target(late: dict) -> None:
+    """The issue's line, judged on every kind of keyframe: the mean over the last 1,000 (a whole
+    explore-and-revisit cycle), with the checkpoint's own window beside it."""
+    mean = late["kinds"]["all"]
+    print(f"target at {late['keyframes']} keyframes: quantise+query+insert {mean:.1f} ms per keyframe over the last "
+          f"{late['kinds']['span']} (the {late['keyframes']} checkpoint's window: {late['total']:.1f}) <= 20 ms "
+          f"{'OK' if mean <= 20.0 else 'MISSED'}; memory {late['rss_kb_per_kf']:.0f} kB/kf <= 150 "
+          f"{'OK' if late['rss_kb_per_kf'] <= 150.0 else 'MISSED'}")
 
 
 _HEAD = (f"{'path':10s} {'kf':>6s} {'words':>8s} {'quant':>7s} {'query':>7s} {'insert':>7s} {'total':>7s} ms/kf "
@@ -340,11 +375,8 @@ def bench_database(args) -> None:
               f"{base[0]['keyframes']})")
     else:
         print()
-    ok_t = late["total"] <= 20.0
-    ok_m = late["rss_kb_per_kf"] <= 150.0
-    print(f"target at {late['keyframes']} keyframes: quantise+query+insert {late['total']:.1f} ms <= 20 ms "
-          f"{'OK' if ok_t else 'MISSED'}; memory {late['rss_kb_per_kf']:.0f} kB/kf <= 150 "
-          f"{'OK' if ok_m else 'MISSED'}")
+    _print_kinds(new)
+    _print_target(late)
     _print_reference(new)
 
 
@@ -377,9 +409,8 @@ def _bench_trained(args, table, real, n: int, checkpoints: list[int], overrides:
     late = rows[-1]
     print(f"growth late/early (total ms/kf at {late['keyframes']} / at {early['keyframes']} keyframes): "
           f"x{late['total'] / early['total']:.2f}")
-    print(f"target at {late['keyframes']} keyframes: quantise+query+insert {late['total']:.1f} ms <= 20 ms "
-          f"{'OK' if late['total'] <= 20.0 else 'MISSED'}; memory {late['rss_kb_per_kf']:.0f} kB/kf <= 150 "
-          f"{'OK' if late['rss_kb_per_kf'] <= 150.0 else 'MISSED'}")
+    _print_kinds(rows)
+    _print_target(late)
     _print_reference(rows)
 
 
