@@ -11,6 +11,24 @@ import pytest
 REPO = Path(__file__).resolve().parent.parent
 
 
+def pytest_configure(config):
+    """With several xdist workers, each worker's numerical libraries get one thread.
+
+    Why: the suite runs two workers on a two-core machine; torch, numpy's BLAS and faiss each
+    start a thread per core in both workers, so four or more busy threads share two cores and
+    OpenMP's spinning workers wait on each other. A test that needs more threads sets them
+    itself (and restores them).
+    """
+    if int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")) < 2:
+        return
+    import faiss  # noqa: F401 - loaded first, so that its OpenMP runtime is among those limited
+    import torch
+    from threadpoolctl import threadpool_limits
+
+    torch.set_num_threads(1)
+    threadpool_limits(1)
+
+
 def shared_root() -> Path | None:
     env = os.environ.get("SLAM_LCD_SHARED")
     cand = Path(env) if env else REPO.parent / "shared"
