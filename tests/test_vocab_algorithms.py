@@ -218,6 +218,24 @@ def test_online_mode_grows_words_and_finds_revisit():
     assert top[0].match_id == 2
 
 
+def test_a_buffer_refilled_in_place_is_converted_again():
+    """The database converts a keyframe's descriptors once for its transform and its add (same
+    array); a caller that refills the same buffer for the next keyframe must get the new content's
+    words."""
+    rng = np.random.default_rng(12)
+    images, _, _ = track_sequence(rng, n_images=6, per_image=40, keep=20, dim=32, noise=0.05)
+    db = BowDatabase(None, VocabConfig(idf_source="database", online_word_radius=0.7))
+    for i, d in enumerate(images[:4]):
+        db.add(i, i * 10**9, d)
+    buf = np.ascontiguousarray(images[4], dtype=np.float32)
+    first = db.transform(buf)
+    buf[:] = images[5]
+    again = db.transform(buf)
+    fresh = db.transform(np.array(images[5], dtype=np.float32))
+    assert np.array_equal(again.words, fresh.words) and np.array_equal(again.counts, fresh.counts)
+    assert not np.array_equal(first.words, again.words)
+
+
 def test_database_rejects_inconsistent_input():
     rng = np.random.default_rng(11)
     db = BowDatabase(random_vocab(rng), VocabConfig())
