@@ -214,8 +214,14 @@ class MachineReference:
 
 
 def grow(stream: PlaceStream, n: int, conf, checkpoints: list[int], label: str, measure_recall: bool,
-         window: int = 100, vocab=None) -> list[dict]:
-    """Grow one database to ``n`` keyframes; one row of figures per checkpoint."""
+         window: int = 100, vocab=None, threads: int = 1) -> list[dict]:
+    """Grow one database to ``n`` keyframes; one row of figures per checkpoint.
+
+    ``threads``: BLAS and faiss threads of each keyframe's database work, applied per keyframe as the
+    pipeline applies ``run.lcd_threads`` (default 1: a run's loop detection while SuperPoint extracts
+    ahead on the other core); 0 leaves the libraries' own thread counts.
+    """
+    from slam_lcd.thread_limits import limited_threads
     from slam_lcd.vocab import BowDatabase
     from slam_lcd.vocab.descriptors import as_unit_vectors
 
@@ -235,11 +241,12 @@ def grow(stream: PlaceStream, n: int, conf, checkpoints: list[int], label: str, 
     for k in range(n):
         d = next_desc
         t0 = time.perf_counter()
-        bow = db.transform(d)
-        t1 = time.perf_counter()
-        cands = db.query(bow, top_k=5, exclude_recent_n=20) if len(db) else []
-        t2 = time.perf_counter()
-        db.add(k, k * 10**8, d)
+        with limited_threads(threads):  # entered and left inside the quantise and insert times, as in a run
+            bow = db.transform(d)
+            t1 = time.perf_counter()
+            cands = db.query(bow, top_k=5, exclude_recent_n=20) if len(db) else []
+            t2 = time.perf_counter()
+            db.add(k, k * 10**8, d)
         t3 = time.perf_counter()
         times[k] = (t1 - t0, t2 - t1, t3 - t2)
         ref = stream.revisit_of[k]
@@ -343,16 +350,17 @@ def bench_database(args) -> None:
           f"({'real landmarks' if real is not None else 'synthetic SuperPoint-like landmarks'}) ==")
     print(f"index: ann_min_words={conf.ann_min_words} pca_dims={conf.ann_pca_dims} hnsw_m={conf.ann_hnsw_m} "
           f"ef_search={conf.ann_ef_search} candidates={conf.ann_candidates} fresh_images={conf.ann_fresh_images} "
-          f"hint_images={conf.ann_hint_images} storage={conf.ann_storage}")
+          f"hint_images={conf.ann_hint_images} storage={conf.ann_storage}; BLAS/faiss threads per keyframe: "
+          f"{args.lcd_threads or 'as the libraries start'} (--lcd-threads)")
     print("agree = same word (or the same 'new word') as exhaustive search for the next keyframe's descriptors; "
           "nn-rec = nearest word equal to exhaustive's")
     print(_HEAD)
     t0 = time.perf_counter()
-    base = grow(PlaceStream(n, args.seed, landmarks=table), base_n, exhaustive, base_checks, "exhaustive", False) \
-        if base_n > 0 else []
+    base = grow(PlaceStream(n, args.seed, landmarks=table), base_n, exhaustive, base_checks, "exhaustive", False,
+                threads=args.lcd_threads) if base_n > 0 else []
     t_base = time.perf_counter() - t0
     t0 = time.perf_counter()
-    new = grow(PlaceStream(n, args.seed, landmarks=table), n, conf, checkpoints, "indexed", True)
+    new = grow(PlaceStream(n, args.seed, landmarks=table), n, conf, checkpoints, "indexed", True, threads=args.lcd_threads)
     t_new = time.perf_counter() - t0
     print(f"wall: exhaustive {t_base:.0f} s for {base_n} keyframes, indexed {t_new:.0f} s for {n} keyframes")
     by_kf = {r["keyframes"]: r for r in new}
@@ -403,7 +411,8 @@ def _bench_trained(args, table, real, n: int, checkpoints: list[int], overrides:
     print("agree = tree word equal to the exhaustive nearest word of the same vocabulary (next keyframe)")
     print(_HEAD)
     t = time.perf_counter()
-    rows = grow(PlaceStream(n, args.seed, landmarks=table), n, conf, checkpoints, "trained", True, vocab=vocab)
+    rows = grow(PlaceStream(n, args.seed, landmarks=table), n, conf, checkpoints, "trained", True, vocab=vocab,
+                threads=args.lcd_threads)
     print(f"wall: {time.perf_counter() - t:.0f} s for {n} keyframes")
     early = next((r for r in rows if r["keyframes"] == 1000), rows[0])
     late = rows[-1]
@@ -639,6 +648,9 @@ def main(argv=None) -> None:
     db.add_argument("--trained", type=int, default=0, metavar="K",
                     help="quantise with a vocabulary trained on K keyframes of another place stream (0: online mode)")
     db.add_argument("--seed", type=int, default=0)
+    db.add_argument("--lcd-threads", type=int, default=1,
+                    help="BLAS and faiss threads of each keyframe's database work, as run.lcd_threads in a run "
+                         "(default 1, a run's default while SuperPoint extracts ahead; 0: the libraries' own)")
     db.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="VocabConfig override, e.g. ann_nprobe=4")
     db.set_defaults(func=bench_database)
     for name, func, helptext in (
