@@ -266,10 +266,12 @@ def grow(stream: PlaceStream, n: int, conf, checkpoints: list[int], label: str, 
                    "total_median": float(np.median(times[lo:k + 1].sum(axis=1)) * 1e3), "reference_ms": reference.ms()}
             row["total"] = row["quantise"] + row["query"] + row["insert"]
             row["kinds"] = _by_kind(times, stream.revisit_of, k + 1)
-            if measure_recall and vocab is not None:
-                row["agree"], row["nearest_recall"], row["exhaustive_ms"] = _tree_agreement(vocab, next_desc)
-            elif measure_recall:
-                row["agree"], row["nearest_recall"], row["exhaustive_ms"] = _agreement(db, as_unit_vectors(next_desc))
+            # the exhaustive search the ratios divide by runs on the same threads as the database
+            with limited_threads(threads):
+                if measure_recall and vocab is not None:
+                    row["agree"], row["nearest_recall"], row["exhaustive_ms"] = _tree_agreement(vocab, next_desc)
+                elif measure_recall:
+                    row["agree"], row["nearest_recall"], row["exhaustive_ms"] = _agreement(db, as_unit_vectors(next_desc))
             rows.append(row)
             rss_prev, kf_prev = rss_bytes(), k + 1
             print(_fmt(row), flush=True)
