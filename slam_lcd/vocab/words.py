@@ -21,7 +21,8 @@ import numpy as np
 from ..column_best import first_in_column
 from ..errors import ConfigError
 from .arrays import grow_in_place
-from .bf16_match import MAX_DISTANCE, ProductBuffers, bf16_auto, mutual_nn_unit_bf16, to_bf16
+from .bf16_match import (MAX_DISTANCE, ProductBuffers, auto_product, int8_available, mutual_nn_unit_bf16,
+                         mutual_nn_unit_int8, to_bf16, to_int8)
 from .descriptors import default_match_distance, group_sums, normalise_rows, unit_distance
 from .word_index import WordIndex, exact_nearest
 
@@ -29,7 +30,7 @@ from .word_index import WordIndex, exact_nearest
 # most words the per-word arrays grow by at once (see IncrementalWords._grow)
 _GROW_STEP = 16384
 # how an image's descriptors are multiplied with the previous image's (vocab.match_product)
-_PRODUCTS = ("auto", "float32", "bfloat16")
+_PRODUCTS = ("auto", "float32", "bfloat16", "int8")
 
 
 def mutual_nn_unit(d1: np.ndarray, d2: np.ndarray, ratio: float | None, max_distance: float | None,
@@ -94,9 +95,10 @@ class IncrementalWords:
     old words); ``None`` is the paper's training rule (unmatched always founds a word).
     ``index``: the nearest-word search used with ``radius`` (default: exact search).
     ``product``: the similarity product of the match to the previous image: ``float32``, or
-    ``bfloat16`` candidates scored in float32 (:mod:`slam_lcd.vocab.bf16_match`: the same matches,
-    ~2-5x less time where the CPU multiplies bfloat16 in hardware); ``auto`` takes ``bfloat16`` there
-    when torch is loaded already (:func:`~slam_lcd.vocab.bf16_match.bf16_auto`).
+    ``bfloat16`` / ``int8`` candidates scored in float32 (:mod:`slam_lcd.vocab.bf16_match`: the same
+    matches, ~2-5x less time where the CPU multiplies bfloat16 in hardware, and int8 (VNNI) in about
+    half the bfloat16 time); ``auto`` takes ``int8`` where the CPU and torch multiply it fast, else
+    ``bfloat16`` there, when torch is loaded already (:func:`~slam_lcd.vocab.bf16_match.auto_product`).
     """
 
     def __init__(self, dim: int, ratio: float | None = 0.9, max_distance: float | None = None,
@@ -107,7 +109,13 @@ class IncrementalWords:
         self.dim = dim
         self.ratio = ratio
         self.max_distance = default_match_distance(kind) if max_distance is None else max_distance
-        self.bf16 = (product == "bfloat16" or (product == "auto" and bf16_auto())) and self.max_distance < MAX_DISTANCE
+        if product == "auto":
+            product = auto_product()
+        elif product == "int8" and not int8_available():
+            raise ConfigError("vocab.match_product: int8 needs torch's int8 CPU product (torch._int_mm); "
+                              "use auto, bfloat16 or float32")
+        # the rounded products need a positive similarity bound (a match distance below MAX_DISTANCE)
+        self.product = product if product == "float32" or self.max_distance < MAX_DISTANCE else "float32"
         self.radius = radius
         self.index = index
         self.version = 0  # bumped whenever words move or are founded (invalidates cached searches)
@@ -120,8 +128,8 @@ class IncrementalWords:
         self.n_words = 0
         self.n_images = 0
         self._prev_desc: np.ndarray | None = None
-        self._prev_bf16 = None  # with ``bf16``: the previous descriptors as bfloat16 rows (to_bf16)
-        self._bf16_buffers = ProductBuffers() if self.bf16 else None
+        self._prev_rounded = None  # bfloat16 / int8 product: the previous descriptors rounded (to_bf16 / to_int8)
+        self._buffers = ProductBuffers() if self.product != "float32" else None
         self._prev_words: np.ndarray | None = None
         self._prev_cands: np.ndarray | None = None  # each previous feature's candidate words (index mode)
         self._prev_age: np.ndarray | None = None  # images since that feature's candidates came from the index
@@ -168,6 +176,9 @@ class IncrementalWords:
     def _same_pool(cls, cached: np.ndarray | None, pool: np.ndarray | None) -> bool:
         return cached is pool or (cached is not None and pool is not None and cls._same(cached, pool))
 
+    def _rounded(self, desc: np.ndarray):
+        return to_int8(desc) if self.product == "int8" else to_bf16(desc)
+
     def _match(self, desc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Matches (row, previous row) of ``desc`` to the previous image and their distances (kept for the same image)."""
         c = self._match_cache
@@ -175,10 +186,10 @@ class IncrementalWords:
             return c[2], c[3]
         h = None
         if len(desc) and self._prev_desc is not None and len(self._prev_desc):
-            if self.bf16:
-                h = to_bf16(desc)
-                m, dist = mutual_nn_unit_bf16(desc, self._prev_desc, self.ratio, self.max_distance, h, self._prev_bf16,
-                                              self._bf16_buffers)
+            if self.product != "float32":
+                h = self._rounded(desc)
+                match = mutual_nn_unit_int8 if self.product == "int8" else mutual_nn_unit_bf16
+                m, dist = match(desc, self._prev_desc, self.ratio, self.max_distance, h, self._prev_rounded, self._buffers)
             else:
                 m, dist = mutual_nn_unit(desc, self._prev_desc, self.ratio, self.max_distance, return_distances=True)
         else:
@@ -337,9 +348,9 @@ class IncrementalWords:
             lost = np.ones(len(self._prev_desc), dtype=bool)
             lost[m[:, 1]] = False
             self._gap = (self._prev_desc[lost], self._prev_cands[lost], self._prev_words[lost], self._prev_age[lost])
-        if self.bf16:
+        if self.product != "float32":
             h = self._match_cache[4] if self._match_cache is not None else None
-            self._prev_bf16 = to_bf16(desc) if h is None else h
+            self._prev_rounded = self._rounded(desc) if h is None else h
         self._prev_desc, self._prev_words = desc, words
         self._prev_cands, self._prev_age = cands, age
         self._match_cache = self._search_cache = None
