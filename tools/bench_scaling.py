@@ -653,7 +653,7 @@ def main(argv=None) -> None:
     db.add_argument("--lcd-threads", type=int, default=1,
                     help="BLAS and faiss threads of each keyframe's database work, as run.lcd_threads in a run "
                          "(default 1, a run's default while SuperPoint extracts ahead; 0: the libraries' own)")
-    db.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="VocabConfig override, e.g. ann_nprobe=4")
+    db.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="VocabConfig override, e.g. ann_ef_search=24")
     db.set_defaults(func=bench_database)
     for name, func, helptext in (
         ("log", bench_log, "loop detection + back end per keyframe over a long demo log, features cached"),

@@ -64,13 +64,6 @@ def bf16_fast() -> bool:
     return bool(caps.get("amx_bf16") or caps.get("avx512_bf16"))
 
 
-def bf16_auto() -> bool:
-    """``match_product: auto``: bfloat16 when torch is already loaded (a SuperPoint run) and the CPU
-    multiplies bfloat16 in hardware. A process without torch (an ORB run, a database used on its own)
-    keeps float32 rather than loading ~190 MB of torch for one product."""
-    return "torch" in sys.modules and bf16_fast()
-
-
 def auto_product() -> str:
     """``match_product: auto``: ``int8`` where the CPU and torch multiply int8 fast (:func:`int8_fast`),
     else ``bfloat16`` where they multiply bfloat16 fast (:func:`bf16_fast`), when torch is already
