@@ -134,25 +134,22 @@ class ProductBuffers:
     """
 
     def __init__(self):
-        self._out = None  # torch bfloat16, flat
-        self._out32 = None  # torch int32, flat (the int8 product)
+        self._outs: dict = {}  # torch dtype -> flat output buffer (bfloat16 product, int32 of the int8 one)
         self._mask = np.empty(0, dtype=bool)
+
+    def _out(self, torch, dtype, rows: int, cols: int):
+        buf = self._outs.get(dtype)
+        if buf is None or buf.numel() < rows * cols:
+            buf = self._outs[dtype] = torch.empty(rows * cols, dtype=dtype)
+        return buf[: rows * cols].view(rows, cols)
 
     def product(self, torch, h1, h2):
         """``h1 @ h2.T`` (both bfloat16 rows) into the kept buffer."""
-        size = h1.shape[0] * h2.shape[0]
-        if self._out is None or self._out.numel() < size:
-            self._out = torch.empty(size, dtype=torch.bfloat16)
-        out = self._out[:size].view(h1.shape[0], h2.shape[0])
-        return torch.mm(h1, h2.T, out=out)
+        return torch.mm(h1, h2.T, out=self._out(torch, torch.bfloat16, h1.shape[0], h2.shape[0]))
 
     def product_int8(self, torch, q1, q2):
         """``q1 @ q2.T`` (both int8 rows) as int32, into the kept buffer."""
-        size = q1.shape[0] * q2.shape[0]
-        if self._out32 is None or self._out32.numel() < size:
-            self._out32 = torch.empty(size, dtype=torch.int32)
-        out = self._out32[:size].view(q1.shape[0], q2.shape[0])
-        return torch._int_mm(q1, q2.T, out=out)
+        return torch._int_mm(q1, q2.T, out=self._out(torch, torch.int32, q1.shape[0], q2.shape[0]))
 
     def mask(self, shape) -> np.ndarray:
         size = shape[0] * shape[1]
