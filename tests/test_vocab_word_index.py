@@ -181,6 +181,36 @@ def test_moved_words_are_found_at_their_new_place(storage):
     assert np.allclose(sims[ids == ex_ids], ex_sims[ids == ex_ids], atol=1e-5)  # exact similarity, current centre
 
 
+def test_a_pool_that_decides_few_rows_pauses_for_three_images():
+    # a pool of words unrelated to the images (a new route: the previous query's best keyframe is no
+    # revisit) decides none of the rows it scores: the next three images search without it; a pool
+    # holding the images' landmarks (a revisit) decides them and stays in use
+    rng = np.random.default_rng(7)
+    words = IncrementalWords(32, radius=0.7, index=WordIndex(32, min_words=200, pca_dims=16, fresh_images=0))
+    seen = []
+    for _ in range(3):
+        seen.append(unit(rng.normal(size=(300, 32))))
+        words.add_image(seen[-1])
+    assert words.index.active
+    calls = []
+    scored = words.index.pool_candidates
+    words.index.pool_candidates = lambda u, pool: calls.append(len(u)) or scored(u, pool)
+
+    def used(images, pool):
+        out = []
+        for d in images:
+            n = len(calls)
+            words.add_image(d, pool)
+            out.append(len(calls) > n)
+        return out
+
+    assert used([unit(rng.normal(size=(300, 32))) for _ in range(6)], np.arange(100)) == [True, False, False, False,
+                                                                                         True, False]
+    # revisit: noisy views of the first images' landmarks (different ones each image: nothing tracked)
+    views = [unit(seen[j % 3] + 0.05 * rng.normal(size=(300, 32))) for j in range(1, 6)]
+    assert used(views, np.arange(900)) == [False, False, True, True, True]  # the pause runs out, then in use
+
+
 def test_fresh_words_are_searched_exhaustively_then_indexed():
     rng = np.random.default_rng(1)
     centres = clustered_words(rng, 2000)

@@ -29,6 +29,11 @@ from .word_index import WordIndex, exact_nearest
 
 # most words the per-word arrays grow by at once (see IncrementalWords._grow)
 _GROW_STEP = 16384
+# a pool that decides fewer than this share of the rows it scores (at least _POOL_JUDGED of them) is not
+# a revisit: the next _POOL_PAUSE images search without it (IncrementalWords._pool_hints)
+_POOL_MIN_YIELD = 0.2
+_POOL_JUDGED = 32
+_POOL_PAUSE = 3
 # how an image's descriptors are multiplied with the previous image's (vocab.match_product)
 _PRODUCTS = ("auto", "float32", "bfloat16", "int8")
 
@@ -136,6 +141,8 @@ class IncrementalWords:
         # (index mode, ``index.hint_gap``) the features of the image before the previous one that no
         # feature of the previous image matched: (unit descriptors, candidates, words, ages)
         self._gap: tuple | None = None
+        self._pool_pause = 0  # images left that search without the pool (see _pool_hints)
+        self._pool_missed = False  # this image's pool decided few of the rows it scored
         self._match_cache: tuple | None = None  # (n_images, descriptors, matches, distances, bfloat16 rows)
         self._search_cache: tuple | None = None  # (version, descriptors, pool, ids, sims, candidates, age)
 
@@ -231,7 +238,7 @@ class IncrementalWords:
                                 hints, search, age)
                 if self._gap is not None:
                     self._gap_hints(desc, hints, search, age)
-            if pool is not None and len(pool) and self.radius is not None:
+            if pool is not None and len(pool) and self.radius is not None and self._pool_pause == 0:
                 if hints is None:
                     hints = np.full((n, self.index.hint_candidates + 1), -1, dtype=np.int64)
                     search = np.ones(n, dtype=bool)
@@ -264,6 +271,11 @@ class IncrementalWords:
         revisit of the synthetic stream 136 of ~200 graph searches per keyframe are replaced this way
         (58 % of all searches over 3,000 keyframes), and for ~1 of those 136 the exhaustive nearest word
         is another word (a near-duplicate of the same landmark) than the pool's (docs/vocab.md).
+
+        On a new route the previous query's best keyframe is no revisit: its words decided ~3.5 of ~200
+        rows per keyframe, for ~1.5 ms of scoring. A pool that decides fewer than ``_POOL_MIN_YIELD`` of
+        the rows it scores pauses the pool for the next ``_POOL_PAUSE`` images (decided per image in
+        :meth:`add_image`, so an image's query and insertion see the same pool).
         """
         rows = np.flatnonzero(search)
         if len(rows) == 0:
@@ -271,6 +283,7 @@ class IncrementalWords:
         cand = self.index.pool_candidates(desc[rows], pool)
         best, sim = self.index.decide(self.centres, desc[rows], cand)
         ok = (cand[:, 0] >= 0) & (unit_distance(sim) < self.radius)
+        self._pool_missed = len(ok) >= _POOL_JUDGED and ok.mean() < _POOL_MIN_YIELD
         rows = rows[ok]
         hints[rows, : cand.shape[1]] = cand[ok]  # a row still to search has no hints yet: the rest stays -1
         search[rows] = False
@@ -343,6 +356,8 @@ class IncrementalWords:
         if self.index is not None:
             self.index.update(self.centres, touched, moved)
         self.n_images += 1
+        self._pool_pause = _POOL_PAUSE if self._pool_missed else max(0, self._pool_pause - 1)
+        self._pool_missed = False
         self._gap = None
         if cands is not None and self.index.hint_gap and self._prev_cands is not None:
             lost = np.ones(len(self._prev_desc), dtype=bool)
