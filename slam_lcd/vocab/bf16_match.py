@@ -107,11 +107,24 @@ def to_bf16(u: np.ndarray):
     """
     import torch
 
-    n = len(u)
+    return _padded(np.ascontiguousarray(u, dtype=np.float32), torch.bfloat16)
+
+
+def _padded(rows: np.ndarray, dtype):
+    """``rows`` as a torch tensor of ``dtype`` with zero rows up to a multiple of :data:`_PAD` (see to_bf16)."""
+    import torch
+
+    n = len(rows)
     with one_thread():
-        t = torch.zeros((-(-max(n, 1) // _PAD) * _PAD, u.shape[1]), dtype=torch.bfloat16)
-        t[:n] = torch.from_numpy(np.ascontiguousarray(u, dtype=np.float32))
+        t = torch.zeros((-(-max(n, 1) // _PAD) * _PAD, rows.shape[1]), dtype=dtype)
+        t[:n] = torch.from_numpy(rows)
         return t
+
+
+def _above(buffers: "ProductBuffers", product: np.ndarray, threshold) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, cols) of the product's entries above ``threshold``: the candidate pairs."""
+    mask = np.greater(product, threshold, out=buffers.mask(product.shape))
+    return np.divmod(np.flatnonzero(mask), product.shape[1])
 
 
 @functools.lru_cache(maxsize=8)
@@ -179,12 +192,9 @@ def mutual_nn_unit_bf16(d1: np.ndarray, d2: np.ndarray, ratio: float | None, max
     # pattern: one integer comparison in numpy (torch's bfloat16 comparison and nonzero are ~10x slower)
     with one_thread():
         bits = buffers.product(torch, h1, h2).view(torch.int16).numpy()
-    mask = np.greater(bits, thr_bits, out=buffers.mask(bits.shape))
-    rows, cols = np.divmod(np.flatnonzero(mask), bits.shape[1])
+    rows, cols = _above(buffers, bits, thr_bits)
     # any pair left out is at most this similar (its rounded product <= thr)
     upper = thr + ERROR_BOUND
-    if not len(rows):
-        return np.zeros((0, 2), dtype=np.int64), np.zeros(0, np.float32)
     return _decide(d1, d2, rows, cols, upper, ratio, max_distance)
 
 
@@ -192,6 +202,8 @@ def _decide(d1: np.ndarray, d2: np.ndarray, rows: np.ndarray, cols: np.ndarray, 
             ratio: float | None, max_distance: float) -> tuple[np.ndarray, np.ndarray]:
     """The matching rule on float32 values, from the candidate pairs (``rows``, ``cols``) of a rounded
     product; ``upper``: the most a pair left out can be similar (see the module doc)."""
+    if not len(rows):
+        return np.zeros((0, 2), dtype=np.int64), np.zeros(0, np.float32)
     n2 = len(d2)
     sims = np.einsum("ij,ij->i", d1[rows], d2[cols])
     # per row: best first (highest similarity, then lowest column); per column the same by row
@@ -268,8 +280,6 @@ class Int8Rows(NamedTuple):
 
 def to_int8(u: np.ndarray) -> Int8Rows:
     """``u`` (unit float32 rows) as :class:`Int8Rows`; the scale maps the image's largest magnitude to 127."""
-    import torch
-
     u = np.ascontiguousarray(u, dtype=np.float32)
     n = len(u)
     top = max(float(u.max()), -float(u.min())) if n else 1.0
@@ -278,9 +288,9 @@ def to_int8(u: np.ndarray) -> Int8Rows:
     q = np.rint(x)
     x -= q  # the rounding residual
     r_norm = float(np.sqrt(np.einsum("ij,ij->i", x, x).max())) if n else 0.0
-    with one_thread():
-        t = torch.zeros((-(-max(n, 1) // _PAD) * _PAD, u.shape[1]), dtype=torch.int8)
-        t[:n] = torch.from_numpy(q.astype(np.int8))
+    import torch
+
+    t = _padded(q.astype(np.int8), torch.int8)
     # |q| <= |scale u| + |residual|, and the rows are unit (to float32 precision: the 1e-4 of room)
     return Int8Rows(t, scale, scale * (1 + 1e-4) + r_norm, r_norm)
 
@@ -322,9 +332,6 @@ def mutual_nn_unit_int8(d1: np.ndarray, d2: np.ndarray, ratio: float | None, max
         return mutual_nn_unit(d1, d2, ratio, max_distance, return_distances=True)
     with one_thread():
         prod = buffers.product_int8(torch, h1.t, h2.t).numpy()
-    mask = np.greater(prod, thr, out=buffers.mask(prod.shape))
-    rows, cols = np.divmod(np.flatnonzero(mask), prod.shape[1])
+    rows, cols = _above(buffers, prod, thr)
     upper = thr / denom + bound  # any pair left out is at most this similar (its integer product <= thr)
-    if not len(rows):
-        return np.zeros((0, 2), dtype=np.int64), np.zeros(0, np.float32)
     return _decide(d1, d2, rows, cols, upper, ratio, max_distance)

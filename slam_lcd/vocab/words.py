@@ -143,7 +143,7 @@ class IncrementalWords:
         self._gap: tuple | None = None
         self._pool_pause = 0  # images left that search without the pool (see _pool_hints)
         self._pool_missed = False  # this image's pool decided few of the rows it scored
-        self._match_cache: tuple | None = None  # (n_images, descriptors, matches, distances, bfloat16 rows)
+        self._match_cache: tuple | None = None  # (n_images, descriptors, matches, distances, rounded rows)
         self._search_cache: tuple | None = None  # (version, descriptors, pool, ids, sims, candidates, age)
 
     # ------------------------------------------------------------------ state
