@@ -351,11 +351,11 @@ class BowDatabase:
             return BowVector.from_word_ids(self._quantized(d))
         if self.words is None or self.words.n_words == 0 or len(d) == 0:
             return BowVector.from_word_ids(np.zeros(0, dtype=np.int64))
-        # online: nearest existing word, as add() would assign it; a feature farther than the word
-        # radius would found a new word that no keyframe holds yet, so it is left out
-        best, sim = self.words.nearest(self._unit(d), self._pool())
-        dist = unit_distance(sim)
-        return BowVector.from_word_ids(best[dist < self.conf.online_word_radius])
+        # online: nearest existing word (a tracked feature: its track's word once the index is active,
+        # IncrementalWords.query_words); a feature farther than the word radius would found a new word
+        # that no keyframe holds yet, so it is left out
+        words = self.words.query_words(self._unit(d), self._pool())
+        return BowVector.from_word_ids(words[words >= 0])
 
     # ------------------------------------------------------------------- add
     def add(self, kf_id: int, stamp_ns: int, descriptors: np.ndarray) -> BowVector:

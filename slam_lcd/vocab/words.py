@@ -217,11 +217,33 @@ class IncrementalWords:
         pool) searches once.
         """
         desc = np.ascontiguousarray(desc, dtype=np.float32)
-        return self._searched(desc, pool)[:2]
+        return self._searched(desc, pool, tracked=False)[:2]
 
-    def _searched(self, desc: np.ndarray, pool: np.ndarray | None = None) -> tuple:
+    def query_words(self, desc: np.ndarray, pool: np.ndarray | None = None) -> np.ndarray:
+        """Each unit-vector row's word for a query, -1 where :meth:`add_image` would found a new word.
+
+        A row's nearest existing word when within ``radius`` (online mode), except, with the index
+        active, a row handed over by its match to the previous image (a track younger than
+        ``ann_hint_images``, matched closer than ``ann_hint_max_distance``): it takes its track's word,
+        the word :meth:`add_image` gives it. Why: the index decides such a row among its track's few
+        candidate words anyway, and that re-ranking (~800 of ~1,000 rows of a keyframe) was the
+        largest part of a revisit's word search (docs/vocab.md); the row's own word is known.
+        Without the index every row gets its exact nearest word.
+        """
+        if self.radius is None:
+            raise ConfigError("IncrementalWords.query_words needs the online mode (a word radius)")
+        desc = np.ascontiguousarray(desc, dtype=np.float32)
+        ids, sims = self._searched(desc, pool, tracked=True)[:2]
+        held = np.isnan(sims)  # rows that kept their track's word (see _searched)
+        with np.errstate(invalid="ignore"):
+            return np.where((unit_distance(sims) < self.radius) | held, ids, -1)
+
+    def _searched(self, desc: np.ndarray, pool: np.ndarray | None = None, tracked: bool = False) -> tuple:
+        """(ids, similarities, candidates, ages) of each row's nearest word; ``tracked``: rows handed over
+        by their match to the previous image keep that feature's word and candidates undecided (similarity
+        NaN): their word is the track's anyway (:meth:`query_words`, :meth:`add_image`)."""
         c = self._search_cache
-        if c is not None and c[0] == self.version and self._same(c[1], desc) and self._same_pool(c[2], pool):
+        if c is not None and c[0] == (self.version, tracked) and self._same(c[1], desc) and self._same_pool(c[2], pool):
             return c[3:]
         n = len(desc)
         cands = age = None
@@ -231,11 +253,14 @@ class IncrementalWords:
             hints = search = None
             age = np.zeros(n, dtype=np.int64)
             m, dist = self._match(desc)
+            held = None  # rows that keep their track's word and candidates (tracked=True)
             if self._prev_cands is not None and len(m):
                 hints = np.full((n, self._prev_cands.shape[1] + 1), -1, dtype=np.int64)
                 search = np.ones(n, dtype=bool)
                 self._hand_over(m[:, 0], m[:, 1], dist, (self._prev_cands, self._prev_words, self._prev_age), 1,
                                 hints, search, age)
+                if tracked:
+                    held = ~search
                 if self._gap is not None:
                     self._gap_hints(desc, hints, search, age)
             if pool is not None and len(pool) and self.radius is not None and self._pool_pause == 0:
@@ -243,8 +268,17 @@ class IncrementalWords:
                     hints = np.full((n, self.index.hint_candidates + 1), -1, dtype=np.int64)
                     search = np.ones(n, dtype=bool)
                 self._pool_hints(desc, pool, hints, search)
-            ids, sims, cands = self.index.nearest(self.centres, desc, hints, search)
-        self._search_cache = (self.version, desc, pool, ids, sims, cands, age)
+            if held is None or not held.any():
+                ids, sims, cands = self.index.nearest(self.centres, desc, hints, search)
+            else:
+                rest = np.flatnonzero(~held)
+                k = self.index.hint_candidates
+                ids, sims = hints[:, k].copy(), np.full(n, np.nan, dtype=np.float32)
+                cands = hints[:, :k].copy()
+                if len(rest):
+                    ids[rest], sims[rest], cands[rest] = self.index.nearest(self.centres, desc[rest], hints[rest],
+                                                                            search[rest])
+        self._search_cache = ((self.version, tracked), desc, pool, ids, sims, cands, age)
         return ids, sims, cands, age
 
     def _gap_hints(self, desc: np.ndarray, hints: np.ndarray, search: np.ndarray, age: np.ndarray) -> None:
@@ -328,7 +362,7 @@ class IncrementalWords:
             free = np.flatnonzero(words < 0)
             if self.index is not None and self.index.active:
                 # every row's candidates are kept for the next image's tracked features
-                ids, sims, cands, age = self._searched(desc, pool)
+                ids, sims, cands, age = self._searched(desc, pool, tracked=True)
                 best, sim = ids[free], sims[free]
             else:
                 best, sim = self._nearest_rows(desc, free) if len(free) else (free, np.zeros(0, np.float32))
