@@ -252,6 +252,56 @@ def test_fresh_words_are_searched_exhaustively_then_indexed():
     assert ix.n_indexed == 1500
 
 
+def _grow_words(background: bool):
+    """An online database over a sliding window of landmarks (new words every image, old ones moving)."""
+    rng = np.random.default_rng(5)
+    landmarks = clustered_words(rng, 2600)
+    db = BowDatabase(None, VocabConfig(idf_source="database", ann_min_words=500, ann_pca_dims=16,
+                                       ann_background_insert=background))
+    words, cands = [], []
+    for k in range(40):
+        u = unit(landmarks[50 * k: 50 * k + 400] + 0.05 * rng.normal(size=(400, 32)))
+        db.query(u, top_k=3, exclude_recent_n=5) if len(db) else None
+        db.add(k, k * 10**9, u)
+        words.append(db.words._prev_words.copy())
+        cands.append(None if db.words._prev_cands is None else db.words._prev_cands.copy())
+    return db, words, cands
+
+
+def test_words_inserted_beside_the_next_image_give_the_same_graph_and_words():
+    """vocab.ann_background_insert: the graph insertion runs on a worker thread, and every use of the
+    graph waits for it: the same words, candidates and graph as inserting in place."""
+    (db_bg, w_bg, c_bg), (db_fg, w_fg, c_fg) = _grow_words(True), _grow_words(False)
+    ix_bg, ix_fg = db_bg.words.index, db_fg.words.index
+    assert ix_bg.active and ix_bg.background_insert and not ix_fg.background_insert
+    assert all(np.array_equal(a, b) for a, b in zip(w_bg, w_fg))
+    assert all((a is None and b is None) or np.array_equal(a, b) for a, b in zip(c_bg, c_fg))
+    assert ix_bg.n_indexed == ix_fg.n_indexed == ix_bg.graph.ntotal == ix_fg.graph.ntotal
+    assert ix_bg.insert_cpu_s > 0 and ix_fg.insert_cpu_s > 0
+    import faiss
+
+    for ix in (ix_bg, ix_fg):  # identical links
+        ix.links = faiss.vector_to_array(ix.graph.hnsw.neighbors)
+    assert np.array_equal(ix_bg.links, ix_fg.links)
+
+
+def test_an_insertion_that_fails_on_the_worker_raises_at_the_next_use():
+    rng = np.random.default_rng(6)
+    centres = clustered_words(rng, 1200)
+    ix = WordIndex(32, min_words=1000, pca_dims=16, fresh_images=0)
+    ix.update(centres[:1100], np.arange(1100))
+    assert ix.active
+
+    class Broken:
+        def add(self, rows):
+            raise RuntimeError("insertion failed")
+
+    ix._graph = Broken()
+    ix.update(centres, np.zeros(0, np.int64))  # hands words 1100-1199 to the worker
+    with pytest.raises(RuntimeError, match="insertion failed"):
+        ix.wait()
+
+
 def test_index_is_refitted_as_the_vocabulary_grows():
     rng = np.random.default_rng(2)
     centres = clustered_words(rng, 9000)

@@ -87,3 +87,6 @@ class VocabConfig:
     ann_rebuild_growth: float = 0.0
     # how the graph stores the projected words: "sq8" (8-bit codes per dimension) or "flat" (float32)
     ann_storage: Literal["sq8", "flat"] = "sq8"
+    # insert an image's settled words into the graph on a worker thread while the caller goes on
+    # (its query, the next image's match); every use of the graph waits for it: the same graph and words
+    ann_background_insert: bool = True

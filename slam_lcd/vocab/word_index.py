@@ -44,16 +44,26 @@ proposes a few candidate words per descriptor and the winner is chosen exactly a
   exactly) lies within the word radius is decided among them instead of a graph search. On a
   revisit the rows left to search are mostly landmarks entering the view again, whose words the
   old keyframes hold: ~60% fewer graph searches on the synthetic stream (docs/vocab.md).
+- **Insertion beside the next image** (``ann_background_insert``): the words that settle after an
+  image are inserted into the graph on a worker thread (faiss releases the GIL) while the caller
+  goes on with what needs no graph: the keyframe's query and insertion into the database, the next
+  image's match to this one and its track hints. Every use of the graph waits for that insertion
+  first, so the graph, and every answer, is the same as inserting in place; only the wait moves.
+  On a new route an image founds ~110 words at ~90 us each (~10 ms), most of it hidden there.
 - **Growth.** With ``ann_rebuild_growth`` > 1 the projection and the graph are re-fitted when
   the vocabulary has grown by that factor (a cost linear in the words, so constant per word
   added); by default the graph just grows.
 
 Everything is deterministic: the projection comes from an evenly spaced sample, words enter
-the graph one thread at a time in id order, and a search does not depend on the thread count.
+the graph one thread at a time in id order (one insertion at a time, finished before any search,
+pool scoring or move), and a search does not depend on the thread count.
 """
 from __future__ import annotations
 
+import threading
+import time
 from collections import deque
+from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager
 
 import numpy as np
@@ -88,6 +98,28 @@ def _one_faiss_thread():
         yield
     finally:
         faiss.omp_set_num_threads(threads)
+
+
+_inserter: ThreadPoolExecutor | None = None
+_inserter_lock = threading.Lock()
+
+
+def _insertion_thread() -> ThreadPoolExecutor:
+    """The one worker thread that inserts words into graphs (shared by every index of the process:
+    an insertion is ~10 ms and one index waits for its own before the next use)."""
+    global _inserter
+    with _inserter_lock:
+        if _inserter is None:
+            _inserter = ThreadPoolExecutor(max_workers=1, thread_name_prefix="slam-lcd-words")
+        return _inserter
+
+
+def _add_on_one_thread(graph, rows: np.ndarray) -> float:
+    """Insert ``rows`` (node i = word i) on one faiss thread; returns the CPU seconds it took."""
+    t = time.thread_time()
+    with _one_faiss_thread():  # the graph's links do not depend on scheduling
+        graph.add(rows)
+    return time.thread_time() - t
 
 
 def exact_nearest(centres: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -137,7 +169,7 @@ class WordIndex:
     def __init__(self, dim: int, *, min_words: int = 5000, pca_dims: int = 64, hnsw_m: int = 16,
                  ef_search: int = 16, candidates: int = 12, fresh_images: int = 2, hint_images: int = 16,
                  hint_max_distance: float = 0.5, rebuild_growth: float = 0.0, storage: str = "sq8",
-                 hint_gap: bool = True, ef_construction: int = 40):
+                 hint_gap: bool = True, ef_construction: int = 40, background_insert: bool = True):
         if pca_dims < 1 or hnsw_m < 2 or ef_search < 1 or ef_construction < 1 or candidates < 1 or fresh_images < 0 or hint_images < 0 \
                 or not (rebuild_growth == 0 or rebuild_growth > 1):
             raise ConfigError("vocab.ann_*: pca_dims, ef_search, ef_construction and candidates must be >= 1, hnsw_m >= 2, "
@@ -158,7 +190,9 @@ class WordIndex:
         self.hint_gap = bool(hint_gap)
         self.rebuild_growth = float(rebuild_growth)
         self.storage = storage
-        self.graph = None  # faiss IndexHNSWSQ / IndexHNSWFlat over the projected words [0, n_indexed)
+        self.background_insert = bool(background_insert)
+        self._pending: Future | None = None  # the insertion running on the worker thread
+        self._graph = None  # faiss IndexHNSWSQ / IndexHNSWFlat over the projected words [0, n_indexed)
         self.proj: np.ndarray | None = None  # (dim, pca_dims)
         self.n_indexed = 0
         self.built_at = 0  # word count at the last fit
@@ -166,6 +200,7 @@ class WordIndex:
         self.n_searched = 0  # descriptors that searched the graph
         self.n_hinted = 0  # descriptors decided among hints: their match's candidates or a pool's words
         self.n_pooled = 0  # ... of which by a pool's words (IncrementalWords._pool_hints)
+        self.insert_cpu_s = 0.0  # CPU seconds of the graph insertions (on whichever thread ran them)
         self._image_ends: deque[int] = deque(maxlen=self.fresh_images + 1)  # word count after each image
 
     @classmethod
@@ -174,12 +209,23 @@ class WordIndex:
                    ef_search=conf.ann_ef_search, candidates=conf.ann_candidates, fresh_images=conf.ann_fresh_images,
                    hint_images=conf.ann_hint_images, hint_max_distance=conf.ann_hint_max_distance,
                    rebuild_growth=conf.ann_rebuild_growth, storage=conf.ann_storage, hint_gap=conf.ann_hint_gap,
-                   ef_construction=conf.ann_ef_construction)
+                   ef_construction=conf.ann_ef_construction, background_insert=conf.ann_background_insert)
 
     @property
     def active(self) -> bool:
         """True once the graph is in use (the vocabulary reached ``min_words``)."""
-        return self.graph is not None
+        return self._graph is not None
+
+    @property
+    def graph(self):
+        """The faiss graph index, once it holds every word handed to it (see :meth:`wait`)."""
+        self.wait()
+        return self._graph
+
+    @graph.setter
+    def graph(self, value) -> None:
+        self.wait()
+        self._graph = value
 
     # ------------------------------------------------------------------ search
     def nearest(self, centres: np.ndarray, u: np.ndarray, hints: np.ndarray | None = None,
@@ -274,7 +320,7 @@ class WordIndex:
         if indexed.any():  # moved words: their current projected position, written in place
             old = touched[indexed]
             self._write(old, (centres[old] if moved is None else moved[indexed]) @ self.proj)
-        self._index_up_to(centres, self._settled(n))
+        self._index_up_to(centres, self._settled(n), background=self.background_insert)
 
     def _settled(self, n: int) -> int:
         """Word count ``fresh_images`` images ago: words below it are no longer fresh."""
@@ -302,12 +348,22 @@ class WordIndex:
                 rows = faiss.downcast_index(self.graph.storage).sa_encode(rows)
         self._storage()[ids] = rows
 
-    def _index_up_to(self, centres: np.ndarray, end: int) -> None:
+    def wait(self) -> None:
+        """Return once the graph holds every word handed to it (the worker's insertion finished);
+        an error of that insertion is raised here."""
+        pending, self._pending = self._pending, None
+        if pending is not None:
+            self.insert_cpu_s += pending.result()
+
+    def _index_up_to(self, centres: np.ndarray, end: int, background: bool = False) -> None:
         if end <= self.n_indexed:
             return
         p = np.ascontiguousarray(centres[self.n_indexed:end] @ self.proj)
-        with _one_faiss_thread():  # the graph's links do not depend on scheduling
-            self.graph.add(p)  # sequential: node i is word i
+        self.wait()
+        if background:
+            self._pending = _insertion_thread().submit(_add_on_one_thread, self._graph, p)
+        else:
+            self.insert_cpu_s += _add_on_one_thread(self.graph, p)
         self.n_indexed = end
 
     def _build(self, centres: np.ndarray) -> None:
@@ -338,4 +394,5 @@ class WordIndex:
 
     def stats(self) -> dict:
         return {"active": self.active, "indexed": self.n_indexed, "builds": self.n_builds,
-                "searched": self.n_searched, "hinted": self.n_hinted, "pooled": self.n_pooled}
+                "searched": self.n_searched, "hinted": self.n_hinted, "pooled": self.n_pooled,
+                "insert_cpu_s": self.insert_cpu_s}
