@@ -43,6 +43,7 @@ of its keyframes, measured in the same run.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import tempfile
 import time
 from pathlib import Path
@@ -219,9 +220,15 @@ def grow(stream: PlaceStream, n: int, conf, checkpoints: list[int], label: str, 
 
     ``threads``: BLAS and faiss threads of each keyframe's database work, applied per keyframe as the
     pipeline applies ``run.lcd_threads`` (default 1: a run's loop detection while SuperPoint extracts
-    ahead on the other core); 0 leaves the libraries' own thread counts.
+    ahead on the other core); 0 leaves the libraries' own thread counts. The stream's next keyframe is
+    made on as many BLAS threads: made on two, its products left OpenBLAS's worker spinning on the other
+    core through the next timed keyframe (a core's worth of CPU that no run spends, and -3 to -21 %
+    wall time per keyframe once it stopped).
+
+    Times are wall clock; ``cpu`` adds the calling thread's CPU time and that of the graph insertions,
+    which run on a worker thread beside the next keyframe (``vocab.ann_background_insert``).
     """
-    from slam_lcd.thread_limits import limited_threads
+    from slam_lcd.thread_limits import blas_limit, limited_threads
     from slam_lcd.vocab import BowDatabase
     from slam_lcd.vocab.descriptors import as_unit_vectors
 
@@ -235,11 +242,14 @@ def grow(stream: PlaceStream, n: int, conf, checkpoints: list[int], label: str, 
     kf_prev = 0
     db = BowDatabase(vocab, conf)
     times = np.zeros((n, 3))
+    cpu = np.zeros(n)  # CPU seconds per keyframe: the calling thread's and the graph insertions'
+    inserted_cpu = 0.0
     hits = []
     rows = []
     next_desc = stream.keyframe(0)
     for k in range(n):
         d = next_desc
+        c0 = time.thread_time()
         t0 = time.perf_counter()
         with limited_threads(threads):  # entered and left inside the quantise and insert times, as in a run
             bow = db.transform(d)
@@ -249,11 +259,16 @@ def grow(stream: PlaceStream, n: int, conf, checkpoints: list[int], label: str, 
             db.add(k, k * 10**8, d)
         t3 = time.perf_counter()
         times[k] = (t1 - t0, t2 - t1, t3 - t2)
+        cpu[k] = time.thread_time() - c0
+        if vocab is None and db.words is not None:
+            cpu[k] += db.words.index.insert_cpu_s - inserted_cpu
+            inserted_cpu = db.words.index.insert_cpu_s
         ref = stream.revisit_of[k]
         if ref >= 0 and k - ref > 20:
             near = np.abs(stream.position[[c.match_id for c in cands[:1]]] - stream.position[k]) <= 3
             hits.append(bool(near.any()))
-        next_desc = stream.keyframe(k + 1) if k + 1 < len(stream.position) else stream.keyframe(k)
+        with blas_limit(threads) if threads > 0 else contextlib.nullcontext():
+            next_desc = stream.keyframe(k + 1) if k + 1 < len(stream.position) else stream.keyframe(k)
         if k + 1 in checkpoints:
             lo = max(0, k + 1 - window)
             row = {"path": label, "keyframes": k + 1, "words": db.n_words,
@@ -265,7 +280,7 @@ def grow(stream: PlaceStream, n: int, conf, checkpoints: list[int], label: str, 
                    "index": db.words.index.stats() if vocab is None else {"active": False, "tree": vocab.depth},
                    "total_median": float(np.median(times[lo:k + 1].sum(axis=1)) * 1e3), "reference_ms": reference.ms()}
             row["total"] = row["quantise"] + row["query"] + row["insert"]
-            row["kinds"] = _by_kind(times, stream.revisit_of, k + 1)
+            row["kinds"] = _by_kind(times, stream.revisit_of, k + 1, cpu)
             # the exhaustive search the ratios divide by runs on the same threads as the database
             with limited_threads(threads):
                 if measure_recall and vocab is not None:
@@ -278,7 +293,7 @@ def grow(stream: PlaceStream, n: int, conf, checkpoints: list[int], label: str, 
     return rows
 
 
-def _by_kind(times: np.ndarray, revisit_of: np.ndarray, end: int, span: int = 1000) -> dict:
+def _by_kind(times: np.ndarray, revisit_of: np.ndarray, end: int, cpu: np.ndarray, span: int = 1000) -> dict:
     """Mean total ms per keyframe over the ``span`` keyframes before ``end``: all, new-route ones (first
     visit: ~110 words founded, ~200 graph searches each) and revisits (few of either).
 
@@ -290,7 +305,8 @@ def _by_kind(times: np.ndarray, revisit_of: np.ndarray, end: int, span: int = 10
     tot = times[lo:end].sum(axis=1) * 1e3
     new = revisit_of[lo:end] < 0
     return {"span": end - lo, "all": float(tot.mean()), "new": float(tot[new].mean()) if new.any() else float("nan"),
-            "n_new": int(new.sum()), "revisit": float(tot[~new].mean()) if (~new).any() else float("nan")}
+            "n_new": int(new.sum()), "revisit": float(tot[~new].mean()) if (~new).any() else float("nan"),
+            "cpu": float(cpu[lo:end].mean() * 1e3)}
 
 
 def _print_kinds(rows: list[dict]) -> None:
@@ -299,7 +315,7 @@ def _print_kinds(rows: list[dict]) -> None:
     for r in rows:
         c = r["kinds"]
         print(f"  {r['keyframes']:6d} kf: all {c['all']:6.2f} | new route {c['new']:6.2f} ({c['n_new']} kf) | "
-              f"revisit {c['revisit']:6.2f} ({c['span'] - c['n_new']} kf)")
+              f"revisit {c['revisit']:6.2f} ({c['span'] - c['n_new']} kf) | CPU {c['cpu']:6.2f} (both threads)")
 
 
 def _print_target(late: dict) -> None:
@@ -307,7 +323,8 @@ def _print_target(late: dict) -> None:
     explore-and-revisit cycle), with the checkpoint's own window beside it."""
     mean = late["kinds"]["all"]
     print(f"target at {late['keyframes']} keyframes: quantise+query+insert {mean:.1f} ms per keyframe over the last "
-          f"{late['kinds']['span']} (the {late['keyframes']} checkpoint's window: {late['total']:.1f}) <= 20 ms "
+          f"{late['kinds']['span']} (the {late['keyframes']} checkpoint's window: {late['total']:.1f}; CPU "
+          f"{late['kinds']['cpu']:.1f} ms per keyframe with the graph insertions' thread) <= 20 ms "
           f"{'OK' if mean <= 20.0 else 'MISSED'}; memory {late['rss_kb_per_kf']:.0f} kB/kf <= 150 "
           f"{'OK' if late['rss_kb_per_kf'] <= 150.0 else 'MISSED'}")
 
