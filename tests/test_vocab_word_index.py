@@ -302,6 +302,34 @@ def test_an_insertion_that_fails_on_the_worker_raises_at_the_next_use():
         ix.wait()
 
 
+def test_a_forked_child_inserts_on_its_own_worker_thread():
+    """The insertion thread is the process's own: a child forked after it started (a fork without
+    exec, as multiprocessing's 'fork') must not queue its insertions on a thread it does not have."""
+    import os
+
+    if not hasattr(os, "fork"):
+        pytest.skip("no fork on this platform")
+    rng = np.random.default_rng(7)
+    centres = clustered_words(rng, 1300)
+    ix = WordIndex(32, min_words=1000, pca_dims=16, fresh_images=0)
+    ix.update(centres[:1100], np.arange(1100))
+    ix.update(centres[:1200], np.zeros(0, np.int64))  # the parent's worker thread runs now
+    ix.wait()
+    pid = os.fork()
+    if pid == 0:  # child: insert and search, then leave without the parent's cleanup
+        import signal
+
+        signal.alarm(30)  # a child waiting on a thread it does not have dies instead of hanging
+        ok = False
+        try:
+            ix.update(centres, np.zeros(0, np.int64))
+            ok = ix.graph.ntotal == 1300 and ix.nearest(centres, centres[1250:1260])[0].tolist() == list(range(1250, 1260))
+        finally:
+            os._exit(0 if ok else 1)
+    _, status = os.waitpid(pid, 0)
+    assert os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0
+
+
 def test_index_is_refitted_as_the_vocabulary_grows():
     rng = np.random.default_rng(2)
     centres = clustered_words(rng, 9000)

@@ -60,6 +60,7 @@ pool scoring or move), and a search does not depend on the thread count.
 """
 from __future__ import annotations
 
+import os
 import threading
 import time
 from collections import deque
@@ -102,6 +103,16 @@ def _one_faiss_thread():
 
 _inserter: ThreadPoolExecutor | None = None
 _inserter_lock = threading.Lock()
+
+
+def _forget_inserter() -> None:
+    """In a forked child: the parent's worker thread does not exist there; the child starts its own."""
+    global _inserter, _inserter_lock
+    _inserter, _inserter_lock = None, threading.Lock()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_inserter)
 
 
 def _insertion_thread() -> ThreadPoolExecutor:
