@@ -260,7 +260,8 @@ def grow(stream: PlaceStream, n: int, conf, checkpoints: list[int], label: str, 
         t3 = time.perf_counter()
         times[k] = (t1 - t0, t2 - t1, t3 - t2)
         cpu[k] = time.thread_time() - c0
-        if vocab is None and db.words is not None:
+        if vocab is None and db.words is not None and db.words.index.background_insert:
+            # insertions on the worker thread (in place they are in the calling thread's time already)
             cpu[k] += db.words.index.insert_cpu_s - inserted_cpu
             inserted_cpu = db.words.index.insert_cpu_s
         ref = stream.revisit_of[k]
@@ -348,6 +349,17 @@ def _fmt(r: dict) -> str:
             f"{r.get('nearest_recall', float('nan')):6.3f} {r['exhaustive_ms']:7.1f} {r['revisit_top1']:9.3f}  {ixs}")
 
 
+def _typed(cls, key: str, value: str):
+    """A ``--set key=value`` in the type of ``cls.key``'s default (``bool("false")`` would be True)."""
+    default = getattr(cls, key)
+    if isinstance(default, bool):
+        words = {"true": True, "1": True, "yes": True, "on": True, "false": False, "0": False, "no": False, "off": False}
+        if value.lower() not in words:
+            raise SystemExit(f"--set {key}={value}: not a boolean (true / false)")
+        return words[value.lower()]
+    return type(default)(value)
+
+
 def bench_database(args) -> None:
     from slam_lcd.vocab import VocabConfig
 
@@ -363,7 +375,7 @@ def bench_database(args) -> None:
     if args.trained:
         _bench_trained(args, table, real, n, checkpoints, overrides)
         return
-    conf = VocabConfig(idf_source="database", **{k: type(getattr(VocabConfig, k))(v) for k, v in overrides.items()})
+    conf = VocabConfig(idf_source="database", **{k: _typed(VocabConfig, k, v) for k, v in overrides.items()})
     exhaustive = VocabConfig(idf_source="database", ann_min_words=2**62)
     print(f"== BoW database, online vocabulary: {n} keyframes of ~{int(1250 * 0.8)} x {DIM}-D descriptors "
           f"({'real landmarks' if real is not None else 'synthetic SuperPoint-like landmarks'}) ==")
@@ -420,7 +432,7 @@ def _bench_trained(args, table, real, n: int, checkpoints: list[int], overrides:
     """The database with a vocabulary trained beforehand on another place stream (the paper's setting)."""
     from slam_lcd.vocab import VocabConfig, train_vocabulary
 
-    conf = VocabConfig(**{k: type(getattr(VocabConfig, k))(v) for k, v in overrides.items()})
+    conf = VocabConfig(**{k: _typed(VocabConfig, k, v) for k, v in overrides.items()})
     other = PlaceStream(args.trained, args.seed + 101, landmarks=LandmarkTable(args.seed + 101, real=real))
     t = time.perf_counter()
     vocab = train_vocabulary([other.keyframe(k) for k in range(args.trained)], conf)
