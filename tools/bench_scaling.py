@@ -349,15 +349,21 @@ def _fmt(r: dict) -> str:
             f"{r.get('nearest_recall', float('nan')):6.3f} {r['exhaustive_ms']:7.1f} {r['revisit_top1']:9.3f}  {ixs}")
 
 
-def _typed(cls, key: str, value: str):
-    """A ``--set key=value`` in the type of ``cls.key``'s default (``bool("false")`` would be True)."""
-    default = getattr(cls, key)
-    if isinstance(default, bool):
-        words = {"true": True, "1": True, "yes": True, "on": True, "false": False, "0": False, "no": False, "off": False}
-        if value.lower() not in words:
-            raise SystemExit(f"--set {key}={value}: not a boolean (true / false)")
-        return words[value.lower()]
-    return type(default)(value)
+def _vocab_config(base, sets: list[str]):
+    """``base`` (a VocabConfig) with each ``--set key=value`` applied as a run applies ``vocab.key=value``
+    (:func:`slam_lcd.config.apply_override`: the value read as YAML, its type checked, an unknown key named)."""
+    import dataclasses
+
+    from slam_lcd.config import Config, apply_override
+    from slam_lcd.errors import ConfigError
+
+    cfg = dataclasses.replace(Config(), vocab=base)
+    try:
+        for kv in sets:
+            cfg = apply_override(cfg, f"vocab.{kv}")
+    except ConfigError as e:
+        raise SystemExit(f"bench_scaling database --set: {e}") from None
+    return cfg.vocab
 
 
 def bench_database(args) -> None:
@@ -371,11 +377,10 @@ def bench_database(args) -> None:
     checkpoints = sorted({c for c in (100, 1000, 5000, 10000) if c <= n} | {n})
     base_n = min(args.baseline_keyframes, n)
     base_checks = sorted({c for c in (100, 1000) if c <= base_n} | {base_n}) if base_n > 0 else []
-    overrides = dict(kv.split("=", 1) for kv in args.set)
     if args.trained:
-        _bench_trained(args, table, real, n, checkpoints, overrides)
+        _bench_trained(args, table, real, n, checkpoints)
         return
-    conf = VocabConfig(idf_source="database", **{k: _typed(VocabConfig, k, v) for k, v in overrides.items()})
+    conf = _vocab_config(VocabConfig(idf_source="database"), args.set)
     exhaustive = VocabConfig(idf_source="database", ann_min_words=2**62)
     print(f"== BoW database, online vocabulary: {n} keyframes of ~{int(1250 * 0.8)} x {DIM}-D descriptors "
           f"({'real landmarks' if real is not None else 'synthetic SuperPoint-like landmarks'}) ==")
@@ -428,11 +433,11 @@ def _print_reference(rows: list[dict]) -> None:
           f"mean {late['total']:.1f} / median {late['total_median']:.1f} ms, is measured at that moment)")
 
 
-def _bench_trained(args, table, real, n: int, checkpoints: list[int], overrides: dict) -> None:
+def _bench_trained(args, table, real, n: int, checkpoints: list[int]) -> None:
     """The database with a vocabulary trained beforehand on another place stream (the paper's setting)."""
     from slam_lcd.vocab import VocabConfig, train_vocabulary
 
-    conf = VocabConfig(**{k: _typed(VocabConfig, k, v) for k, v in overrides.items()})
+    conf = _vocab_config(VocabConfig(), args.set)
     other = PlaceStream(args.trained, args.seed + 101, landmarks=LandmarkTable(args.seed + 101, real=real))
     t = time.perf_counter()
     vocab = train_vocabulary([other.keyframe(k) for k in range(args.trained)], conf)
