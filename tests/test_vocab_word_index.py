@@ -280,9 +280,8 @@ def test_words_inserted_beside_the_next_image_give_the_same_graph_and_words():
     assert ix_bg.insert_cpu_s > 0 and ix_fg.insert_cpu_s > 0
     import faiss
 
-    for ix in (ix_bg, ix_fg):  # identical links
-        ix.links = faiss.vector_to_array(ix.graph.hnsw.neighbors)
-    assert np.array_equal(ix_bg.links, ix_fg.links)
+    links = [faiss.vector_to_array(ix.graph.hnsw.neighbors) for ix in (ix_bg, ix_fg)]
+    assert np.array_equal(*links)  # identical links
 
 
 def test_an_insertion_that_fails_on_the_worker_raises_at_the_next_use():
