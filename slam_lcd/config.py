@@ -27,6 +27,7 @@ from .features.config import FeaturesConfig
 from .frontend.config import FrontendConfig
 from .io.config import IOConfig
 from .lcd.config import LcdConfig
+from .map.config import MapConfig
 from .sensors.config import SensorsConfig
 from .vocab.config import VocabConfig
 
@@ -117,6 +118,7 @@ class Config:
     eval: EvalConfig = field(default_factory=EvalConfig)
     run: RunConfig = field(default_factory=RunConfig)
     batch: BatchConfig = field(default_factory=BatchConfig)
+    map: MapConfig = field(default_factory=MapConfig)
 
 
 def _coerce(value: Any, tp: Any, where: str) -> Any:

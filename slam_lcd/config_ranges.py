@@ -173,6 +173,14 @@ RANGES: dict[str, str] = {
     "batch.cpus_per_task": "(0, inf)",
     "batch.gpus_per_task": "[0, inf)",
     "batch.max_retries": "[0, inf)",
+    # map (multi-session)
+    "map.min_join_loops": "[1, inf)",
+    "map.pcm_probability": "(0, 1)",
+    "map.pcm_sigma_trans_per_m": "[0, inf)",
+    "map.pcm_sigma_rot_per_m": "[0, inf)",
+    "map.localize_max_disagreement_m": "(0, inf)",
+    "map.localize_max_disagreement_deg": "(0, 180]",
+    "map.lock_timeout_s": "[0, inf)",
     "run.loop_pictures_rejected": "[0, inf)",
 }
 

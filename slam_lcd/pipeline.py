@@ -80,6 +80,7 @@ class Pipeline:
         expect_depth: bool = False,
         keyframe_sink: Callable[[Keyframe], None] | None = None,
         loop_sink: Callable[[object], None] | None = None,
+        map=None,
     ):
         self.config = config or Config()
         self.camera = camera
@@ -112,7 +113,7 @@ class Pipeline:
         self._detector_stale = self._stale_warned = False  # an interrupt inside the detector: no more detection
         # keyframes handed in, made by the selector but not handed in, waiting for features / loops
         self._n_submitted = 0
-        self._unsubmitted: list[Keyframe] = []
+        self._unsubmitted: list[tuple[int, Keyframe]] = []
         self._ahead = max(0, int(self.config.run.extract_ahead))
         self._lcd_threads = int(self.config.run.lcd_threads) if self._ahead else 0  # leave a core to extraction
         self._workers = self._extract_workers()
@@ -121,6 +122,15 @@ class Pipeline:
         self._executor: ThreadPoolExecutor | None = None
         # per keyframe: seconds of loop detection (and its parts), of the back end, resident kB after it
         self.keyframe_seconds: list[dict[str, float]] = []
+        # a multi-session map (slam_lcd.map.Map): its keyframes are loop candidates; loops to them are
+        # collected here for the map's joint graph (this session's own pose graph cannot hold them)
+        self.map = map
+        self.map_closures: list[LoopClosure] = []
+        self._id_base = 0
+        if map is not None:
+            map.load_into(self.detector)
+            self.detector.begin_session()
+            self._id_base = map.next_kf_id()
 
     # ------------------------------------------------------------------ inputs
     def set_camera(self, camera: CameraModel, T_body_camera: np.ndarray | None = None) -> None:
@@ -170,7 +180,7 @@ class Pipeline:
         handed in (or at :meth:`flush`/:meth:`finalize`): the loops returned by a call may
         belong to earlier keyframes. ``on_loop`` fires for each accepted loop either way.
         """
-        kf.id = self._n_submitted
+        kf.id = self._id_base + self._n_submitted
         if kf.camera is None:
             kf.camera = self.camera
         future = None
@@ -242,6 +252,9 @@ class Pipeline:
             for c in closures:
                 if not np.all(np.isfinite(c.T_match_query)):
                     continue  # verified by appearance but no metric pose: nothing to add to the graph
+                if c.evidence.get("inter_session"):
+                    self.map_closures.append(c)  # judged with every session in the map's joint graph
+                    continue
                 n_loops = self.graph.n_loops
                 try:
                     with self.timer("backend"):
@@ -357,13 +370,13 @@ class Pipeline:
             return []
         # one new keyframe, two on an odometry break (the frame before it is promoted), and one an
         # interrupt kept from the queue (its selector id is not below the count handed in)
-        self._unsubmitted += made
+        self._unsubmitted += [(k.id, k) for k in made]  # the selector's id (add_keyframe renumbers from the map's)
         out: list[LoopClosure] = []
         while self._unsubmitted:
-            if self._unsubmitted[0].id < self._n_submitted:
+            if self._unsubmitted[0][0] < self._n_submitted:
                 self._unsubmitted.pop(0)
                 continue
-            out += self.add_keyframe(self._unsubmitted[0])
+            out += self.add_keyframe(self._unsubmitted[0][1])
         return out
 
     # ------------------------------------------------------------------ results

@@ -76,6 +76,8 @@ def run_log(
     overrides: list[str] | None = None,
     calib=None,
     right_topic: str | None = None,
+    map=None,
+    session_name: str | None = None,
 ) -> RunResult:
     """Correct the trajectory of ``log_path`` with loop closures; write outputs into ``out_dir``.
 
@@ -92,6 +94,9 @@ def run_log(
     win over the log's CameraInfo and ``/tf_static``. A log without odometry gets the built-in
     visual odometry: RGB-D on its depth topic, else stereo on ``right_topic`` (default: the
     second camera found by :func:`slam_lcd.sensors.topics.choose_right_topic`).
+    ``map``: a :class:`slam_lcd.map.Map` opened for writing: its keyframes are loop candidates and
+    the log is appended to it as session ``session_name`` (committed before the outputs are
+    written; an interrupted run leaves the map as it was).
     """
     cfg = validate_config(config or Config())
     log_path = Path(log_path)
@@ -157,7 +162,7 @@ def run_log(
             if copy_topics:  # the topics corrected.mcap copies, kept undecoded from the one pass over the log
                 spool = RawSpool(outputs.staging / ".corrected_mcap_spool", copied_topics(copy_topics))
             pipe = _make_pipeline(cfg, extractor, vocab, log_path, topics, album,
-                                  rectified=stereo is not None and stereo.rectifier is not None)
+                                  rectified=stereo is not None and stereo.rectifier is not None, map=map)
             if calibrated is not None:  # the calibration file's camera (CameraInfo is not read then)
                 T_bc = (vo_odometry.T_body_camera if vo_odometry is not None else
                         calibrated_mounting(cfg.frontend, calibrated, tf, body_frame_of(first.get(topics.odom))))
@@ -192,6 +197,8 @@ def run_log(
             gt_traj = gt_traj_from_log
         if gt_traj is None:
             result.gt_source = None  # a ground-truth topic without a message
+        if map is not None:
+            result.map = _append_to_map(map, pipe, result, log_path, session_name, gt_traj, notes)
         result.wall_s = time.perf_counter() - t_start
     except BaseException:
         if spool is not None:
@@ -267,7 +274,21 @@ def _log_frames(first: dict, topics: Topics) -> dict:
     return {k: v for k, v in frames.items() if v}
 
 
-def _make_pipeline(cfg, extractor, vocab, log_path, topics: Topics, keyframe_sink=None, rectified: bool = False):
+def _append_to_map(map, pipe, result: RunResult, log_path: Path, name: str | None, gt, notes: list[str]) -> dict:
+    """Add the finished session to ``map`` and commit it; an interrupted run adds nothing (said in the notes)."""
+    from .map.summary import map_summary
+
+    if result.interrupted:
+        notes.append(f"The map {map.root} was left as it was: an interrupted session is not added to a map.")
+        log.warning("interrupted: %s was not changed", map.root)
+        return {"root": str(map.root), "appended": False, "reason": "interrupted"}
+    joined = map.add_session(pipe, name=name or log_path.stem, log_path=log_path, ground_truth=gt)
+    map.save()
+    return map_summary(map, joined, current=map.session_names[-1], pipe=pipe)
+
+
+def _make_pipeline(cfg, extractor, vocab, log_path, topics: Topics, keyframe_sink=None, rectified: bool = False,
+                   map=None):
     """The pipeline with its collaborators: the extractor, the vocabulary (None: online), the feature
     cache of this log (``rectified``: the images are the rectified pair's, cached apart from the raw
     ones), whether frames wait for depth, the loop pictures' keyframe album."""
@@ -288,7 +309,7 @@ def _make_pipeline(cfg, extractor, vocab, log_path, topics: Topics, keyframe_sin
 
     return Pipeline(cfg, extractor=extractor, vocab=vocab, feature_source=feature_source,
                     expect_depth=topics.depth is not None, keyframe_sink=keyframe_sink,
-                    loop_sink=getattr(keyframe_sink, "keep_loop", None))
+                    loop_sink=getattr(keyframe_sink, "keep_loop", None), map=map)
 
 
 def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame, vo_odometry, log_path,

@@ -64,9 +64,17 @@ def register(sub) -> None:
                        description="Stream a ROS1 bag, rosbag2 folder or MCAP file through keyframe selection, "
                                    "SuperPoint, Bag of SuperPoints, graph verification and GTSAM iSAM2; write the "
                                    "corrected trajectory, loops, reports and plots into --out.")
-    p.add_argument("log", help="ROS1 .bag, rosbag2 folder or .mcap file")
+    p.add_argument("log", nargs="+", help="ROS1 .bag, rosbag2 folder or .mcap file (several with --map: appended "
+                                          "in the order given)")
     p.add_argument("-o", "--out", required=True,
-                   help="output folder (required; created if missing; the files slam-lcd writes are replaced)")
+                   help="output folder (required; created if missing; the files slam-lcd writes are replaced; with "
+                        "several logs, one subfolder per log named after it)")
+    p.add_argument("--map", default=None, metavar="DIR",
+                   help="multi-session map folder: the log's loops are also searched in every session the map "
+                        "holds, and the log is appended to it as a new session (created if missing; default: none, "
+                        "a single-log run)")
+    p.add_argument("--session-name", default=None, metavar="NAME",
+                   help="name of the new session in the map (default: the log's file name without suffix)")
     p.add_argument("--image-topic", default=None,
                    help="camera image topic (default: auto-detected, the only sensor_msgs/Image or CompressedImage "
                         "topic without 'depth' or 'right' in its name)")
@@ -107,19 +115,63 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
+    from ..errors import InputError
     from ..runner import run_log
 
     extra = ["run.copy_images=true"] if args.copy_images else []
     if args.plot_mode:
         extra.append(f"run.plot_mode={args.plot_mode}")
     cfg = config_from_args(args, extra=extra)
-    res = run_log(args.log, Path(args.out), cfg, image_topic=args.image_topic, odom_topic=args.odom_topic,
-                  depth_topic=args.depth_topic, gt_topic=args.gt_topic, gt_file=args.gt,
-                  progress=not args.no_progress, write_mcap=not args.no_mcap, input_paths=config_inputs(args),
-                  command_line=getattr(args, "command_line", None), overrides=list(args.overrides),
-                  calib=args.calib, right_topic=args.right_topic)
+    logs = [Path(x) for x in args.log]
+    if len(logs) > 1 and args.map is None:
+        raise InputError(f"{len(logs)} logs given: several logs go into one map (--map DIR); "
+                         "to run them separately use `slam-lcd batch`")
+    if len(logs) > 1 and args.session_name:
+        raise InputError("--session-name names one session: give it with one log")
+    if args.map is None:
+        return _print_result(_run_one(args, cfg, logs[0], Path(args.out), None))
+    from ..features import load_extractor
+    from ..map.session_map import Map, extractor_meta
+
+    names = [x.stem for x in logs]
+    if len(set(names)) != len(names):
+        raise InputError(f"two logs share a name ({', '.join(names)}): their output folders would clash")
+    outs = [Path(args.out)] if len(logs) == 1 else [Path(args.out) / n for n in names]
+    extractor = load_extractor(cfg.features)
+    m = Map.open(args.map, features=extractor_meta(extractor, cfg.map.descriptor_form), conf=cfg.map, write=True,
+                 create=True)
+    rc = 0
+    try:
+        for log_path, out in zip(logs, outs):
+            res = _run_one(args, cfg, log_path, out, m, extractor=extractor)
+            rc = _print_result(res)
+            if res.interrupted:
+                break
+    finally:
+        m.close()
+    return rc
+
+
+def _run_one(args, cfg, log_path: Path, out: Path, m, extractor=None):
+    from ..runner import run_log
+
+    inputs = config_inputs(args)
+    return run_log(log_path, out, cfg, image_topic=args.image_topic, odom_topic=args.odom_topic,
+                   depth_topic=args.depth_topic, gt_topic=args.gt_topic, gt_file=args.gt,
+                   progress=not args.no_progress, write_mcap=not args.no_mcap, input_paths=inputs,
+                   command_line=getattr(args, "command_line", None), overrides=list(args.overrides),
+                   calib=args.calib, right_topic=args.right_topic, map=m, extractor=extractor,
+                   session_name=args.session_name)
+
+
+def _print_result(res) -> int:
     for line in res.summary_lines():
         print(line)
+    if res.map is not None:
+        from ..map.summary import summary_lines
+
+        for line in summary_lines(res.map):
+            print(line)
     print(f"outputs in {res.out_dir}/ ({', '.join(res.outputs)})"
           + (" -- a partial set, see PARTIAL.txt" if res.interrupted else ""))
     return 130 if res.interrupted else 0

@@ -210,12 +210,69 @@ class LoopDetector:
         self._temporal = TemporalConsistency(self.conf.temporal_k, self.conf.temporal_window)
         self._prior: tuple[int, int] | None = None  # (query position, match position) of the last full-threshold loop
         self._kind: str | None = None
+        self._floor = 0  # position of the current session's first keyframe (:meth:`begin_session`)
         # sees each loop the detector hands on (a record with its graph's matches and kept rows) before
         # the arrays are dropped: the loop pictures draw exactly what was verified
         self.loop_sink: Callable[[CandidateRecord], None] | None = None
 
     def __len__(self) -> int:
         return len(self._entries)
+
+    # ------------------------------------------------------------------ sessions (maps)
+    def begin_session(self) -> None:
+        """Keyframes added from now on are a new session of the same place (a multi-session map).
+
+        Earlier keyframes stay candidates; what only makes sense within one recording starts
+        afresh: the recent-keyframe exclusion, temporal consistency, the continuation of the
+        previous keyframe's loop, the odometry distance (a loop to an earlier session has no
+        odometry between its keyframes, so the odometry-drift check applies within a session only).
+        """
+        self._floor = len(self._entries)
+        self.db.begin_session()
+        self._temporal = TemporalConsistency(self.conf.temporal_k, self.conf.temporal_window)
+        self._prior = None
+
+    def in_current_session(self, kf_id: int) -> bool:
+        """Was keyframe ``kf_id`` added in the current session (not remembered from an earlier one)?"""
+        e = self._entries.get(int(kf_id))
+        return e is not None and e.position >= self._floor
+
+    def remember(self, kf: Keyframe, descriptors: np.ndarray, points3d: np.ndarray | None,
+                 points_source: str = "none") -> None:
+        """Insert a keyframe of an earlier session as a candidate, without querying (loading a map).
+
+        ``kf`` carries its keypoints (``kf.features``), camera, mounting and odometry pose;
+        ``descriptors`` are its stored (compact) descriptors; ``points3d`` its camera-frame points
+        per keypoint (NaN where unknown) from ``points_source``. The bag of words is made from
+        the descriptors as :meth:`add` would.
+        """
+        if kf.id in self._entries:
+            raise InputError(f"keyframe id {kf.id} was already added to the loop detector")
+        feats = kf.features
+        if self._kind is None:
+            self._kind = feats.kind
+        elif feats.kind != self._kind:
+            raise InputError(f"keyframe {kf.id} has {feats.kind} features but the detector holds {self._kind}")
+        desc = compact_descriptors(descriptors, self.conf.descriptor_dtype)
+        kept = Features(keypoints=np.asarray(feats.keypoints, np.float32), scores=np.zeros(0, np.float32),
+                        descriptors=np.zeros((0,) + desc.shape[1:], desc.dtype), image_size=feats.image_size,
+                        kind=feats.kind)
+        points3d = _float32_or_none(points3d)
+        camera = self._camera(kf, feats)
+        light = Keyframe(id=kf.id, stamp=kf.stamp, T_world_body=np.array(kf.T_world_body, float), camera=camera,
+                         T_body_camera=np.array(kf.T_body_camera, float), features=kept,
+                         landmarks=points3d if points_source == "landmarks" else None)
+        entry = _Entry(kf.id, int(kf.stamp), len(self._entries), kept, camera, light.T_body_camera, points3d,
+                       points_source if points3d is not None else "none", light, self._path_to(kf))
+        full = desc if desc.dtype == np.uint8 else np.asarray(desc, np.float32)
+        self.db.add(kf.id, int(kf.stamp), full)
+        self._store.put(kf.id, desc)
+        self._entries[kf.id] = entry
+
+    def stored(self, kf_id: int):
+        """What the detector keeps of keyframe ``kf_id``: (light keyframe, compact descriptors, 3-D points, source)."""
+        e = self._entries[int(kf_id)]
+        return e.keyframe, self._store.get(e.id), e.points3d, e.points_source
 
     # ------------------------------------------------------------------ helpers
     def _features(self, kf: Keyframe) -> Features:
@@ -258,8 +315,12 @@ class LoopDetector:
         return default_camera(w, h, self.conf.default_focal_factor)
 
     # ------------------------------------------------------------------ main entry
-    def add(self, kf: Keyframe) -> list[LoopClosure]:
-        """Query the database with ``kf``, verify its candidates, then insert it; returns accepted loops."""
+    def add(self, kf: Keyframe, *, insert: bool = True) -> list[LoopClosure]:
+        """Query the database with ``kf``, verify its candidates, then insert it; returns accepted loops.
+
+        ``insert=False`` only queries and verifies (localisation against a fixed map): ``kf``
+        is not kept and later keyframes cannot match it.
+        """
         if kf.id in self._entries:
             raise InputError(f"keyframe id {kf.id} was already added to the loop detector")
         check_user_keyframe(kf)
@@ -325,6 +386,9 @@ class LoopDetector:
         for r in records:
             _drop_arrays(r)
         clock.lap("decision")
+        if not insert:
+            self.last_part_seconds = clock.seconds
+            return closures
         self.db.add(kf.id, int(kf.stamp), feats.descriptors)
         clock.lap("bow_add")
         self._store.put(kf.id, desc)
@@ -335,8 +399,8 @@ class LoopDetector:
 
     def _path_to(self, kf: Keyframe) -> float:
         """Odometry distance from the first keyframe to ``kf`` (a non-finite step counts as none)."""
-        if not self._entries:
-            return 0.0
+        if len(self._entries) <= self._floor:
+            return 0.0  # the session's first keyframe
         last = next(reversed(self._entries.values()))
         step = float(np.linalg.norm(np.asarray(kf.T_world_body, float)[:3, 3] - last.keyframe.T_world_body[:3, 3]))
         return last.path_m + (step if np.isfinite(step) else 0.0)
@@ -431,7 +495,7 @@ class LoopDetector:
             rec.pose = estimate_loop_pose(q.keyframe, m.keyframe, used, c, points3d_m=m.points3d,
                                           source=m.points_source) if m.points3d is not None else \
                 estimate_loop_pose(q.keyframe, m.keyframe, used, c)
-            if rec.pose.ok and rec.pose.tight:
+            if rec.pose.ok and rec.pose.tight and m.position >= self._floor:  # odometry links one session only
                 why, rec.pose.odometry = odometry_drift_reason(rec.pose.T_match_query, m.keyframe.T_world_body,
                                                                q.keyframe.T_world_body, q.path_m - m.path_m, c)
                 if why:
@@ -444,7 +508,8 @@ class LoopDetector:
         return rec
 
     def _closure(self, r: CandidateRecord) -> LoopClosure:
-        evidence: dict[str, Any] = {"bow_score": r.bow_score, "n_matches": r.n_matches, "verify": self.conf.verify}
+        evidence: dict[str, Any] = {"bow_score": r.bow_score, "n_matches": r.n_matches, "verify": self.conf.verify,
+                                    "inter_session": not self.in_current_session(r.match_id)}
         if r.graph is not None:
             evidence.update(r.graph.evidence())
             evidence["structural_score"] = r.graph.score

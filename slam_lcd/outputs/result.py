@@ -47,6 +47,8 @@ class RunResult:
     frames: dict = field(default_factory=dict)
     command_line: list[str] | None = None
     overrides: list[str] = field(default_factory=list)
+    # run --map: the map after this session was added (slam_lcd.map.summary.map_summary), else None
+    map: dict | None = None
 
     @property
     def ate_ratio(self) -> float | None:

@@ -287,6 +287,14 @@ class BowDatabase:
         self._query_best: int | None = None
         self._pool_at: int | None = None
         self._pool_cache: tuple | None = None  # (pool_at, keyframes, pool)
+        # index of the current session's first keyframe: the recent-keyframe exclusion and the stamp
+        # order apply within a session only (a map holds earlier sessions, recorded at other times)
+        self.session_floor = 0
+
+    def begin_session(self) -> None:
+        """Keyframes added from now on belong to a new session (see :attr:`session_floor`)."""
+        self.session_floor = len(self.kf_ids)
+        self._query_best = self._pool_at = None
 
     def __len__(self) -> int:
         return len(self.kf_ids)
@@ -362,7 +370,7 @@ class BowDatabase:
         """Insert a keyframe (online mode also grows the words from it); returns its bag of words."""
         if kf_id in self._index_of:
             raise InputError(f"keyframe id {kf_id} is already in the database")
-        if self._stamps.n and stamp_ns < self._stamps.view[-1]:
+        if self._stamps.n > self.session_floor and stamp_ns < self._stamps.view[-1]:
             raise InputError(f"keyframe {kf_id}: stamp {stamp_ns} is older than the previous keyframe's")
         d = self._check(descriptors)
         if self.vocab is not None:
@@ -403,7 +411,7 @@ class BowDatabase:
         """Insert a keyframe whose bag of words is already known (word ids of this database's vocabulary)."""
         if kf_id in self._index_of:
             raise InputError(f"keyframe id {kf_id} is already in the database")
-        if self._stamps.n and stamp_ns < self._stamps.view[-1]:
+        if self._stamps.n > self.session_floor and stamp_ns < self._stamps.view[-1]:
             raise InputError(f"keyframe {kf_id}: stamp {stamp_ns} is older than the previous keyframe's")
         if len(bow) and (bow.words.min() < 0 or bow.words.max() >= self.n_words):
             raise InputError(f"keyframe {kf_id}: word ids outside the vocabulary (0..{self.n_words - 1})")
@@ -522,12 +530,13 @@ class BowDatabase:
         self_index = self._index_of.get(query_id) if query_id is not None else None
         if self_index is not None:
             keep[self_index] = False
+        floor = min(self.session_floor, n)
         if ex_n > 0:
-            keep[max(0, n - ex_n):] = False
+            keep[max(floor, n - ex_n):] = False
         stamps = self._stamps.view
         ref = stamps[-1] if stamp_ns is None else int(stamp_ns)
         if ex_s > 0:
-            keep &= stamps < ref - int(round(ex_s * 1e9))
+            keep[floor:] &= stamps[floor:] < ref - int(round(ex_s * 1e9))
         if norm_prev:
             prev = n - 1 if self_index != n - 1 else n - 2
             if prev < 0 or s[prev] < c.min_previous_score:

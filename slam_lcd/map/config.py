@@ -1,0 +1,30 @@
+"""Section `map`: how a multi-session map stores keyframes, joins sessions and localises a log."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+
+@dataclass
+class MapConfig:
+    """Section `map` (``slam-lcd run --map``, ``slam-lcd localize``; docs/multisession.md)."""
+
+    # SuperPoint descriptors in the map: int8 (one scale per descriptor, 256 B each) or float16
+    # (512 B); ORB's binary descriptors are stored as they are
+    descriptor_form: Literal["int8", "float16"] = "int8"
+    # two sessions are joined only by this many pairwise-consistent loops between them (PCM):
+    # one loop between two unconnected sessions cannot be checked against anything
+    min_join_loops: int = 3
+    # pairwise consistency of two loops between the same two sessions: chi-square quantile of
+    # the cycle (loop, odometry in one session, loop back, odometry in the other), 6 dof
+    pcm_probability: float = 0.99
+    # odometry uncertainty per metre travelled, used for the cycle's covariance when the
+    # session's odometry gives none (m/m and rad/m, 1 sigma)
+    pcm_sigma_trans_per_m: float = 0.05
+    pcm_sigma_rot_per_m: float = 0.02
+    # localise: a keyframe's pose from the map must agree with the poses of the localised
+    # keyframes around it carried by odometry (translation m, rotation deg); the rest are outliers
+    localize_max_disagreement_m: float = 1.0
+    localize_max_disagreement_deg: float = 15.0
+    # wait for a writer's lock this long before refusing (seconds; 0: refuse at once)
+    lock_timeout_s: float = 60.0

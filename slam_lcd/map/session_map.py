@@ -1,0 +1,373 @@
+"""``Map``: a multi-session map in memory, read from and committed to a map folder.
+
+Use (the pipeline takes a map the way it takes a user's iSAM2, as a collaborator)::
+
+    m = Map.open("office_map", features=extractor_meta(extractor), write=True)  # lock held
+    pipe = Pipeline(config, camera=camera, map=m)   # the map's keyframes become loop candidates
+    ...                                             # feed odometry and frames as usual
+    pipe.finalize()
+    joined = m.add_session(pipe, name="tuesday", log_path="tuesday.bag")   # joint solve, in memory
+    m.save()                                        # one atomic commit
+    m.close()
+
+``Map.open(path)`` without ``write`` only reads (``localize``): nothing in the folder changes.
+"""
+from __future__ import annotations
+
+import hashlib
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..geometry import inv
+from ..types import CameraModel, Features, Keyframe, Trajectory
+from . import store
+from .config import MapConfig
+from .joint_graph import JointLoop, JointResult, SessionPoses, solve
+from .store import MapError, MapGraph, MapManifest, SessionKeyframes
+
+log = logging.getLogger(__name__)
+
+
+def extractor_meta(extractor, descriptor_form: str = "int8") -> dict:
+    """What a map records of the features it holds: kind, weights' sha256, descriptor size and form."""
+    ident = extractor.identity() if hasattr(extractor, "identity") else {"kind": extractor.kind}
+    return {"kind": ident.get("kind", getattr(extractor, "kind", "")), "weights_sha256": ident.get("weights_sha256"),
+            "descriptor_dim": int(getattr(extractor, "descriptor_dim", 0) or 0),
+            "descriptor_form": descriptor_form if ident.get("kind") != "orb" else "binary",
+            "identity": {k: (v if isinstance(v, (int, float, str, bool, type(None))) else str(v))
+                         for k, v in ident.items()}}
+
+
+def _camera_json(c: CameraModel | None) -> dict | None:
+    if c is None:
+        return None
+    return {"width": c.width, "height": c.height, "fx": c.fx, "fy": c.fy, "cx": c.cx, "cy": c.cy,
+            "distortion_model": c.distortion_model, "D": np.asarray(c.D, float).tolist(), "baseline": c.baseline}
+
+
+def _camera_from_json(d: dict | None) -> CameraModel | None:
+    if not d:
+        return None
+    return CameraModel(int(d["width"]), int(d["height"]), float(d["fx"]), float(d["fy"]), float(d["cx"]),
+                       float(d["cy"]), str(d.get("distortion_model", "none")), np.asarray(d.get("D", []), float),
+                       d.get("baseline"))
+
+
+def compact_for_map(desc: np.ndarray, form: str) -> tuple[np.ndarray, np.ndarray]:
+    """(stored descriptors, scales): SuperPoint rows as int8 with one scale each, or float16; ORB as is."""
+    desc = np.asarray(desc)
+    if desc.dtype == np.uint8:
+        return np.ascontiguousarray(desc), np.zeros(0, np.float32)
+    d = desc.astype(np.float32)
+    if form == "float16":
+        return d.astype(np.float16), np.zeros(0, np.float32)
+    peak = np.abs(d).max(axis=1) if len(d) else np.zeros(0, np.float32)
+    scale = np.where(peak > 0, 127.0 / np.maximum(peak, 1e-12), 1.0).astype(np.float32)
+    return np.clip(np.rint(d * scale[:, None]), -127, 127).astype(np.int8), scale
+
+
+@dataclass
+class SessionSummary:
+    name: str
+    keyframes: int
+    component: int
+    inter_loops: int
+    joined: bool
+
+
+class Map:
+    """A multi-session map (see module docstring). ``write=True`` holds the folder's writer lock."""
+
+    def __init__(self, root: Path, manifest: MapManifest, sessions: list[SessionKeyframes], graph: MapGraph,
+                 conf: MapConfig, lock=None):
+        self.root = Path(root)
+        self.manifest = manifest
+        self.sessions = sessions
+        self.graph = graph
+        self.conf = conf
+        self._lock = lock
+        self._unsaved: list[tuple[dict, SessionKeyframes]] = []  # added, not committed yet
+        self._generation_read = manifest.generation
+        self.last_join: JointResult | None = None
+
+    # ------------------------------------------------------------------ open / close
+    @classmethod
+    def open(cls, root: str | Path, *, features: dict | None = None, conf: MapConfig | None = None,
+             write: bool = False, create: bool = False) -> "Map":
+        """Read the map at ``root``. ``write``: take the writer lock first; ``create``: an absent map is empty.
+
+        ``features`` (from :func:`extractor_meta`): refused with :class:`MapError` when the map holds
+        another feature kind or other weights.
+        """
+        root = Path(root)
+        conf = conf or MapConfig()
+        lock = None
+        if write:
+            if root.exists() and not root.is_dir():
+                raise MapError("a file is in the way of the map folder", root)
+            lock = store.write_lock(root, conf.lock_timeout_s)
+            lock.__enter__()
+        try:
+            if not store.is_map(root):
+                if not create:
+                    raise MapError("no map here (no map.json)" if root.exists() else "no such map folder", root)
+                if root.exists() and any(p.name != store.LOCK for p in root.iterdir()):
+                    raise MapError("the folder is not empty and holds no map: give an empty or new folder", root)
+                if features is None:
+                    raise MapError("a new map needs the feature kind it will hold", root)
+                manifest = MapManifest(features=dict(features, descriptor_form=features.get("descriptor_form",
+                                                                                               conf.descriptor_form)))
+                m = cls(root, manifest, [], MapGraph.empty(), conf, lock)
+            else:
+                manifest = store.read_manifest(root)
+                sessions = [store.read_session(root, manifest, i) for i in range(len(manifest.sessions))]
+                graph = store.read_graph(root, manifest)
+                m = cls(root, manifest, sessions, graph, conf, lock)
+                if write:
+                    store.remove_unlisted(root, manifest)  # a failed append's files
+            if features is not None:
+                m.check_features(features)
+            return m
+        except BaseException:
+            if lock is not None:
+                lock.__exit__(None, None, None)
+            raise
+
+    def close(self) -> None:
+        if self._lock is not None:
+            self._lock.__exit__(None, None, None)
+            self._lock = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def check_features(self, features: dict) -> None:
+        have = self.manifest.features
+        where = self.root / store.MANIFEST
+        if have.get("kind") != features.get("kind"):
+            raise MapError(f"the map holds {have.get('kind')} features, this run extracts {features.get('kind')}: "
+                           "a map never mixes feature kinds (use --features "
+                           f"{have.get('kind')} or another map)", where)
+        if have.get("weights_sha256") != features.get("weights_sha256"):
+            raise MapError(f"the map's SuperPoint weights have sha256 {str(have.get('weights_sha256'))[:12]}..., "
+                           f"this run's {str(features.get('weights_sha256'))[:12]}...: a map never mixes weights "
+                           "(give --weights with the map's file)", where)
+        if int(have.get("descriptor_dim", 0)) != int(features.get("descriptor_dim", 0)):
+            raise MapError(f"the map's descriptors have {have.get('descriptor_dim')} dimensions, this run's "
+                           f"{features.get('descriptor_dim')}", where)
+
+    # ------------------------------------------------------------------ contents
+    @property
+    def n_keyframes(self) -> int:
+        return sum(len(s) for s in self.sessions)
+
+    @property
+    def session_names(self) -> list[str]:
+        return [s["name"] for s in self.manifest.sessions]
+
+    def next_kf_id(self) -> int:
+        return self.manifest.next_kf_id()
+
+    def poses(self) -> dict[int, np.ndarray]:
+        return {int(k): T for k, T in zip(self.graph.kf_ids, self.graph.T_map)}
+
+    def session_trajectory(self, index: int, frame: str = "map") -> Trajectory:
+        """Session ``index``'s keyframes in its component's frame (``frame='map'``) or its own odometry."""
+        s = self.sessions[index]
+        if frame == "odom":
+            return Trajectory(s.stamps.copy(), s.T_odom.copy())
+        P = self.poses()
+        return Trajectory(s.stamps.copy(), np.array([P[int(k)] for k in s.ids]).reshape(-1, 4, 4))
+
+    def components(self) -> list[list[str]]:
+        comps: dict[int, list[str]] = {}
+        for s in self.manifest.sessions:
+            comps.setdefault(int(s["component"]), []).append(s["name"])
+        return [comps[k] for k in sorted(comps)]
+
+    def keyframes_for_detector(self):
+        """Per session: (meta, [(light Keyframe with keypoints, descriptors, points3d, source), ...])."""
+        for meta, s in zip(self.manifest.sessions, self.sessions):
+            camera = _camera_from_json(meta.get("camera"))
+            T_bc = np.asarray(meta.get("T_body_camera", np.eye(4).tolist()), float)
+            kind = self.manifest.features.get("kind", "superpoint")
+            size = (camera.width, camera.height) if camera else tuple(meta.get("image_size", (0, 0)))
+            items = []
+            for i, k in enumerate(s.ids):
+                r = s.rows(i)
+                feats = Features(s.keypoints[r], np.zeros(0, np.float32), np.zeros((0, 1), np.float32), size, kind)
+                kf = Keyframe(id=int(k), stamp=int(s.stamps[i]), T_world_body=s.T_odom[i], camera=camera,
+                              T_body_camera=T_bc, features=feats)
+                p3 = s.points3d[r]
+                src = str(s.points_source[i])
+                items.append((kf, s.descriptors_of(i), p3 if src != "none" else None, src))
+            yield meta, items
+
+    def load_into(self, detector) -> None:
+        """Give ``detector`` every keyframe of the map as a candidate (each session begins afresh)."""
+        for _, items in self.keyframes_for_detector():
+            detector.begin_session()
+            for kf, desc, p3, src in items:
+                detector.remember(kf, desc, p3, src)
+
+    # ------------------------------------------------------------------ appending
+    def add_session(self, pipeline, *, name: str | None = None, log_path: str | Path | None = None,
+                    ground_truth: Trajectory | None = None, extra: dict | None = None) -> JointResult:
+        """Take a finished pipeline's keyframes and loops as a new session; solve the joint graph (not saved yet)."""
+        if self._lock is None:
+            raise MapError("the map was opened read-only: open it with write=True to add a session", self.root)
+        kfs = list(pipeline.keyframes)
+        if not kfs:
+            raise MapError("the session has no keyframe: nothing to add to the map", log_path or self.root)
+        sess = self._session_arrays(pipeline, kfs, ground_truth)
+        name = name or f"session{len(self.sessions) + 1}"
+        names = set(self.session_names)
+        base, n = name, 2
+        while name in names:
+            name, n = f"{base}_{n}", n + 1
+        # this session's own corrected poses, its accepted loops; every inter-session loop offered
+        own = pipeline.keyframe_trajectory()
+        closures = {(int(c.query_id), int(c.match_id)): c for c in pipeline.closures}
+        loops = self._existing_loops()
+        for rec in pipeline.loop_records:
+            c = closures.get((rec.query_id, rec.match_id))
+            if c is not None and rec.verdict == "accepted":
+                loops.append(JointLoop(int(c.query_id), int(c.match_id), np.asarray(c.T_match_query, float),
+                                       np.asarray(c.information, float), False, True, "ok"))
+        for c in getattr(pipeline, "map_closures", []):
+            loops.append(JointLoop(int(c.query_id), int(c.match_id), np.asarray(c.T_match_query, float),
+                                   np.asarray(c.information, float), True, False, ""))
+        sessions = self._session_poses()
+        sessions.append(SessionPoses(name, sess.ids, sess.T_odom, sess.cov, np.asarray(own.poses, float), None))
+        result = solve(sessions, loops, self.conf)
+        self.last_join = result
+        graph = MapGraph(
+            kf_ids=np.array([k for s in sessions for k in s.ids], np.int64),
+            T_map=np.array([result.poses[int(k)] for s in sessions for k in s.ids]).reshape(-1, 4, 4),
+            loop_query=np.array([lp.query for lp in loops], np.int64),
+            loop_match=np.array([lp.match for lp in loops], np.int64),
+            loop_T=np.array([lp.T for lp in loops], float).reshape(-1, 4, 4),
+            loop_info=np.array([lp.info for lp in loops], float).reshape(-1, 6, 6),
+            loop_accepted=np.array([lp.accepted and not (lp.inter and lp.reason.startswith("gnc")) for lp in loops],
+                                   bool),
+            loop_reason=np.array([lp.reason for lp in loops], dtype="<U160"))
+        cam = getattr(pipeline, "camera", None)
+        meta = {"name": name, "keyframes": len(sess), "kf_id_start": int(sess.ids.min()),
+                "kf_id_end": int(sess.ids.max()) + 1, "stamps": [int(sess.stamps[0]), int(sess.stamps[-1])],
+                "log_path": str(Path(log_path).resolve()) if log_path else None,
+                "log_sha256": _sha256_log(log_path) if log_path else None,
+                "camera": _camera_json(cam), "T_body_camera": np.asarray(pipeline.T_body_camera, float).tolist(),
+                "features": self.manifest.features.get("kind"), "T_map_session": np.eye(4).tolist(),
+                "component": 0, **(extra or {})}
+        # the in-memory map follows at once (a second session may be added before saving)
+        self._apply(meta, sess, graph, result)
+        return result
+
+    def _apply(self, meta, sess, graph, result) -> None:
+        metas = [dict(m) for m in self.manifest.sessions] + [meta]
+        for m in metas:
+            m["component"] = int(result.component[m["name"]])
+            m["T_map_session"] = np.asarray(result.anchors[m["name"]], float).tolist()
+        self.sessions = self.sessions + [sess]
+        self.graph = graph
+        self._unsaved.append((meta, sess))
+        self.manifest = MapManifest(self.manifest.features, metas, self.manifest.graph_file, self.manifest.files,
+                                    self.manifest.created, self.manifest.updated, self.manifest.generation)
+
+    def save(self) -> None:
+        """Commit the sessions added since the last save: one atomic step (the manifest's rename)."""
+        if self._lock is None:
+            raise MapError("the map was opened read-only", self.root)
+        if not self._unsaved:
+            return
+        on_disk = store.read_manifest(self.root) if store.is_map(self.root) else MapManifest(self.manifest.features)
+        if on_disk.generation != self._generation_read:
+            raise MapError("the map changed on disk since it was opened (another writer?): nothing saved", self.root)
+        self.manifest = store.commit(self.root, on_disk, self._unsaved, self.graph, self.manifest.sessions)
+        self._generation_read = self.manifest.generation
+        self._unsaved = []
+
+    # ------------------------------------------------------------------ helpers
+    def _existing_loops(self) -> list[JointLoop]:
+        g = self.graph
+        sess_of = {int(k): si for si, s in enumerate(self.sessions) for k in s.ids}
+        out = []
+        for q, m_, T, I, acc, why in zip(g.loop_query, g.loop_match, g.loop_T, g.loop_info, g.loop_accepted,
+                                         g.loop_reason):
+            inter = sess_of.get(int(q)) != sess_of.get(int(m_))
+            out.append(JointLoop(int(q), int(m_), T, I, inter, bool(acc), str(why)))
+        return out
+
+    def _session_poses(self) -> list[SessionPoses]:
+        P = self.poses()
+        out = []
+        for meta, s in zip(self.manifest.sessions, self.sessions):
+            T = np.array([P[int(k)] for k in s.ids]) if P else s.T_odom.copy()
+            out.append(SessionPoses(meta["name"], s.ids, s.T_odom, s.cov, T.reshape(-1, 4, 4), int(meta["component"])))
+        return out
+
+    def _session_arrays(self, pipeline, kfs: list[Keyframe], gt: Trajectory | None) -> SessionKeyframes:
+        det = pipeline.detector
+        form = self.manifest.features.get("descriptor_form", self.conf.descriptor_form)
+        ids, stamps, T_odom, cov, offs = [], [], [], [], [0]
+        kps, descs, scales, p3s, srcs = [], [], [], [], []
+        for kf in kfs:
+            light, desc, p3, src = det.stored(kf.id)
+            n = len(light.features.keypoints)
+            ids.append(int(kf.id))
+            stamps.append(int(kf.stamp))
+            T_odom.append(np.asarray(kf.T_world_body, float))
+            c = kf.covariance_since_last
+            cov.append(np.asarray(c, float) if c is not None else np.full((6, 6), np.nan))
+            kps.append(np.asarray(light.features.keypoints, np.float32).reshape(-1, 2))
+            d, sc = compact_for_map(desc, form)
+            descs.append(d)
+            scales.append(sc)
+            p3s.append(np.asarray(p3, np.float32).reshape(-1, 3) if p3 is not None else np.full((n, 3), np.nan, np.float32))
+            srcs.append(src if p3 is not None else "none")
+            offs.append(offs[-1] + n)
+        stamps_a = np.array(stamps, np.int64)
+        T_gt = np.full((len(ids), 4, 4), np.nan)
+        if gt is not None and len(gt) > 1:
+            from ..geometry import interpolate_poses
+
+            inside = (stamps_a >= gt.stamps[0]) & (stamps_a <= gt.stamps[-1])
+            if inside.any():
+                T_gt[inside] = interpolate_poses(gt.stamps, gt.poses, stamps_a[inside])
+        dim = descs[0].shape[1] if descs and descs[0].ndim == 2 else 0
+        return SessionKeyframes(
+            ids=np.array(ids, np.int64), stamps=stamps_a, T_odom=np.array(T_odom).reshape(-1, 4, 4),
+            cov=np.array(cov).reshape(-1, 6, 6), T_gt=T_gt, offsets=np.array(offs, np.int64),
+            keypoints=np.concatenate(kps) if kps else np.zeros((0, 2), np.float32),
+            descriptors=np.concatenate([d.reshape(-1, dim) for d in descs]) if descs else np.zeros((0, dim)),
+            scales=np.concatenate(scales).astype(np.float32) if scales else np.zeros(0, np.float32),
+            points3d=np.concatenate(p3s) if p3s else np.zeros((0, 3), np.float32),
+            points_source=np.array(srcs, dtype="<U10"))
+
+
+def _sha256_log(path) -> str | None:
+    p = Path(path)
+    h = hashlib.sha256()
+    files = sorted(q for q in p.rglob("*") if q.is_file()) if p.is_dir() else [p]
+    try:
+        for f in files:
+            with open(f, "rb") as fh:
+                for block in iter(lambda: fh.read(1 << 20), b""):
+                    h.update(block)
+    except OSError:
+        return None
+    return h.hexdigest()
+
+
+def transform_trajectory(traj: Trajectory, A: np.ndarray) -> Trajectory:
+    return Trajectory(traj.stamps.copy(), np.einsum("ij,njk->nik", A, traj.poses), None, traj.frame_id,
+                      traj.child_frame_id)
+
+
+__all__ = ["Map", "MapError", "extractor_meta", "compact_for_map", "transform_trajectory", "inv"]

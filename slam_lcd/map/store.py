@@ -1,0 +1,371 @@
+"""The map folder on disk: a manifest, one file per session, one file for the joint graph.
+
+Layout (``schema`` 1)::
+
+    DIR/map.json                  manifest: schema, feature kind, sessions table, files with sha256
+    DIR/sessions/NNNN-<tag>.npz   one session's keyframes (written once, never rewritten)
+    DIR/graph-<tag>.npz           loops of every session and the map-frame keyframe poses
+    DIR/.lock                     the writers' lock (flock)
+
+Why this shape: appending a session writes only new files (the session's keyframes and a new
+graph file under a fresh name), then replaces ``map.json`` in one ``os.replace``: that rename is
+the commit. Before it the map is exactly the old one (a reader only opens files the manifest
+names); after it, the whole new session. Files that no manifest names (a failed append's, an
+old graph) are removed by the next writer, under the lock. Every file is checked against the
+size and sha256 the manifest gives before it is used, and arrays load with
+``allow_pickle=False``: a truncated, tampered or foreign file is one :class:`MapError` naming it.
+"""
+from __future__ import annotations
+
+import contextlib
+import errno
+import fcntl
+import hashlib
+import json
+import os
+import secrets
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from ..errors import InputError
+from ..interrupts import defer_sigint
+
+SCHEMA = 1
+MANIFEST = "map.json"
+LOCK = ".lock"
+FORMAT_NAME = "slam-lcd map"
+
+
+class MapError(InputError):
+    """A map folder that cannot be used: missing, damaged, of another schema or another feature kind."""
+
+
+class MapLockedError(MapError):
+    """Another process is writing the map."""
+
+
+# ----------------------------------------------------------------------------- data
+@dataclass
+class SessionKeyframes:
+    """One session's keyframes as the map keeps them (arrays; keypoint rows concatenated).
+
+    ``offsets[i]:offsets[i+1]`` are keyframe i's rows of ``keypoints``, ``descriptors``,
+    ``scales`` (int8 descriptors: value = int8 / scale; empty otherwise) and ``points3d``
+    (camera frame, NaN where unknown). Poses: ``T_odom`` in the session's own odometry frame,
+    ``T_gt`` ground truth at the keyframe stamps where the run had it (NaN otherwise; only for
+    evaluation), ``cov`` the odometry covariance since the previous keyframe (NaN: none).
+    """
+
+    ids: np.ndarray  # (n,) int64, unique in the map
+    stamps: np.ndarray  # (n,) int64 ns
+    T_odom: np.ndarray  # (n, 4, 4)
+    cov: np.ndarray  # (n, 6, 6)
+    T_gt: np.ndarray  # (n, 4, 4)
+    offsets: np.ndarray  # (n + 1,) int64
+    keypoints: np.ndarray  # (K, 2) float32
+    descriptors: np.ndarray  # (K, D) int8 / float16 / uint8 (ORB)
+    scales: np.ndarray  # (K,) float32 for int8, else (0,)
+    points3d: np.ndarray  # (K, 3) float32
+    points_source: np.ndarray  # (n,) str: rgbd | stereo | landmarks | none
+
+    ARRAYS = ("ids", "stamps", "T_odom", "cov", "T_gt", "offsets", "keypoints", "descriptors", "scales",
+              "points3d", "points_source")
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+    def rows(self, i: int) -> slice:
+        return slice(int(self.offsets[i]), int(self.offsets[i + 1]))
+
+    def descriptors_of(self, i: int) -> np.ndarray:
+        """Keyframe i's descriptors as the loop detector uses them (float32 unit rows, or ORB bytes)."""
+        d = self.descriptors[self.rows(i)]
+        if d.dtype == np.int8:
+            return d.astype(np.float32) / self.scales[self.rows(i), None]
+        if d.dtype == np.float16:
+            return d.astype(np.float32)
+        return d
+
+    def check(self, where: Path) -> None:
+        n, K = len(self.ids), len(self.keypoints)
+        ok = (self.stamps.shape == (n,) and self.T_odom.shape == (n, 4, 4) and self.cov.shape == (n, 6, 6)
+              and self.T_gt.shape == (n, 4, 4) and self.offsets.shape == (n + 1,) and self.points_source.shape == (n,)
+              and self.keypoints.shape == (K, 2) and len(self.descriptors) == K and self.points3d.shape == (K, 3)
+              and (len(self.scales) in (0, K)) and n > 0 and int(self.offsets[0]) == 0 and int(self.offsets[-1]) == K
+              and bool(np.all(np.diff(self.offsets) >= 0)))
+        if not ok:
+            raise MapError("session file's arrays do not fit together (damaged or not written by slam-lcd)", where)
+        if not np.all(np.isfinite(self.T_odom)):
+            raise MapError("session file holds non-finite keyframe poses", where)
+
+
+@dataclass
+class MapGraph:
+    """Loops of every session (within and between) and the keyframes' poses in the map frame."""
+
+    kf_ids: np.ndarray  # (N,) int64, every keyframe of the map
+    T_map: np.ndarray  # (N, 4, 4) solved pose of each keyframe in its component's frame
+    loop_query: np.ndarray  # (m,) int64
+    loop_match: np.ndarray  # (m,) int64
+    loop_T: np.ndarray  # (m, 4, 4) T_match_query
+    loop_info: np.ndarray  # (m, 6, 6) information, GTSAM order
+    loop_accepted: np.ndarray  # (m,) bool: in the graph (false: kept for the record, not used)
+    loop_reason: np.ndarray  # (m,) str
+
+    ARRAYS = ("kf_ids", "T_map", "loop_query", "loop_match", "loop_T", "loop_info", "loop_accepted", "loop_reason")
+
+    @classmethod
+    def empty(cls) -> "MapGraph":
+        return cls(np.zeros(0, np.int64), np.zeros((0, 4, 4)), np.zeros(0, np.int64), np.zeros(0, np.int64),
+                   np.zeros((0, 4, 4)), np.zeros((0, 6, 6)), np.zeros(0, bool), np.zeros(0, "<U8"))
+
+    def check(self, where: Path) -> None:
+        N, m = len(self.kf_ids), len(self.loop_query)
+        ok = (self.T_map.shape == (N, 4, 4) and self.loop_match.shape == (m,) and self.loop_T.shape == (m, 4, 4)
+              and self.loop_info.shape == (m, 6, 6) and self.loop_accepted.shape == (m,)
+              and self.loop_reason.shape == (m,))
+        if not ok:
+            raise MapError("graph file's arrays do not fit together (damaged or not written by slam-lcd)", where)
+
+
+@dataclass
+class MapManifest:
+    """``map.json``: the sessions table and the files that make the map now."""
+
+    features: dict  # kind, weights_sha256, descriptor_dim, descriptor_form, vocabulary
+    sessions: list[dict] = field(default_factory=list)
+    graph_file: str | None = None
+    files: dict[str, dict] = field(default_factory=dict)  # relative name -> {"sha256", "bytes"}
+    created: str = ""
+    updated: str = ""
+    generation: int = 0
+
+    def to_json(self) -> dict:
+        return {"format": FORMAT_NAME, "schema": SCHEMA, "created": self.created, "updated": self.updated,
+                "generation": self.generation, "features": self.features, "sessions": self.sessions,
+                "graph_file": self.graph_file, "files": self.files}
+
+    @property
+    def n_keyframes(self) -> int:
+        return sum(int(s["keyframes"]) for s in self.sessions)
+
+    def next_kf_id(self) -> int:
+        return max((int(s["kf_id_end"]) for s in self.sessions), default=0)
+
+
+# ----------------------------------------------------------------------------- reading
+def sha256_file(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def is_map(path: str | Path) -> bool:
+    return (Path(path) / MANIFEST).is_file()
+
+
+def read_manifest(root: str | Path) -> MapManifest:
+    """The manifest of the map at ``root`` (schema and shape checked; files not opened)."""
+    root = Path(root)
+    mpath = root / MANIFEST
+    if not root.exists():
+        raise MapError("no such map folder", root)
+    if not mpath.is_file():
+        raise MapError(f"not a slam-lcd map: no {MANIFEST} in the folder", root)
+    try:
+        data = json.loads(mpath.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise MapError(f"cannot be read as a map manifest ({e.__class__.__name__}: {e})", mpath) from None
+    if not isinstance(data, dict) or data.get("format") != FORMAT_NAME:
+        raise MapError("not a slam-lcd map manifest", mpath)
+    schema = data.get("schema")
+    if schema != SCHEMA:
+        newer = isinstance(schema, int) and schema > SCHEMA
+        raise MapError(f"map schema {schema!r}: this slam-lcd reads schema {SCHEMA} "
+                       f"({'upgrade slam-lcd' if newer else 'rebuild the map from its logs'})", mpath)
+    try:
+        m = MapManifest(features=dict(data["features"]), sessions=list(data["sessions"]),
+                        graph_file=data.get("graph_file"), files=dict(data["files"]),
+                        created=str(data.get("created", "")), updated=str(data.get("updated", "")),
+                        generation=int(data.get("generation", 0)))
+        for s in m.sessions:
+            for key in ("name", "file", "keyframes", "kf_id_start", "kf_id_end", "T_map_session", "component"):
+                if key not in s:
+                    raise KeyError(key)
+    except (KeyError, TypeError, ValueError) as e:
+        raise MapError(f"map manifest lacks or garbles {e}", mpath) from None
+    return m
+
+
+def _checked(root: Path, manifest: MapManifest, name: str) -> Path:
+    path = root / name
+    meta = manifest.files.get(name)
+    if meta is None:
+        raise MapError(f"the manifest does not list {name}", root / MANIFEST)
+    if not path.is_file():
+        raise MapError("map file missing", path)
+    size = path.stat().st_size
+    if size != int(meta.get("bytes", -1)):
+        raise MapError(f"map file is {size} bytes, the manifest says {meta.get('bytes')} (truncated or replaced)",
+                       path)
+    if sha256_file(path) != meta.get("sha256"):
+        raise MapError("map file's sha256 differs from the manifest's (modified after it was written)", path)
+    return path
+
+
+def _load_arrays(path: Path, names: tuple[str, ...]) -> dict[str, np.ndarray]:
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            missing = [n for n in names if n not in z.files]
+            if missing:
+                raise MapError(f"map file lacks arrays {missing}", path)
+            return {n: z[n] for n in names}
+    except MapError:
+        raise
+    except Exception as e:  # zip damage, pickled objects, bad CRC
+        raise MapError(f"cannot be read as map arrays ({e.__class__.__name__}: {e})", path) from None
+
+
+def read_session(root: str | Path, manifest: MapManifest, index: int) -> SessionKeyframes:
+    root = Path(root)
+    path = _checked(root, manifest, manifest.sessions[index]["file"])
+    s = SessionKeyframes(**_load_arrays(path, SessionKeyframes.ARRAYS))
+    s.check(path)
+    return s
+
+
+def read_graph(root: str | Path, manifest: MapManifest) -> MapGraph:
+    if manifest.graph_file is None:
+        return MapGraph.empty()
+    root = Path(root)
+    path = _checked(root, manifest, manifest.graph_file)
+    g = MapGraph(**_load_arrays(path, MapGraph.ARRAYS))
+    g.check(path)
+    return g
+
+
+# ----------------------------------------------------------------------------- writing
+def _fsync_dir(path: Path) -> None:
+    with contextlib.suppress(OSError):
+        fd = os.open(path, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
+def _write_npz(path: Path, arrays: dict[str, np.ndarray]) -> dict:
+    """Write arrays to ``path`` (a fresh name), fsync; returns its manifest entry."""
+    tmp = path.with_name(f".{path.name}.tmp")
+    try:
+        with open(tmp, "wb") as fh:
+            np.savez(fh, **arrays)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    finally:
+        with defer_sigint():
+            tmp.unlink(missing_ok=True)
+    return {"sha256": sha256_file(path), "bytes": path.stat().st_size}
+
+
+@contextlib.contextmanager
+def write_lock(root: Path, timeout_s: float = 60.0) -> Iterator[None]:
+    """Hold the map's writer lock (``flock`` on ``DIR/.lock``); wait up to ``timeout_s``, then refuse."""
+    root.mkdir(parents=True, exist_ok=True)
+    fd = os.open(root / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        deadline = time.monotonic() + max(0.0, timeout_s)
+        while True:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except OSError as e:
+                if e.errno not in (errno.EAGAIN, errno.EACCES):
+                    raise
+                if time.monotonic() >= deadline:
+                    raise MapLockedError(f"another slam-lcd process is writing this map (waited {timeout_s:g} s); "
+                                         "try again when it has finished", root) from None
+                time.sleep(0.2)
+        yield
+    finally:
+        os.close(fd)  # closing releases the lock
+
+
+def remove_unlisted(root: Path, manifest: MapManifest | None) -> None:
+    """Remove files of ours that the manifest does not name (a failed append's, an old graph). Under the lock."""
+    keep = set(manifest.files) if manifest else set()
+    for path in list(root.glob("graph-*.npz")) + list((root / "sessions").glob("*.npz")) + \
+            list(root.glob(".*.tmp")) + list((root / "sessions").glob(".*.tmp")):
+        rel = path.relative_to(root).as_posix()
+        if rel not in keep:
+            with contextlib.suppress(OSError):
+                path.unlink()
+
+
+def commit(root: Path, manifest: MapManifest, new_sessions: list[tuple[dict, SessionKeyframes]], graph: MapGraph,
+           sessions_table: list[dict]) -> MapManifest:
+    """Write new sessions' files and a new graph file, then the manifest (the commit). Hold the lock.
+
+    ``manifest``: the one on disk (or an empty one for a new map); ``sessions_table``: every
+    session's entry after the commit (new ones last, without their ``file``). A failure before
+    the manifest's rename removes the files it wrote: the folder is as it was.
+    """
+    tag = secrets.token_hex(4)
+    files = dict(manifest.files)
+    written: list[Path] = []
+    (root / "sessions").mkdir(parents=True, exist_ok=True)
+    table = [dict(s) for s in sessions_table]
+    known = {s["name"]: s.get("file") for s in manifest.sessions}
+    try:
+        n_before = len(manifest.sessions)
+        for i, (meta, sess) in enumerate(new_sessions):
+            name = f"sessions/{n_before + i + 1:04d}-{tag}.npz"
+            written.append(root / name)
+            files[name] = _write_npz(root / name, {k: getattr(sess, k) for k in SessionKeyframes.ARRAYS})
+            known[meta["name"]] = name
+        for s in table:
+            s["file"] = known[s["name"]]
+        gname = f"graph-{manifest.generation + 1:06d}-{tag}.npz"
+        if manifest.graph_file:
+            files.pop(manifest.graph_file, None)
+        written.append(root / gname)
+        files[gname] = _write_npz(root / gname, {k: getattr(graph, k) for k in MapGraph.ARRAYS})
+        now = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+        new = MapManifest(features=manifest.features, sessions=table, graph_file=gname, files=files,
+                          created=manifest.created or now, updated=now, generation=manifest.generation + 1)
+        text = json.dumps(new.to_json(), indent=1, default=_json_default)
+        tmp = root / f".{MANIFEST}.tmp"
+        written.append(tmp)
+        with open(tmp, "w", encoding="utf-8") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        _fsync_dir(root / "sessions")
+        with defer_sigint():  # the commit: the old map or the whole new one
+            os.replace(tmp, root / MANIFEST)
+            written.clear()
+            _fsync_dir(root)
+    finally:
+        with defer_sigint():
+            for path in written:  # not committed: leave the folder as it was
+                with contextlib.suppress(OSError):
+                    path.unlink()
+    remove_unlisted(root, new)
+    return new
+
+
+def _json_default(o):
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, (np.integer,)):
+        return int(o)
+    if isinstance(o, (np.floating,)):
+        return float(o)
+    raise TypeError(f"not JSON: {type(o).__name__}")
