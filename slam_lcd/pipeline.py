@@ -81,6 +81,7 @@ class Pipeline:
         keyframe_sink: Callable[[Keyframe], None] | None = None,
         loop_sink: Callable[[object], None] | None = None,
         map=None,
+        map_mode: str = "append",
     ):
         self.config = config or Config()
         self.camera = camera
@@ -127,6 +128,9 @@ class Pipeline:
         self.map = map
         self.map_closures: list[LoopClosure] = []
         self._id_base = 0
+        if map_mode not in ("append", "localize"):
+            raise ValueError(f"map_mode must be 'append' or 'localize', got {map_mode!r}")
+        self._insert_keyframes = map is None or map_mode == "append"  # localize: the map stays as it is
         if map is not None:
             map.load_into(self.detector)
             self.detector.begin_session()
@@ -301,7 +305,7 @@ class Pipeline:
         try:
             busy = any(f is not None and not f.done() for _, f in self._inflight)  # extraction running now
             with self.timer("loop_detection"), limited_threads(self._lcd_threads if busy else 0):
-                closures = det.add(kf)
+                closures = det.add(kf, insert=self._insert_keyframes)
             done = True
             return closures
         finally:

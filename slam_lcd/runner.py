@@ -78,6 +78,7 @@ def run_log(
     right_topic: str | None = None,
     map=None,
     session_name: str | None = None,
+    map_mode: str = "append",
 ) -> RunResult:
     """Correct the trajectory of ``log_path`` with loop closures; write outputs into ``out_dir``.
 
@@ -96,7 +97,8 @@ def run_log(
     second camera found by :func:`slam_lcd.sensors.topics.choose_right_topic`).
     ``map``: a :class:`slam_lcd.map.Map` opened for writing: its keyframes are loop candidates and
     the log is appended to it as session ``session_name`` (committed before the outputs are
-    written; an interrupted run leaves the map as it was).
+    written; an interrupted run leaves the map as it was). ``map_mode='localize'``: the map (opened
+    read-only) is not changed; each keyframe is localised against it (``result.localization``).
     """
     cfg = validate_config(config or Config())
     log_path = Path(log_path)
@@ -162,7 +164,8 @@ def run_log(
             if copy_topics:  # the topics corrected.mcap copies, kept undecoded from the one pass over the log
                 spool = RawSpool(outputs.staging / ".corrected_mcap_spool", copied_topics(copy_topics))
             pipe = _make_pipeline(cfg, extractor, vocab, log_path, topics, album,
-                                  rectified=stereo is not None and stereo.rectifier is not None, map=map)
+                                  rectified=stereo is not None and stereo.rectifier is not None, map=map,
+                                  map_mode=map_mode)
             if calibrated is not None:  # the calibration file's camera (CameraInfo is not read then)
                 T_bc = (vo_odometry.T_body_camera if vo_odometry is not None else
                         calibrated_mounting(cfg.frontend, calibrated, tf, body_frame_of(first.get(topics.odom))))
@@ -197,7 +200,11 @@ def run_log(
             gt_traj = gt_traj_from_log
         if gt_traj is None:
             result.gt_source = None  # a ground-truth topic without a message
-        if map is not None:
+        if map is not None and map_mode == "localize":
+            from .map.summary import localisation_report
+
+            result.localization = localisation_report(map, map.localise(pipe), gt_traj)
+        elif map is not None:
             result.map = _append_to_map(map, pipe, result, log_path, session_name, gt_traj, notes)
         result.wall_s = time.perf_counter() - t_start
     except BaseException:
@@ -288,7 +295,7 @@ def _append_to_map(map, pipe, result: RunResult, log_path: Path, name: str | Non
 
 
 def _make_pipeline(cfg, extractor, vocab, log_path, topics: Topics, keyframe_sink=None, rectified: bool = False,
-                   map=None):
+                   map=None, map_mode: str = "append"):
     """The pipeline with its collaborators: the extractor, the vocabulary (None: online), the feature
     cache of this log (``rectified``: the images are the rectified pair's, cached apart from the raw
     ones), whether frames wait for depth, the loop pictures' keyframe album."""
@@ -309,7 +316,7 @@ def _make_pipeline(cfg, extractor, vocab, log_path, topics: Topics, keyframe_sin
 
     return Pipeline(cfg, extractor=extractor, vocab=vocab, feature_source=feature_source,
                     expect_depth=topics.depth is not None, keyframe_sink=keyframe_sink,
-                    loop_sink=getattr(keyframe_sink, "keep_loop", None), map=map)
+                    loop_sink=getattr(keyframe_sink, "keep_loop", None), map=map, map_mode=map_mode)
 
 
 def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame, vo_odometry, log_path,

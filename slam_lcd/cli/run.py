@@ -59,22 +59,8 @@ def add_alias(p, alias: str, dest: str, **kwargs) -> None:
     p.add_argument(alias, dest=dest, default=argparse.SUPPRESS, help=argparse.SUPPRESS, **kwargs)
 
 
-def register(sub) -> None:
-    p = sub.add_parser("run", help="correct a recorded log's trajectory with loop closures",
-                       description="Stream a ROS1 bag, rosbag2 folder or MCAP file through keyframe selection, "
-                                   "SuperPoint, Bag of SuperPoints, graph verification and GTSAM iSAM2; write the "
-                                   "corrected trajectory, loops, reports and plots into --out.")
-    p.add_argument("log", nargs="+", help="ROS1 .bag, rosbag2 folder or .mcap file (several with --map: appended "
-                                          "in the order given)")
-    p.add_argument("-o", "--out", required=True,
-                   help="output folder (required; created if missing; the files slam-lcd writes are replaced; with "
-                        "several logs, one subfolder per log named after it)")
-    p.add_argument("--map", default=None, metavar="DIR",
-                   help="multi-session map folder: the log's loops are also searched in every session the map "
-                        "holds, and the log is appended to it as a new session (created if missing; default: none, "
-                        "a single-log run)")
-    p.add_argument("--session-name", default=None, metavar="NAME",
-                   help="name of the new session in the map (default: the log's file name without suffix)")
+def add_source_args(p) -> None:
+    """The flags that choose a log's topics, ground truth and calibration (`run`, `localize`)."""
     p.add_argument("--image-topic", default=None,
                    help="camera image topic (default: auto-detected, the only sensor_msgs/Image or CompressedImage "
                         "topic without 'depth' or 'right' in its name)")
@@ -101,6 +87,25 @@ def register(sub) -> None:
                    help="camera calibration: a Kalibr camchain.yaml, or EuRoC camN/sensor.yaml files (repeat: cam0 "
                         "first); wins over the log's CameraInfo and /tf_static mounting (default: none, the log's "
                         "CameraInfo)")
+
+
+def register(sub) -> None:
+    p = sub.add_parser("run", help="correct a recorded log's trajectory with loop closures",
+                       description="Stream a ROS1 bag, rosbag2 folder or MCAP file through keyframe selection, "
+                                   "SuperPoint, Bag of SuperPoints, graph verification and GTSAM iSAM2; write the "
+                                   "corrected trajectory, loops, reports and plots into --out.")
+    p.add_argument("log", nargs="+", help="ROS1 .bag, rosbag2 folder or .mcap file (several with --map: appended "
+                                          "in the order given)")
+    p.add_argument("-o", "--out", required=True,
+                   help="output folder (required; created if missing; the files slam-lcd writes are replaced; with "
+                        "several logs, one subfolder per log named after it)")
+    p.add_argument("--map", default=None, metavar="DIR",
+                   help="multi-session map folder: the log's loops are also searched in every session the map "
+                        "holds, and the log is appended to it as a new session (created if missing; default: none, "
+                        "a single-log run)")
+    p.add_argument("--session-name", default=None, metavar="NAME",
+                   help="name of the new session in the map (default: the log's file name without suffix)")
+    add_source_args(p)
     p.add_argument("--no-mcap", action="store_true",
                    help="do not write corrected.mcap (default: write it, run.write_mcap)")
     p.add_argument("--plot_mode", "--plot-mode", dest="plot_mode", default=None,

@@ -293,6 +293,41 @@ class Map:
         self._generation_read = self.manifest.generation
         self._unsaved = []
 
+    # ------------------------------------------------------------------ localisation
+    def localise(self, pipeline):
+        """Map-frame poses of a finished pipeline's keyframes from its matches to the map (the map is not changed)."""
+        from .localize import localise
+
+        poses = self.poses()
+        session_of, component_of = {}, {}
+        for meta, s in zip(self.manifest.sessions, self.sessions):
+            for k in s.ids:
+                session_of[int(k)] = meta["name"]
+                component_of[int(k)] = int(meta["component"])
+        kfs = list(pipeline.keyframes)
+        if not kfs:
+            raise MapError("the log gave no keyframe: nothing to localise", self.root)
+        return localise(poses, session_of, component_of, [k.id for k in kfs], [k.stamp for k in kfs],
+                        np.array([k.T_world_body for k in kfs], float).reshape(-1, 4, 4),
+                        [k.covariance_since_last for k in kfs], getattr(pipeline, "map_closures", []), self.conf)
+
+    def gt_alignment(self, component: int = 0):
+        """(R, t) taking this component's map frame to the ground truth's frame, from the sessions' keyframe GT; or None."""
+        from ..eval.align import umeyama
+
+        P, G = [], []
+        poses = self.poses()
+        for meta, s in zip(self.manifest.sessions, self.sessions):
+            if int(meta["component"]) != component:
+                continue
+            ok = np.all(np.isfinite(s.T_gt[:, :3, 3]), axis=1)
+            P += [poses[int(k)][:3, 3] for k in s.ids[ok]]
+            G += list(s.T_gt[ok, :3, 3])
+        if len(P) < 3:
+            return None
+        R, t, _ = umeyama(np.array(P), np.array(G), with_scale=False)
+        return R, t
+
     # ------------------------------------------------------------------ helpers
     def _existing_loops(self) -> list[JointLoop]:
         g = self.graph

@@ -110,3 +110,54 @@ def summary_lines(summary: dict) -> list[str]:
         lines.append(f"  {s['name']}: {s['keyframes']} keyframes, {s['inter_session_loops']} loops to other "
                      f"sessions{ate}" + ("" if s["joined"] else f" -- {s['note']}"))
     return lines
+
+
+def localisation_report(m, loc, gt=None) -> dict:
+    """Figures of a localisation: share localised, reasons, and with ground truth the position errors.
+
+    Errors need the map's own ground truth (kept per keyframe): the map frame is aligned to the
+    ground truth's frame once, from the map's keyframes (never from the localised log), and each
+    localised keyframe's position is compared with its ground truth at that stamp.
+    """
+    from ..geometry import interpolate_poses
+
+    ks = loc.keyframes
+    reasons: dict[str, int] = {}
+    for k in ks:
+        if not k.localised:
+            key = k.reason.split(" (")[0]
+            reasons[key] = reasons.get(key, 0) + 1
+    out = {"map": str(m.root), "keyframes": len(ks), "localised": sum(k.localised for k in ks),
+           "share_localised": loc.share_localised, "component": loc.component, "not_localised_reasons": reasons,
+           "errors": None, "_loc": loc}
+    al = m.gt_alignment(loc.component or 0)
+    if gt is not None and len(gt) > 1 and al is not None:
+        R, t = al
+        stamps = np.array([k.stamp for k in ks], np.int64)
+        inside = (stamps >= gt.stamps[0]) & (stamps <= gt.stamps[-1])
+        err = np.full(len(ks), np.nan)
+        if inside.any():
+            G = interpolate_poses(gt.stamps, gt.poses, stamps[inside])[:, :3, 3]
+            P = np.array([k.T_map[:3, 3] for k in ks])[inside] @ R.T + t
+            err[inside] = np.linalg.norm(P - G, axis=1)
+        for k, e in zip(ks, err):
+            k.error_m = float(e) if np.isfinite(e) else None
+        e_loc = np.array([e for k, e in zip(ks, err) if k.localised and np.isfinite(e)])
+        e_all = err[np.isfinite(err)]
+        out["errors"] = {"median_m": float(np.median(e_loc)) if len(e_loc) else None,
+                         "max_m": float(e_loc.max()) if len(e_loc) else None,
+                         "over_1m": int((e_loc > 1.0).sum()),
+                         "all_keyframes_median_m": float(np.median(e_all)) if len(e_all) else None}
+    return out
+
+
+def localisation_lines(rep: dict) -> list[str]:
+    lines = [f"localised {rep['localised']} of {rep['keyframes']} keyframes ({100 * rep['share_localised']:.1f} %) "
+             f"against {rep['map']}"]
+    for why, n in rep["not_localised_reasons"].items():
+        lines.append(f"  not localised: {n} ({why})")
+    e = rep.get("errors")
+    if e and e["median_m"] is not None:
+        lines.append(f"position error of localised keyframes: median {e['median_m']:.3f} m, max {e['max_m']:.3f} m, "
+                     f"{e['over_1m']} over 1 m")
+    return lines

@@ -75,6 +75,11 @@ def report_facts(result: RunResult, cfg, rows: list[dict], ate_before, ate_after
         "wall_s": round(result.wall_s, 3), "log_duration_s": round(result.log_duration_s, 3),
         "stages": result.stages, "outputs": result.outputs,
         "config": config_to_dict(cfg),
+        # run --map: the map after this session (sessions, components, loops between sessions, ATE per session)
+        "map": result.map,
+        # localize: share of keyframes localised, reasons, errors against ground truth
+        "localization": ({k: v for k, v in result.localization.items() if not k.startswith("_")}
+                         if result.localization is not None else None),
     }
 
 
@@ -113,7 +118,29 @@ def write_report(out_dir: Path, facts: dict, summary_lines: list[str]) -> None:
                 f"{lp['err_trans_m']:.3f} / " + (f"{lp['err_rot_deg']:.2f}" if lp["err_rot_deg"] is not None else "-"))
             gd = f"{lp['gt_distance_m']:.2f}" if lp["gt_distance_m"] is not None else ""
             md.append(f"| {lp['query_id']} | {lp['match_id']} | {lp['pose_inliers'] or ''} | {gd} | {err} |")
+    md += _map_section(facts.get("map"), facts.get("localization"))
     md += ["", "## Time per stage", "", "| stage | seconds | calls |", "|---|---|---|"]
     md += [f"| {k} | {v['seconds']:.2f} | {v['calls']} |" for k, v in facts["stages"].items()]
     md += ["", "## Outputs", ""] + [f"- `{o}`" for o in facts["outputs"]]
     write_text(out_dir / "report.md", "\n".join(md) + "\n")
+
+
+def _map_section(summary: dict | None, localization: dict | None) -> list[str]:
+    """report.md's part on the map this run appended to or was localised against."""
+    from ..map.summary import localisation_lines, summary_lines
+
+    md: list[str] = []
+    if summary is not None:
+        md += ["", "## Map", ""] + [f"- {line.strip()}" for line in summary_lines(summary)]
+        if summary.get("sessions"):
+            md += ["", "| session | keyframes | component | loops to other sessions | ATE odometry (m) | "
+                   "ATE in the map (m) |", "|---|---|---|---|---|---|"]
+            for srow in summary["sessions"]:
+                a, b = srow.get("ate_odometry"), srow.get("ate_map")
+                md.append(f"| {srow['name']} | {srow['keyframes']} | {srow['component']} | "
+                          f"{srow['inter_session_loops']} | {'' if a is None else f'{a:.3f}'} | "
+                          f"{'' if b is None else f'{b:.3f}'} |")
+    if localization is not None:
+        md += ["", "## Localisation against the map", ""] + [f"- {line.strip()}" for line in
+                                                               localisation_lines(localization)]
+    return md

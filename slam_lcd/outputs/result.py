@@ -49,6 +49,8 @@ class RunResult:
     overrides: list[str] = field(default_factory=list)
     # run --map: the map after this session was added (slam_lcd.map.summary.map_summary), else None
     map: dict | None = None
+    # localize: slam_lcd.map.summary.localisation_report (with the Localisation under "_loc"), else None
+    localization: dict | None = None
 
     @property
     def ate_ratio(self) -> float | None:

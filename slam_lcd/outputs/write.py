@@ -17,6 +17,7 @@ from ..errors import InputError, SlamLcdError
 from ..interrupts import defer_sigint
 from ..types import Trajectory
 from .loop_pictures import LOOPS_DIR
+from .map_outputs import LOCALIZATION_FILES, MAP_DIR
 from .loops import VERIFIED, count_false_accepted, loop_rows, write_loops_csv
 from .output_set import PARTIAL_MARKER, OutputSet
 from .figures import write_plots
@@ -27,7 +28,8 @@ log = logging.getLogger(__name__)
 
 # every name `run` may write into --out (the set is published as a whole: slam_lcd.outputs.output_set)
 RUN_OUTPUTS = ("config.yaml", "odometry.tum", "corrected.tum", "keyframes_corrected.tum", "graph.g2o", "loops.csv",
-               "corrected.mcap", "trajectory.png", "ate_over_time.png", "report.json", "report.md", "report.html", LOOPS_DIR)
+               "corrected.mcap", "trajectory.png", "ate_over_time.png", "report.json", "report.md", "report.html", LOOPS_DIR,
+               MAP_DIR, *LOCALIZATION_FILES)
 
 
 def partial_text(result: RunResult, notes=(), *, read_to_end: bool, while_writing: bool = False) -> str:
@@ -174,6 +176,14 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
     if result.loop_pictures:  # listed where it always was: after corrected.mcap (or loops.csv), before the plots
         after = "corrected.mcap" if "corrected.mcap" in outputs else "loops.csv"
         outputs.insert(outputs.index(after) + 1, LOOPS_DIR + "/")
+    if result.map is not None and result.map.get("appended") and getattr(pipe, "map", None) is not None:
+        from .map_outputs import write_map_outputs
+
+        outputs += write_map_outputs(out_dir, pipe, result, pipe.map)
+    if result.localization is not None:
+        from .map_outputs import write_localization_outputs
+
+        outputs += write_localization_outputs(out_dir, pipe, result)
     outputs += ["report.json", "report.md", "report.html"]
     result.outputs = outputs
     facts = report_facts(result, cfg, rows, ate_before, ate_after, rpe_before, rpe_after)

@@ -1,0 +1,86 @@
+"""The files a run with a map adds to its set: every session in the map frame, localisation results.
+
+``run --map``: ``map/sessions.csv`` (one row per session: keyframes, component, loops to other
+sessions, ATE in the common frame), ``map/<session>.tum`` (every session's keyframes in the
+frame of its component; the first session's odometry frame is the map frame), ``map/<this
+session>_full_rate.tum`` (this log at every odometry stamp in the map frame) and
+``map/inter_session_loops.csv``. ``localize``: ``localized.tum`` (every odometry stamp in the map
+frame), ``keyframes_localized.tum`` and ``localization.csv`` (per keyframe: localised or not, why,
+the map keyframe it matched, the error against ground truth where known).
+"""
+from __future__ import annotations
+
+import csv
+import io
+from pathlib import Path
+
+import numpy as np
+
+from ..atomic import write_text
+from ..backend import correct_full_rate
+from ..types import Trajectory
+
+MAP_DIR = "map"
+LOCALIZATION_FILES = ("localized.tum", "keyframes_localized.tum", "localization.csv")
+
+
+def _csv(rows: list[dict]) -> str:
+    buf = io.StringIO()
+    if rows:
+        w = csv.DictWriter(buf, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    return buf.getvalue()
+
+
+def _safe(name: str) -> str:
+    return "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in name) or "session"
+
+
+def write_map_outputs(out_dir: Path, pipe, result, the_map) -> list[str]:
+    """Write ``map/`` for a run that appended to ``the_map``; returns the names written."""
+    from ..io.trajectory_files import write_tum
+
+    folder = out_dir / MAP_DIR
+    folder.mkdir(parents=True, exist_ok=True)
+    summary = result.map
+    rows = []
+    for s in summary["sessions"]:
+        rows.append({"session": s["name"], "keyframes": s["keyframes"], "component": s["component"],
+                     "joined": s["joined"], "inter_session_loops": s["inter_session_loops"],
+                     "ate_odometry_m": _num(s.get("ate_odometry")), "ate_map_m": _num(s.get("ate_map")),
+                     "note": s.get("note", "")})
+    write_text(folder / "sessions.csv", _csv(rows))
+    write_text(folder / "inter_session_loops.csv", _csv(summary["inter_session_loops"]) or
+               "query_id,match_id,query_session,match_session,accepted,reason\n")
+    for i, name in enumerate(the_map.session_names):
+        write_tum(folder / f"{_safe(name)}.tum", the_map.session_trajectory(i))
+    current = summary.get("current_session")
+    if current is not None and pipe.keyframes:
+        i = the_map.session_names.index(current)
+        kf_map = the_map.session_trajectory(i)
+        kf_odom = pipe.keyframe_odometry()
+        full = correct_full_rate(pipe.odometry_trajectory(), kf_odom.stamps, kf_odom.poses, kf_map.poses)
+        write_tum(folder / f"{_safe(current)}_full_rate.tum", full)
+    return [MAP_DIR + "/"]
+
+
+def write_localization_outputs(out_dir: Path, pipe, result) -> list[str]:
+    from ..io.trajectory_files import write_tum
+
+    rep = result.localization
+    loc = rep["_loc"]
+    kf_odom = pipe.keyframe_odometry()
+    full = correct_full_rate(pipe.odometry_trajectory(), kf_odom.stamps, kf_odom.poses, loc.trajectory.poses)
+    write_tum(out_dir / "localized.tum", full)
+    write_tum(out_dir / "keyframes_localized.tum", Trajectory(loc.trajectory.stamps, loc.trajectory.poses))
+    rows = [{"keyframe": k.kf_id, "stamp_ns": k.stamp, "localised": k.localised, "reason": k.reason,
+             "map_keyframe": "" if k.match_id is None else k.match_id, "map_session": k.match_session or "",
+             "inliers": "" if k.inliers is None else k.inliers,
+             "error_m": "" if getattr(k, "error_m", None) is None else round(k.error_m, 4)} for k in loc.keyframes]
+    write_text(out_dir / "localization.csv", _csv(rows))
+    return list(LOCALIZATION_FILES)
+
+
+def _num(x):
+    return "" if x is None or not np.isfinite(x) else round(float(x), 4)
