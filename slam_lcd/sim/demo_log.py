@@ -173,6 +173,43 @@ def _scenario(frames, seed, kind, laps, width, height, camera_rate, odom_rate, s
                      world_frame=world_frame, odom_at_start=odom_at_start)
 
 
+def _resolve(session: int | None, **given) -> dict:
+    """The scenario settings of ``session`` (None: a plain demo log): ``given`` values that are
+    not None win over the preset's, the preset's over the plain log's defaults."""
+    plain = {"kind": "laps", "laps": 2.0, "seed": 0, "world_seed": None, "start_at": None, "lighting": 0.0,
+             "exposure": 1.0}
+    out = {k: given.get(k) for k in plain}
+    extra = {"start_ns": START_NS, "odom_at_start": False, "world_frame": rig.WORLD_FRAME}
+    if session is not None:
+        from .sessions import session_preset, session_start_ns, world_frame
+
+        pre = session_preset(session)
+        for k in plain:
+            if out[k] is None:
+                out[k] = getattr(pre, k)
+        extra = {"start_ns": session_start_ns(session), "odom_at_start": True,
+                 "world_frame": world_frame(out["world_seed"])}
+    for k, v in plain.items():
+        if out[k] is None:
+            out[k] = v
+    if out["world_seed"] is None:
+        out["world_seed"] = out["seed"]  # a plain log: --seed makes the world too
+    return {**out, **extra}
+
+
+def session_scenario(session: int | None, *, frames: int | None = None, camera_rate: float = 10.0,
+                     odom_rate: float = 50.0, width: int = 640, height: int = 480, **given) -> _Scenario:
+    """The scenario (stamps, ground truth, odometry, lighting) a log of ``session`` would hold,
+    without rendering anything: for studying routes and shared places. ``given``: ``kind``,
+    ``laps``, ``seed``, ``world_seed``, ``start_at``, ``lighting``, ``exposure`` overriding
+    the preset, as :func:`make_demo_log` takes them."""
+    r = _resolve(session, **given)
+    return _scenario(frames, r["seed"], r["kind"], r["laps"], width, height, camera_rate, odom_rate, False,
+                     world_seed=r["world_seed"], start_at=r["start_at"], lighting=r["lighting"],
+                     exposure=r["exposure"], start_ns=r["start_ns"], odom_at_start=r["odom_at_start"],
+                     world_frame=r["world_frame"])
+
+
 def make_path_start(kind: str, start_at: float | None) -> float:
     """The start point's arc length a route ``kind`` uses for ``start_at`` (None: the route's default)."""
     return START_AT["laps" if kind == "laps-wide" else kind] if start_at is None else float(start_at)
@@ -282,25 +319,11 @@ def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int |
     """
     t_start = time.perf_counter()
     out = Path(out)
-    start_ns, odom_at_start, gt_frame = START_NS, False, rig.WORLD_FRAME
-    if session is not None:
-        from .sessions import session_preset, session_start_ns, world_frame
-
-        pre = session_preset(session)
-        kind = pre.kind if kind is None else kind
-        laps = pre.laps if laps is None else laps
-        seed = pre.seed if seed is None else seed
-        world_seed = pre.world_seed if world_seed is None else world_seed
-        start_at = pre.start_at if start_at is None else start_at
-        lighting = pre.lighting if lighting is None else lighting
-        exposure = pre.exposure if exposure is None else exposure
-        start_ns, odom_at_start, gt_frame = session_start_ns(session), True, world_frame(world_seed)
-    kind = "laps" if kind is None else kind
-    laps = 2.0 if laps is None else laps
-    seed = 0 if seed is None else seed
-    world_seed = seed if world_seed is None else world_seed
-    lighting = 0.0 if lighting is None else lighting
-    exposure = 1.0 if exposure is None else exposure
+    r = _resolve(session, kind=kind, laps=laps, seed=seed, world_seed=world_seed, start_at=start_at,
+                 lighting=lighting, exposure=exposure)
+    kind, laps, seed, world_seed, start_at, lighting, exposure = (
+        r["kind"], r["laps"], r["seed"], r["world_seed"], r["start_at"], r["lighting"], r["exposure"])
+    start_ns, odom_at_start, gt_frame = r["start_ns"], r["odom_at_start"], r["world_frame"]
     if fmt not in FORMATS:
         raise InputError(f"unknown demo-log format {fmt!r}; use one of {list(FORMATS)}", out)
     from .trajectory import KINDS

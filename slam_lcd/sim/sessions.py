@@ -14,7 +14,7 @@ The presets (``make_demo_log(session=K)``, ``slam-lcd make-demo-log OUT --sessio
 K  route                   start_at laps     seed      world_seed lighting expo  role
 == ======================= ======== ======== ========= ========== ======== ===== ========================
 1  laps of block A         3.0 m    1.3      1         0          0        1.0   mapping, its own loop
-2  figure eight (A and B)  55.0 m   1.0      2         0          0        1.0   mapping, from B's east
+2  figure eight (A and B)  55.0 m   1.0      2         0          0        1.0   mapping, from north of B
 3  figure eight (A and B)  26.0 m   0.9      3         0          3        0.75  mapping, changed lighting
 4  laps of block A         3.0 m    1.3      4         1000       0        1.0   another world
 5  laps of block A         24.0 m   1.0      5         0          0        1.0   localisation in 1-3
@@ -57,7 +57,7 @@ class SessionPreset:
 
 SESSIONS: dict[int, SessionPreset] = {
     1: SessionPreset(1, "laps", 3.0, 1.3, 1, 0, 0.0, 1.0, "mapping, with a loop of its own"),
-    2: SessionPreset(2, "figure8", 55.0, 1.0, 2, 0, 0.0, 1.0, "mapping, figure eight from B's east corridor"),
+    2: SessionPreset(2, "figure8", 55.0, 1.0, 2, 0, 0.0, 1.0, "mapping, figure eight from the corridor north of B"),
     3: SessionPreset(3, "figure8", 26.0, 0.9, 3, 0, 3.0, 0.75, "mapping, figure eight under changed lighting"),
     4: SessionPreset(4, "laps", 3.0, 1.3, 4, 1000, 0.0, 1.0, "another world: shares no place with 1-3"),
     5: SessionPreset(5, "laps", 24.0, 1.0, 5, 0, 0.0, 1.0, "localisation inside the area of 1-3"),
