@@ -10,7 +10,7 @@ import pytest
 from slam_lcd.cli.main import main
 from slam_lcd.io import open_log
 from slam_lcd.io.decode import decode_pose
-from slam_lcd.sim import (SESSIONS, T_body_camera, build_world, gt_cross_pairs, keyframe_indices, make_demo_log,
+from slam_lcd.sim import (SESSIONS, T_body_camera, build_world, gt_cross_pairs, gt_loop_pairs, keyframe_indices, make_demo_log,
                           make_path, render, session_start_ns, shared_place_fraction)
 from slam_lcd.sim.demo_log import session_scenario
 from slam_lcd.sim.trajectory import START_NS
@@ -49,6 +49,7 @@ def test_presets_set_routes_worlds_lighting_and_days(scenarios):
     assert min(np.linalg.norm(a - b) for a, b in itertools.combinations(starts, 2)) > 3.0  # other start points
     assert scenarios[4].world_seed != 0 and scenarios[3].exposure < 1.0 and scenarios[3].laps[0] >= 1.0
     # session 1 closes a loop of its own; sessions differ in their noise
+    assert len(gt_loop_pairs(scenarios[1].gt_cam, T_body_camera=TBC)) > 1000
     assert len({SESSIONS[k].seed for k in SESSIONS}) == len(SESSIONS)
 
 
