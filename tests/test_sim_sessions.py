@@ -10,8 +10,8 @@ import pytest
 from slam_lcd.cli.main import main
 from slam_lcd.io import open_log
 from slam_lcd.io.decode import decode_pose
-from slam_lcd.sim import (SESSIONS, T_body_camera, build_world, gt_cross_pairs, gt_loop_pairs, keyframe_indices, make_demo_log,
-                          make_path, render, session_start_ns, shared_place_fraction)
+from slam_lcd.sim import (SESSIONS, T_body_camera, build_world, gt_cross_pairs, gt_loop_pairs, keyframe_indices,
+                          make_demo_log, make_path, render, session_start_ns, shared_place_fraction)
 from slam_lcd.sim.demo_log import session_scenario
 from slam_lcd.sim.trajectory import START_NS
 from slam_lcd.types import Trajectory
@@ -43,7 +43,8 @@ def test_presets_set_routes_worlds_lighting_and_days(scenarios):
         # the route starts where the preset says, and the lighting epochs are offset by the preset's
         start = make_path(pre.kind, laps=0.1, seed=pre.seed, start_at=pre.start_at).pose_at(0.0)[0]
         assert np.allclose(sc.gt_cam.poses[0], start)
-        assert sc.laps[0] == pytest.approx(pre.lighting) and sc.laps[-1] == pytest.approx(pre.lighting + pre.laps, abs=0.02)
+        assert sc.laps[0] == pytest.approx(pre.lighting)
+        assert sc.laps[-1] == pytest.approx(pre.lighting + pre.laps, abs=0.02)
         assert world.is_free(sc.gt_odo.positions[:, :2], margin=0.6).all()
     starts = [scenarios[k].gt_cam.positions[0, :2] for k in (1, 2, 3, 5)]
     assert min(np.linalg.norm(a - b) for a, b in itertools.combinations(starts, 2)) > 3.0  # other start points
@@ -120,7 +121,8 @@ def test_changed_lighting_and_another_world_look_different():
     def corr(x, y):
         return np.corrcoef(x.ravel().astype(float), y.ravel().astype(float))[0, 1]
 
-    print(f"brightness ratio {ratio:.2f}, correlation relit {corr(nominal, dim):.2f}, other world {corr(nominal, other):.2f}")
+    print(f"brightness ratio {ratio:.2f}, correlation relit {corr(nominal, dim):.2f}, "
+          f"other world {corr(nominal, other):.2f}")
     # the same walls relit still correlate; another world's walls (same corridors) much less
     assert corr(nominal, dim) > 0.9 and corr(nominal, other) < corr(nominal, dim) - 0.2
 

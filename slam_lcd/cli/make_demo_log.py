@@ -34,7 +34,8 @@ def register(sub) -> None:
                    help="one recording of a multi-session set (presets below; explicit flags override them): its "
                         "odometry starts at the identity (its own frame, no world -> odom on /tf_static), its stamps "
                         "start K days later, ground truth is in its world's frame (world, or world_<seed>). "
-                        + "; ".join(f"{k}: {_preset_text(v)}" for k, v in SESSIONS.items()) + " (default: none, a plain demo log)")
+                        + "; ".join(f"{k}: {_preset_text(v)}" for k, v in SESSIONS.items())
+                        + " (default: none, a plain demo log)")
     p.add_argument("--world-seed", type=int, default=None,
                    help="seed of the world's textures and lighting (default: --seed; with --session the preset's)")
     p.add_argument("--start-at", type=float, default=None, metavar="METRES",

@@ -15,7 +15,8 @@ written as real log files. Public API:
 - :func:`make_demo_log`: everything written as MCAP / rosbag2 / ROS1 bag / folder.
 """
 from .demo_log import DemoLogInfo, loops_path_for, make_demo_log
-from .loops import gt_cross_pairs, gt_loop_pairs, keyframe_indices, read_loop_pairs, shared_place_fraction, write_loop_pairs
+from .loops import (gt_cross_pairs, gt_loop_pairs, keyframe_indices, read_loop_pairs, shared_place_fraction,
+                    write_loop_pairs)
 from .odometry import OdometryNoise, end_drift, simulate_odometry
 from .render import render
 from .rig import T_body_camera, T_left_right, demo_camera

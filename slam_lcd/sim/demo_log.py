@@ -89,7 +89,8 @@ class DemoLogInfo:
             f"{self.path_length_m:.1f} m ({self.kind}, seed {self.seed}) in {self.wall_s:.1f} s",
         ]
         if self.session is not None:
-            lines.append(f"session {self.session}: world {self.world_seed} (ground truth in '{self.world_frame}'), start "
+            lines.append(f"session {self.session}: world {self.world_seed} (ground truth in "
+                         f"'{self.world_frame}'), start "
                          f"{self.start_at:g} m along the route, lighting +{self.lighting:g}, exposure "
                          f"{self.exposure:g}; odometry in its own frame (identity at the first stamp)")
         lines += [
