@@ -3,7 +3,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..sim.sessions import SESSIONS
 from .util import parse_size
+
+
+def _preset_text(p) -> str:
+    return (f"--trajectory {p.kind} --laps {p.laps:g} --start-at {p.start_at:g} --seed {p.seed} --world-seed "
+            f"{p.world_seed} --lighting {p.lighting:g} --exposure {p.exposure:g} ({p.role})")
 
 
 def register(sub) -> None:
@@ -21,17 +27,36 @@ def register(sub) -> None:
                    help="output format (default: auto-detected from OUT's suffix: .mcap, .bag, otherwise rosbag2)")
     p.add_argument("--frames", type=int, default=None,
                    help="number of camera frames (default: --laps laps, 2 laps = about 850 frames)")
-    p.add_argument("--seed", type=int, default=0, help="random seed of world, path, odometry and noise (default 0)")
+    p.add_argument("--seed", type=int, default=None,
+                   help="random seed of path weave, odometry and image noise, and of the world unless --world-seed "
+                        "(default 0; with --session the preset's)")
+    p.add_argument("--session", type=int, choices=sorted(SESSIONS), default=None, metavar="K",
+                   help="one recording of a multi-session set (presets below; explicit flags override them): its "
+                        "odometry starts at the identity (its own frame, no world -> odom on /tf_static), its stamps "
+                        "start K days later, ground truth is in its world's frame (world, or world_<seed>). "
+                        + "; ".join(f"{k}: {_preset_text(v)}" for k, v in SESSIONS.items())
+                        + " (default: none, a plain demo log)")
+    p.add_argument("--world-seed", type=int, default=None,
+                   help="seed of the world's textures and lighting (default: --seed; with --session the preset's)")
+    p.add_argument("--start-at", type=float, default=None, metavar="METRES",
+                   help="arc length of the start point along the route's centre line (default: the route's usual "
+                        "start, 3 m for laps, 2 m for figure8; with --session the preset's)")
+    p.add_argument("--lighting", type=float, default=None, metavar="EPOCH",
+                   help="offset added to the lighting epoch of every frame: another lamp / exposure state "
+                        "(default 0; with --session the preset's)")
+    p.add_argument("--exposure", type=float, default=None, metavar="FACTOR",
+                   help="global exposure factor of the renderer (default 1; with --session the preset's)")
     p.add_argument("--stereo", action="store_true", help="also write the rectified right camera (default: off)")
     p.add_argument("--depth", dest="depth", action="store_true", default=True, help="write /camera/depth (default: on)")
     p.add_argument("--no-depth", dest="depth", action="store_false", help="do not write depth images (default: write them)")
     p.add_argument("--compressed", action="store_true",
                    help="write JPEG sensor_msgs/CompressedImage instead of raw images (default: raw)")
     p.add_argument("--color", action="store_true", help="RGB images (rgb8) instead of mono8 (default: mono8)")
-    p.add_argument("--trajectory", choices=["laps", "figure8", "laps-wide"], default="laps",
+    p.add_argument("--trajectory", choices=["laps", "figure8", "laps-wide"], default=None,
                    help="laps of block A, a figure eight, or laps-wide: laps of block A with every second lap "
-                        "0.45 m to the side and the camera turned 30 deg (wide-baseline revisits) (default: laps)")
-    p.add_argument("--laps", type=float, default=2.0, help="laps to drive when --frames is not given (default 2)")
+                        "0.45 m to the side and the camera turned 30 deg (wide-baseline revisits) (default: laps; with --session the preset's)")
+    p.add_argument("--laps", type=float, default=None,
+                   help="laps to drive when --frames is not given (default 2; with --session the preset's)")
     p.add_argument("--size", default="640x480", type=parse_size, help="image size WxH (default 640x480)")
     p.add_argument("--hfov", type=float, default=70.0, help="horizontal field of view in degrees (default 70: fx = 457 at 640 px)")
     p.add_argument("--rate", type=float, default=None,
@@ -76,6 +101,7 @@ def run(args) -> int:
                              depth=args.depth, compressed=args.compressed, color=args.color, kind=args.trajectory,
                              laps=args.laps, width=w, height=h, hfov_deg=args.hfov, camera_rate=args.rate,
                              loops_csv=args.loops_csv, progress=not args.no_progress, layout=args.layout,
-                             depth_noise=not args.exact_depth)
+                             depth_noise=not args.exact_depth, session=args.session, world_seed=args.world_seed,
+                             start_at=args.start_at, lighting=args.lighting, exposure=args.exposure)
     print(info.summary())
     return 0

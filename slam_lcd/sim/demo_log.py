@@ -17,7 +17,11 @@ topic                           type                        content
 /tf_static                      tf2_msgs/TFMessage          base_link -> camera(s); world -> odom
 =============================== =========================== ======================================
 
-The odometry frame coincides with 'world' at the first stamp (identity world -> odom).
+The odometry frame coincides with 'world' at the first stamp (identity world -> odom). A
+session (``session=K``, :mod:`slam_lcd.sim.sessions`) differs: its odometry starts at the
+identity (its own frame; no world -> odom on /tf_static), its stamps start K days later,
+and its ground truth is in the frame of its world (``world``, or ``world_<seed>`` for
+another world).
 Beside the log, ``<name>_loops.csv`` lists the ground-truth loop pairs of the camera frames.
 The same arguments give byte-identical files.
 """
@@ -39,7 +43,7 @@ from . import rig
 from .loops import gt_loop_pairs, write_loop_pairs
 from .odometry import end_drift, simulate_odometry
 from .render import render
-from .trajectory import START_NS, make_path, path_trajectory, sample_stamps
+from .trajectory import START_AT, START_NS, make_path, path_trajectory, sample_stamps
 from .world import build_world
 
 log = logging.getLogger(__name__)
@@ -71,11 +75,25 @@ class DemoLogInfo:
     layout: str = "demo"
     depth_model: object = None  # the depth sensor model the depth images carry (None: exact depth)
     calibration_path: Path | None = None  # the Kalibr camchain written beside the log (layout euroc)
+    session: int | None = None  # the session preset (slam_lcd.sim.sessions), None: a plain demo log
+    world_seed: int = 0
+    world_frame: str = "world"  # frame of the ground truth
+    start_at: float = 0.0  # arc length (m) of the start point along the route's centre line
+    lighting: float = 0.0  # offset added to the lighting epoch of every frame
+    exposure: float = 1.0
+    odom_at_start: bool = False  # odometry in its own frame (identity at the first stamp)
 
     def summary(self) -> str:
         lines = [
             f"wrote {self.path} ({self.format}): {self.frames} frames, {self.duration_s:.1f} s, "
             f"{self.path_length_m:.1f} m ({self.kind}, seed {self.seed}) in {self.wall_s:.1f} s",
+        ]
+        if self.session is not None:
+            lines.append(f"session {self.session}: world {self.world_seed} (ground truth in "
+                         f"'{self.world_frame}'), start "
+                         f"{self.start_at:g} m along the route, lighting +{self.lighting:g}, exposure "
+                         f"{self.exposure:g}; odometry in its own frame (identity at the first stamp)")
+        lines += [
             (f"odometry end drift {self.drift.get('end_error_m', float('nan')):.2f} m = "
              f"{self.drift.get('drift_percent', float('nan')):.2f} % of the path "
              f"(yaw {self.drift.get('end_yaw_error_deg', float('nan')):+.1f} deg)") if self.layout == "demo" else
@@ -101,33 +119,101 @@ class _Scenario:
     gt_odo: Trajectory
     odom: Trajectory
     laps: np.ndarray  # lighting epoch per camera frame
-    world: object
+    world_seed: int
+    exposure: float = 1.0  # global exposure factor of the renderer
+    world_frame: str = rig.WORLD_FRAME  # frame of the ground truth
+    odom_at_start: bool = False  # the odometry starts at the identity (its own frame), not at the world pose
+
+    @property
+    def world(self):
+        return build_world(self.world_seed)  # cached per seed; built only when rendering
 
 
-def _scenario(frames, seed, kind, laps, width, height, camera_rate, odom_rate, stereo, hfov_deg=70.0) -> _Scenario:
+def _scenario(frames, seed, kind, laps, width, height, camera_rate, odom_rate, stereo, hfov_deg=70.0, *,
+              world_seed: int | None = None, start_at: float | None = None, lighting: float = 0.0,
+              exposure: float = 1.0, start_ns: int = START_NS, odom_at_start: bool = False,
+              world_frame: str = rig.WORLD_FRAME) -> _Scenario:
+    """Everything of a log but its images: stamps, ground truth, odometry, lighting epochs.
+
+    Cheap (no world is built until ``.world`` is read), so the routes and odometry of
+    sessions can be studied without rendering.
+    """
     if camera_rate <= 0 or odom_rate <= 0:
         raise InputError("camera and odometry rates must be positive")
-    path = make_path(kind, laps=laps, seed=seed)
+    if not np.isfinite(exposure) or exposure <= 0:
+        raise InputError(f"exposure must be a positive factor, got {exposure}")
+    if not np.isfinite(lighting) or lighting < 0:
+        raise InputError(f"the lighting epoch offset must be >= 0, got {lighting}")
+    if start_at is not None and not np.isfinite(start_at):
+        raise InputError(f"the start point must be a finite arc length (m), got {start_at}")
+    path = make_path(kind, laps=laps, seed=seed, start_at=start_at)
     cam_period = int(round(1e9 / camera_rate))
     if frames is None:
-        cam_stamps = sample_stamps(path.duration_s, camera_rate)
+        cam_stamps = sample_stamps(path.duration_s, camera_rate, start_ns)
     else:
         if frames < 2:
             raise InputError(f"--frames must be at least 2, got {frames}")
         need = (frames - 1) * cam_period * 1e-9
         while path.duration_s < need:
-            path = make_path(kind, laps=path.distance[-1] / path.lap_length * need / path.duration_s * 1.05 + 0.05, seed=seed)
-        cam_stamps = START_NS + cam_period * np.arange(frames, dtype=np.int64)
-    end_s = (cam_stamps[-1] - START_NS) * 1e-9
-    odo_stamps = sample_stamps(end_s, odom_rate)
+            path = make_path(kind, laps=path.distance[-1] / path.lap_length * need / path.duration_s * 1.05 + 0.05,
+                             seed=seed, start_at=start_at)
+        cam_stamps = start_ns + cam_period * np.arange(frames, dtype=np.int64)
+    end_s = (cam_stamps[-1] - start_ns) * 1e-9
+    odo_stamps = sample_stamps(end_s, odom_rate, start_ns)
     if not 20.0 <= hfov_deg <= 150.0:
         raise InputError(f"horizontal field of view must be within 20-150 degrees, got {hfov_deg}")
     camera = rig.demo_camera(width, height, hfov_deg=hfov_deg, baseline=rig.STEREO_BASELINE if stereo else None)
-    gt_cam = path_trajectory(path, cam_stamps)
-    gt_odo = path_trajectory(path, odo_stamps)
-    odom = simulate_odometry(gt_odo, seed=seed, frame_id=rig.ODOM_FRAME, child_frame_id=rig.BODY_FRAME)
-    laps_at = path.laps_at((cam_stamps - START_NS) * 1e-9)
-    return _Scenario(camera, rig.T_body_camera(), cam_stamps, odo_stamps, gt_cam, gt_odo, odom, laps_at, build_world(seed))
+    gt_cam = path_trajectory(path, cam_stamps, start_ns)
+    gt_odo = path_trajectory(path, odo_stamps, start_ns)
+    gt_cam.frame_id = gt_odo.frame_id = world_frame
+    odom = simulate_odometry(gt_odo, seed=seed, frame_id=rig.ODOM_FRAME, child_frame_id=rig.BODY_FRAME,
+                             start_at_identity=odom_at_start)
+    laps_at = path.laps_at((cam_stamps - start_ns) * 1e-9) + float(lighting)
+    return _Scenario(camera, rig.T_body_camera(), cam_stamps, odo_stamps, gt_cam, gt_odo, odom, laps_at,
+                     seed if world_seed is None else int(world_seed), exposure=float(exposure),
+                     world_frame=world_frame, odom_at_start=odom_at_start)
+
+
+def _resolve(session: int | None, **given) -> dict:
+    """The scenario settings of ``session`` (None: a plain demo log): ``given`` values that are
+    not None win over the preset's, the preset's over the plain log's defaults."""
+    plain = {"kind": "laps", "laps": 2.0, "seed": 0, "world_seed": None, "start_at": None, "lighting": 0.0,
+             "exposure": 1.0}
+    out = {k: given.get(k) for k in plain}
+    extra = {"start_ns": START_NS, "odom_at_start": False, "world_frame": rig.WORLD_FRAME}
+    if session is not None:
+        from .sessions import session_preset, session_start_ns, world_frame
+
+        pre = session_preset(session)
+        for k in plain:
+            if out[k] is None:
+                out[k] = getattr(pre, k)
+        extra = {"start_ns": session_start_ns(session), "odom_at_start": True,
+                 "world_frame": world_frame(out["world_seed"])}
+    for k, v in plain.items():
+        if out[k] is None:
+            out[k] = v
+    if out["world_seed"] is None:
+        out["world_seed"] = out["seed"]  # a plain log: --seed makes the world too
+    return {**out, **extra}
+
+
+def session_scenario(session: int | None, *, frames: int | None = None, camera_rate: float = 10.0,
+                     odom_rate: float = 50.0, width: int = 640, height: int = 480, **given) -> _Scenario:
+    """The scenario (stamps, ground truth, odometry, lighting) a log of ``session`` would hold,
+    without rendering anything: for studying routes and shared places. ``given``: ``kind``,
+    ``laps``, ``seed``, ``world_seed``, ``start_at``, ``lighting``, ``exposure`` overriding
+    the preset, as :func:`make_demo_log` takes them."""
+    r = _resolve(session, **given)
+    return _scenario(frames, r["seed"], r["kind"], r["laps"], width, height, camera_rate, odom_rate, False,
+                     world_seed=r["world_seed"], start_at=r["start_at"], lighting=r["lighting"],
+                     exposure=r["exposure"], start_ns=r["start_ns"], odom_at_start=r["odom_at_start"],
+                     world_frame=r["world_frame"])
+
+
+def make_path_start(kind: str, start_at: float | None) -> float:
+    """The start point's arc length a route ``kind`` uses for ``start_at`` (None: the route's default)."""
+    return START_AT["laps" if kind == "laps-wide" else kind] if start_at is None else float(start_at)
 
 
 def _noise_bank(seed: int, shape) -> np.ndarray:
@@ -141,14 +227,16 @@ def _add_noise(img: np.ndarray, noise: np.ndarray) -> np.ndarray:
 
 def _render_one(sc: _Scenario, i: int, bank: np.ndarray, *, color: bool, depth: bool, stereo: bool):
     T_wc = sc.gt_cam.poses[i] @ sc.T_bc
-    img, dep = render(sc.world, sc.camera, T_wc, epoch=float(sc.laps[i]), color=color, with_depth=depth)
+    img, dep = render(sc.world, sc.camera, T_wc, epoch=float(sc.laps[i]), color=color, with_depth=depth,
+                      gain=sc.exposure)
     img = _add_noise(img, bank[(7 * i) % NOISE_BANK])
     if dep is not None:
         dep = (np.round(dep / DEPTH_STEP) * DEPTH_STEP).astype(np.float32)
     right = None
     if stereo:
         T_lr = rig.T_left_right(rig.STEREO_BASELINE)
-        right, _ = render(sc.world, sc.camera, T_wc @ T_lr, epoch=float(sc.laps[i]), color=color, with_depth=False)
+        right, _ = render(sc.world, sc.camera, T_wc @ T_lr, epoch=float(sc.laps[i]), color=color, with_depth=False,
+                          gain=sc.exposure)
         right = _add_noise(right, bank[(7 * i + 3) % NOISE_BANK])
     return i, img, dep, right
 
@@ -199,12 +287,14 @@ def loops_path_for(out: Path) -> Path:
     return out.with_name(f"{stem}_loops.csv")
 
 
-def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int = 0, stereo: bool = False,
-                  depth: bool = True, *, compressed: bool = False, color: bool = False, kind: str = "laps",
-                  laps: float = 2.0, width: int = 640, height: int = 480, camera_rate: float | None = None,
+def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int | None = None, stereo: bool = False,
+                  depth: bool = True, *, compressed: bool = False, color: bool = False, kind: str | None = None,
+                  laps: float | None = None, width: int = 640, height: int = 480, camera_rate: float | None = None,
                   odom_rate: float | None = None, loops_csv: str | Path | None = None, progress: bool = False,
                   io_conf=None, workers: int | None = None, hfov_deg: float = 70.0,
-                  layout: str = "demo", depth_noise: bool = True) -> DemoLogInfo:
+                  layout: str = "demo", depth_noise: bool = True, session: int | None = None,
+                  world_seed: int | None = None, start_at: float | None = None, lighting: float | None = None,
+                  exposure: float | None = None) -> DemoLogInfo:
     """Render the demo world along a trajectory and write it as ``fmt`` at ``out``.
 
     ``frames`` None means ``laps`` laps (default 2 laps of block A: ~850 frames at 10 Hz);
@@ -217,10 +307,24 @@ def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int =
     ``depth_noise``: a layout's depth images carry its depth sensor's errors (``tum``: the
     Kinect v1 model of :mod:`slam_lcd.sim.kinect`); False writes the exact rendered depth
     (millimetre steps only). The demo layout's depth is exact (1/1024 m steps) either way.
+
+    ``session`` (1-5): one recording of a multi-session set (:mod:`slam_lcd.sim.sessions`):
+    the preset gives ``kind``, ``laps``, ``seed``, ``world_seed``, ``start_at``, ``lighting``
+    and ``exposure`` where they are None; the odometry starts at the identity (its own
+    frame; no world -> odom on /tf_static), stamps start ``session`` days after the plain
+    log's, and the ground truth is in the world's frame (:func:`~slam_lcd.sim.sessions.world_frame`).
+    Without a session: ``seed`` 0, ``kind`` laps, 2 laps, ``world_seed`` = ``seed``, the
+    route's usual start, ``lighting`` 0 (offset added to every frame's lighting epoch),
+    ``exposure`` 1 (global gain of the renderer).
     Returns a :class:`DemoLogInfo`.
     """
     t_start = time.perf_counter()
     out = Path(out)
+    r = _resolve(session, kind=kind, laps=laps, seed=seed, world_seed=world_seed, start_at=start_at,
+                 lighting=lighting, exposure=exposure)
+    kind, laps, seed, world_seed, start_at, lighting, exposure = (
+        r["kind"], r["laps"], r["seed"], r["world_seed"], r["start_at"], r["lighting"], r["exposure"])
+    start_ns, odom_at_start, gt_frame = r["start_ns"], r["odom_at_start"], r["world_frame"]
     if fmt not in FORMATS:
         raise InputError(f"unknown demo-log format {fmt!r}; use one of {list(FORMATS)}", out)
     from .trajectory import KINDS
@@ -238,7 +342,9 @@ def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int =
         if fmt == "folder":
             raise InputError(f"layout {layout} is a log layout: write it as mcap, rosbag2 or rosbag1, not a folder")
         stereo, depth, color, compressed = layout in ("euroc", "kitti"), layout == "tum", layout == "tum", False
-    sc = _scenario(frames, seed, kind, laps, width, height, camera_rate, odom_rate, stereo, hfov_deg)
+    sc = _scenario(frames, seed, kind, laps, width, height, camera_rate, odom_rate, stereo, hfov_deg,
+                   world_seed=world_seed, start_at=start_at, lighting=lighting, exposure=exposure, start_ns=start_ns,
+                   odom_at_start=odom_at_start, world_frame=gt_frame)
     if workers is None:
         workers = 1 if (os.cpu_count() or 1) >= 2 else 0
     er = L.euroc_rig(sc.camera, sc.T_bc) if layout == "euroc" else None
@@ -279,7 +385,9 @@ def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int =
                        n_loop_pairs=len(pairs), drift=end_drift(sc.gt_odo, sc.odom), camera=sc.camera,
                        T_body_camera=sc.T_bc, wall_s=time.perf_counter() - t_start, seed=seed, kind=kind,
                        layout=layout, calibration_path=calib_path,
-                       depth_model=L.depth_model(layout, depth_noise))
+                       depth_model=L.depth_model(layout, depth_noise), session=session, world_seed=sc.world_seed,
+                       world_frame=sc.world_frame, lighting=float(lighting), exposure=float(exposure),
+                       start_at=float(make_path_start(kind, start_at)), odom_at_start=odom_at_start)
 
 
 def _write_log(out, fmt, sc: _Scenario, frames_iter, *, depth, stereo, compressed, color, io_conf):
@@ -301,7 +409,9 @@ def _write_log(out, fmt, sc: _Scenario, frames_iter, *, depth, stereo, compresse
 
     with open_writer(out, fmt, conf=conf) as w:
         t0 = int(min(sc.cam_stamps[0], sc.odo_stamps[0]))
-        statics = [(sc.T_bc, t0, rig.BODY_FRAME, cam_frame), (np.eye(4), t0, rig.WORLD_FRAME, rig.ODOM_FRAME)]
+        statics = [(sc.T_bc, t0, rig.BODY_FRAME, cam_frame)]
+        if not sc.odom_at_start:  # a session's odometry frame is its own: its relation to the world is unknown
+            statics.append((np.eye(4), t0, rig.WORLD_FRAME, rig.ODOM_FRAME))
         if stereo:
             statics.append((sc.T_bc @ rig.T_left_right(rig.STEREO_BASELINE), t0, rig.BODY_FRAME, right_frame))
         put(w, "/tf_static", M.tf_message(statics), t0)
@@ -329,7 +439,7 @@ def _write_log(out, fmt, sc: _Scenario, frames_iter, *, depth, stereo, compresse
                         put(w, "/camera/right/image_raw", M.image_msg(right, stamp, right_frame), stamp)
             else:
                 put(w, "/odom", M.odometry_msg(odo.poses[i], odo.covariances[i], stamp, rig.ODOM_FRAME, rig.BODY_FRAME), stamp)
-                put(w, "/ground_truth/pose", M.pose_stamped_msg(gt.poses[i], stamp, rig.WORLD_FRAME), stamp)
+                put(w, "/ground_truth/pose", M.pose_stamped_msg(gt.poses[i], stamp, sc.world_frame), stamp)
         counts = dict(w.counts)
     return {t: (types[t], n) for t, n in counts.items()}
 
@@ -398,8 +508,9 @@ def _write_folder(out: Path, sc: _Scenario, frames_iter, *, color, depth, stereo
             "depth_scale": 1000.0,  # depth PNG value / depth_scale = metres (0 = no depth)
             "T_body_camera": [[float(v) for v in row] for row in sc.T_bc],
             "frame_rate_hz": float(1e9 / (sc.cam_stamps[1] - sc.cam_stamps[0])) if len(sc.cam_stamps) > 1 else None,
-            "groundtruth": "base_link pose in 'world' (TUM: t x y z qx qy qz qw)",
-            "odometry": "drifting base_link pose in 'odom' (= 'world' at the first stamp)",
+            "groundtruth": f"base_link pose in '{sc.world_frame}' (TUM: t x y z qx qy qz qw)",
+            "odometry": ("drifting base_link pose in 'odom' (the start pose: identity at the first stamp)"
+                         if sc.odom_at_start else "drifting base_link pose in 'odom' (= 'world' at the first stamp)"),
         }
         (tmp / "camera.yaml").write_text(yaml.safe_dump(meta, sort_keys=False), encoding="utf-8")
     return counts

@@ -107,10 +107,10 @@ def euroc_rig(pinhole: CameraModel, T_body_rect0: np.ndarray) -> EurocRig:
     return EurocRig(c0, c1, T_b0, T_b1)
 
 
-def render_raw(world, raw: RawCamera, T_world_raw: np.ndarray, epoch: float) -> np.ndarray:
+def render_raw(world, raw: RawCamera, T_world_raw: np.ndarray, epoch: float, gain: float = 1.0) -> np.ndarray:
     from .render import render
 
-    img, _ = render(world, raw.canvas, T_world_raw, epoch=epoch, with_depth=False)
+    img, _ = render(world, raw.canvas, T_world_raw, epoch=epoch, with_depth=False, gain=gain)
     return cv2.remap(img, *raw.map_xy, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
 
 
@@ -166,14 +166,15 @@ def frame_renderer(layout: str, sc, bank, er: EurocRig | None, *, seed: int = 0,
 
     def euroc(i):
         T_wb, epoch = sc.gt_cam.poses[i], float(sc.laps[i])
-        left = render_raw(sc.world, er.cam0, T_wb @ er.T_body_cam0, epoch)
-        right = render_raw(sc.world, er.cam1, T_wb @ er.T_body_cam1, epoch)
+        left = render_raw(sc.world, er.cam0, T_wb @ er.T_body_cam0, epoch, sc.exposure)
+        right = render_raw(sc.world, er.cam1, T_wb @ er.T_body_cam1, epoch, sc.exposure)
         return (i, _add_noise(left, bank[(7 * i) % NOISE_BANK]), None,
                 _add_noise(right, bank[(7 * i + 3) % NOISE_BANK]))
 
     def tum(i):
         T_wc = sc.gt_cam.poses[i] @ sc.T_bc
-        img, dep = render(sc.world, sc.camera, T_wc, epoch=float(sc.laps[i]), color=True, with_depth=True)
+        img, dep = render(sc.world, sc.camera, T_wc, epoch=float(sc.laps[i]), color=True, with_depth=True,
+                          gain=sc.exposure)
         img = _add_noise(img, bank[(7 * i) % NOISE_BANK])
         if sensor is not None:
             dep = sensor.measure(dep, depth_rng(seed, i))
@@ -181,9 +182,9 @@ def frame_renderer(layout: str, sc, bank, er: EurocRig | None, *, seed: int = 0,
 
     def kitti(i):
         T_wc = sc.gt_cam.poses[i] @ sc.T_bc
-        img, _ = render(sc.world, sc.camera, T_wc, epoch=float(sc.laps[i]), with_depth=False)
+        img, _ = render(sc.world, sc.camera, T_wc, epoch=float(sc.laps[i]), with_depth=False, gain=sc.exposure)
         right, _ = render(sc.world, sc.camera, T_wc @ rig.T_left_right(rig.STEREO_BASELINE),
-                          epoch=float(sc.laps[i]), with_depth=False)
+                          epoch=float(sc.laps[i]), with_depth=False, gain=sc.exposure)
         return (i, _add_noise(img, bank[(7 * i) % NOISE_BANK]), None,
                 _add_noise(right, bank[(7 * i + 3) % NOISE_BANK]))
 

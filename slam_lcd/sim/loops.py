@@ -11,6 +11,12 @@ CSV format (written by :func:`write_loop_pairs`, one header line)::
 
 ``query_index > match_index`` are frame indices in the image sequence (0-based, camera
 stamps order); the stamps identify the frames in a log.
+
+Between two recordings of the same world (sessions, :mod:`slam_lcd.sim.sessions`),
+:func:`gt_cross_pairs` gives the same kind of pairs from one trajectory to the other (no
+time gap: the recordings are different) and :func:`shared_place_fraction` how much of one
+recording's keyframes see a place the other saw. Trajectories whose ground-truth frames
+differ (``frame_id``: two different worlds) share no place.
 """
 from __future__ import annotations
 
@@ -57,6 +63,74 @@ def gt_loop_pairs(traj: Trajectory, max_dist: float = 1.0, max_angle_deg: float 
 def _angles_deg(Ra: np.ndarray, Rb: np.ndarray) -> np.ndarray:
     tr = np.einsum("nij,nij->n", Ra, Rb)  # trace(Ra^T Rb)
     return np.degrees(np.arccos(np.clip((tr - 1.0) / 2.0, -1.0, 1.0)))
+
+
+def gt_cross_pairs(traj_a: Trajectory, traj_b: Trajectory, max_dist: float = 1.0, max_angle_deg: float = 20.0,
+                   T_body_camera: np.ndarray | None = None) -> np.ndarray:
+    """Pairs ``(M, 2)`` int64 ``[index in a, index in b]`` whose camera poses are within
+    ``max_dist`` metres and ``max_angle_deg`` degrees (viewing direction and roll: the whole
+    rotation), sorted by a's then b's index.
+
+    Both trajectories must be in one world frame (ground truth); when their ``frame_id``
+    differ (two worlds: :func:`slam_lcd.sim.sessions.world_frame`) no place is shared and
+    the result is empty, however close the poses.
+    """
+    empty = np.zeros((0, 2), np.int64)
+    if traj_a.frame_id != traj_b.frame_id or len(traj_a) == 0 or len(traj_b) == 0:
+        return empty
+    Ta, Tb = _camera_poses(traj_a, T_body_camera), _camera_poses(traj_b, T_body_camera)
+    sdm = cKDTree(Ta[:, :3, 3]).sparse_distance_matrix(cKDTree(Tb[:, :3, 3]), max_dist, output_type="ndarray")
+    if len(sdm) == 0:
+        return empty
+    i, j = sdm["i"].astype(np.int64), sdm["j"].astype(np.int64)
+    keep = _angles_deg(Ta[i, :3, :3], Tb[j, :3, :3]) <= max_angle_deg
+    out = np.column_stack([i[keep], j[keep]])
+    return out[np.lexsort((out[:, 1], out[:, 0]))] if len(out) else empty
+
+
+def keyframe_indices(traj: Trajectory, min_translation: float = 0.5, min_rotation_deg: float = 15.0) -> np.ndarray:
+    """Indices a keyframe selector would keep: the first pose, then each pose that moved
+    ``min_translation`` metres or turned ``min_rotation_deg`` degrees from the last kept one
+    (the front end's defaults). Both 0: every pose."""
+    n = len(traj)
+    if n == 0 or (min_translation <= 0 and min_rotation_deg <= 0):
+        return np.arange(n, dtype=np.int64)
+    pos, R = traj.poses[:, :3, 3], traj.poses[:, :3, :3]
+    keep, last = [0], 0
+    for k in range(1, n):
+        moved = np.linalg.norm(pos[k] - pos[last])
+        turned = _angles_deg(R[k][None], R[last][None])[0]
+        if (min_translation > 0 and moved >= min_translation) or (min_rotation_deg > 0 and turned >= min_rotation_deg):
+            keep.append(k)
+            last = k
+    return np.asarray(keep, dtype=np.int64)
+
+
+def _subset(traj: Trajectory, idx: np.ndarray) -> Trajectory:
+    return Trajectory(stamps=traj.stamps[idx], poses=traj.poses[idx], frame_id=traj.frame_id,
+                      child_frame_id=traj.child_frame_id)
+
+
+def shared_place_fraction(traj_a: Trajectory, traj_b, max_dist: float = 1.0, max_angle_deg: float = 20.0,
+                          T_body_camera: np.ndarray | None = None, min_translation: float = 0.5,
+                          min_rotation_deg: float = 15.0) -> float:
+    """Fraction of ``traj_a``'s keyframes with a counterpart among ``traj_b``'s keyframes
+    (:func:`gt_cross_pairs` thresholds; :func:`keyframe_indices` picks the keyframes of both).
+
+    ``traj_b``: one trajectory or several (their union: a map of several sessions).
+    Not symmetric: a short route inside a long one shares all of its places, the long one
+    only some of its own. 0.0 when ``traj_a`` is empty.
+    """
+    bs = [traj_b] if isinstance(traj_b, Trajectory) else list(traj_b)
+    ka = _subset(traj_a, keyframe_indices(traj_a, min_translation, min_rotation_deg))
+    if len(ka) == 0:
+        return 0.0
+    hit = np.zeros(len(ka), bool)
+    for b in bs:
+        kb = _subset(b, keyframe_indices(b, min_translation, min_rotation_deg))
+        pairs = gt_cross_pairs(ka, kb, max_dist, max_angle_deg, T_body_camera)
+        hit[pairs[:, 0]] = True
+    return float(hit.mean())
 
 
 def loop_pair_table(traj: Trajectory, pairs: np.ndarray, T_body_camera: np.ndarray | None = None) -> list[tuple]:

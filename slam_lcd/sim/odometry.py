@@ -76,11 +76,16 @@ def _noise_free_end(biases, x0, y0, th0, dx, dy, dth, dt) -> np.ndarray:
 
 
 def simulate_odometry(gt: Trajectory, seed: int = 0, noise: OdometryNoise | None = None,
-                      frame_id: str = "odom", child_frame_id: str = "base_link") -> Trajectory:
+                      frame_id: str = "odom", child_frame_id: str = "base_link",
+                      start_at_identity: bool = False) -> Trajectory:
     """Drifting odometry from a planar ground-truth body trajectory (same stamps).
 
     The odometry frame coincides with the world frame at the first stamp (the first pose
-    is exact). Returns a Trajectory with accumulated covariances (see module docstring).
+    is exact). ``start_at_identity``: instead, the robot's start pose is the origin of its
+    odometry frame (the first pose is the identity), as a robot switched on somewhere
+    reports it; the errors are the same, the whole trajectory is only re-expressed in the
+    start's frame (``T_world_body0^-1 @ T_odom_body``; the body-frame covariances do not
+    change). Returns a Trajectory with accumulated covariances (see module docstring).
     """
     nz = noise or OdometryNoise()
     rng = np.random.default_rng(np.random.SeedSequence([seed, 0x0D0]))
@@ -156,12 +161,22 @@ def simulate_odometry(gt: Trajectory, seed: int = 0, noise: OdometryNoise | None
     cth, sth = np.cos(oth), np.sin(oth)
     poses[:, 0, 0], poses[:, 0, 1], poses[:, 1, 0], poses[:, 1, 1] = cth, -sth, sth, cth
     poses[:, 0, 3], poses[:, 1, 3] = ox, oy
+    if start_at_identity:
+        poses = np.linalg.inv(gt.poses[0]) @ poses
+        poses[0] = np.eye(4)  # exactly, not up to rounding
     return Trajectory(stamps=gt.stamps.copy(), poses=poses, covariances=covs, frame_id=frame_id,
                       child_frame_id=child_frame_id)
 
 
 def end_drift(gt: Trajectory, odom: Trajectory) -> dict:
-    """End-point drift of ``odom`` against ``gt`` (same stamps, unaligned: the frames coincide at start)."""
+    """End-point drift of ``odom`` against ``gt`` (same stamps, unaligned: the frames coincide at start).
+
+    When the first poses differ (an odometry in its own frame,
+    ``simulate_odometry(start_at_identity=True)``), the ground truth is first moved so that
+    the two coincide at the first stamp.
+    """
+    if not np.array_equal(odom.poses[0], gt.poses[0]):
+        gt = Trajectory(stamps=gt.stamps, poses=odom.poses[0] @ np.linalg.inv(gt.poses[0]) @ gt.poses)
     err = float(np.linalg.norm(odom.positions[-1] - gt.positions[-1]))
     length = gt.path_length()
     dyaw = float(np.degrees(np.angle(np.exp(1j * (_yaw(odom.poses[-1]) - _yaw(gt.poses[-1]))))))

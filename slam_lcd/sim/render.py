@@ -93,12 +93,14 @@ def render(
     color: bool = False,
     with_depth: bool = True,
     mip_bias: float = 0.0,
+    gain: float = 1.0,
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """Render the view of ``camera`` at ``T_world_camera``.
 
     Returns ``(image, depth)``: image is uint8 (H, W) gray or (H, W, 3) RGB; depth is float32
     (H, W) metric z in metres (``None`` when ``with_depth`` is False). ``epoch`` selects the
-    lighting state (lap number; fractional values blend between laps).
+    lighting state (lap number; fractional values blend between laps). ``gain``: a global
+    exposure factor on top of the epoch's lamp gains (a camera set darker or brighter).
     """
     W, H = int(camera.width), int(camera.height)
     T = np.asarray(T_world_camera, dtype=np.float64)
@@ -124,6 +126,8 @@ def render(
         dist = np.linalg.norm(cc[idx].mean(axis=1), axis=1)
         idx = idx[np.argsort(dist, kind="stable")]
     gains = world.plane_gains(epoch)
+    if gain != 1.0:
+        gains = gains * float(gain)
     xramp, yramp = _ramps(W, H)
 
     Rt = R_wc.T

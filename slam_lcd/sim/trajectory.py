@@ -118,8 +118,13 @@ class DemoPath:
 
 
 def make_path(kind: str = "laps", laps: float = 2.0, seed: int = 0, speed: float = 1.1,
-              turn_speed: float = 0.7, weave: float = 0.18) -> DemoPath:
-    """Build the continuous path for ``laps`` laps of ``kind`` ('laps' or 'figure8')."""
+              turn_speed: float = 0.7, weave: float = 0.18, start_at: float | None = None) -> DemoPath:
+    """Build the continuous path for ``laps`` laps of ``kind`` ('laps', 'figure8' or 'laps-wide').
+
+    ``start_at``: arc length (m) of the start point along the route's centre line, measured
+    from the centre line's origin (:data:`START_AT` holds each route's default; values wrap
+    around the lap). The weave, the speed ramp and the lap counter run from the start point.
+    """
     if kind not in KINDS:
         raise ValueError(f"unknown trajectory kind {kind!r}; use one of {list(KINDS)}")
     wide = kind == "laps-wide"
@@ -130,7 +135,10 @@ def make_path(kind: str = "laps", laps: float = 2.0, seed: int = 0, speed: float
     pos, tan, kappa, s_c, L = _centre_line(WAYPOINTS[kind_path], TURN_RADIUS)
     total = laps * L
     S = np.arange(0.0, total + STEP, STEP)
-    s_mod = np.mod(S + START_AT[kind_path], L)
+    s0 = START_AT[kind_path] if start_at is None else float(start_at)
+    if not np.isfinite(s0):
+        raise ValueError("start_at must be a finite arc length (m)")
+    s_mod = np.mod(S + s0, L)
     idx = np.searchsorted(s_c, s_mod, side="right") - 1
     c = pos[idx] + tan[idx] * (s_mod - s_c[idx])[:, None]
     left = np.column_stack([-tan[idx, 1], tan[idx, 0]])
@@ -175,19 +183,21 @@ def path_trajectory(path: DemoPath, stamps: np.ndarray, start_ns: int = START_NS
 
 
 def make_trajectory(kind: str = "laps", *, laps: float = 2.0, rate_hz: float = 10.0, seed: int = 0,
-                    start_ns: int = START_NS, frames: int | None = None) -> Trajectory:
+                    start_ns: int = START_NS, frames: int | None = None, start_at: float | None = None) -> Trajectory:
     """Ground-truth body poses at ``rate_hz`` for ``laps`` laps (or exactly ``frames`` samples).
 
     With ``frames`` the path is made long enough and cut after ``frames`` samples.
+    ``start_at``: the start point's arc length along the centre line (see :func:`make_path`).
     """
     if frames is not None:
         if frames < 1:
             raise ValueError("frames must be at least 1")
         need_s = (frames - 1) / rate_hz
-        path = make_path(kind, laps=laps, seed=seed)
+        path = make_path(kind, laps=laps, seed=seed, start_at=start_at)
         while path.duration_s < need_s:
-            path = make_path(kind, laps=path.distance[-1] / path.lap_length * (need_s / path.duration_s) * 1.05 + 0.05, seed=seed)
+            path = make_path(kind, laps=path.distance[-1] / path.lap_length * (need_s / path.duration_s) * 1.05 + 0.05,
+                             seed=seed, start_at=start_at)
         stamps = start_ns + int(round(1e9 / rate_hz)) * np.arange(frames, dtype=np.int64)
         return path_trajectory(path, stamps, start_ns)
-    path = make_path(kind, laps=laps, seed=seed)
+    path = make_path(kind, laps=laps, seed=seed, start_at=start_at)
     return path_trajectory(path, sample_stamps(path.duration_s, rate_hz, start_ns), start_ns)

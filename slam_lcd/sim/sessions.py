@@ -1,0 +1,83 @@
+"""Sessions: the demo world recorded several times, as logs for a multi-session map.
+
+A session is one recording: its own route and start point through the corridors, its own
+odometry noise, its own lighting, and its own day (stamps start ``session`` days after the
+plain demo log's). Its odometry starts at the identity (the robot's start pose is the
+origin of its ``odom`` frame), so two sessions share no frame: a map must find how they
+relate by loop closure. Ground truth stays in the world frame, which all sessions of one
+world share; a session in another world publishes its ground truth in that world's frame
+(:func:`world_frame`), so an evaluation can tell that no place is shared.
+
+The presets (``make_demo_log(session=K)``, ``slam-lcd make-demo-log OUT --session K``):
+
+== ======================= ======== ======== ========= ========== ======== ===== ========================
+K  route                   start_at laps     seed      world_seed lighting expo  role
+== ======================= ======== ======== ========= ========== ======== ===== ========================
+1  laps of block A         3.0 m    1.3      1         0          0        1.0   mapping, its own loop
+2  figure eight (A and B)  55.0 m   1.0      2         0          0        1.0   mapping, from north of B
+3  figure eight (A and B)  26.0 m   0.9      3         0          3        0.75  mapping, changed lighting
+4  laps of block A         3.0 m    1.3      4         1000       0        1.0   another world
+5  laps of block A         24.0 m   1.0      5         0          0        1.0   localisation in 1-3
+== ======================= ======== ======== ========= ========== ======== ===== ========================
+
+``start_at``: arc length of the start point along the route's centre line
+(:func:`slam_lcd.sim.trajectory.make_path`); ``lighting``: offset added to every frame's
+lighting epoch; ``expo``: a global exposure factor of the renderer. Every field is only a
+default: explicit arguments override it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from . import rig
+from .trajectory import START_NS
+
+DAY_NS = 86_400 * 1_000_000_000
+
+
+@dataclass(frozen=True)
+class SessionPreset:
+    """Defaults one session sets (each overridable by an explicit argument)."""
+
+    session: int
+    kind: str  # route: 'laps' (block A) or 'figure8' (A and B)
+    start_at: float  # arc length (m) of the start point along the route's centre line
+    laps: float
+    seed: int  # path weave, odometry noise and image noise
+    world_seed: int  # the world's textures and lighting
+    lighting: float  # offset added to the lighting epoch of every frame
+    exposure: float  # global exposure factor of the renderer
+    role: str
+
+    def describe(self) -> str:
+        route = {"laps": "laps of block A", "figure8": "figure eight around A and B"}.get(self.kind, self.kind)
+        return (f"session {self.session}: {self.role}; {self.laps:g} {route} from {self.start_at:g} m, seed "
+                f"{self.seed}, world {self.world_seed}, lighting +{self.lighting:g}, exposure {self.exposure:g}")
+
+
+SESSIONS: dict[int, SessionPreset] = {
+    1: SessionPreset(1, "laps", 3.0, 1.3, 1, 0, 0.0, 1.0, "mapping, with a loop of its own"),
+    2: SessionPreset(2, "figure8", 55.0, 1.0, 2, 0, 0.0, 1.0, "mapping, figure eight from the corridor north of B"),
+    3: SessionPreset(3, "figure8", 26.0, 0.9, 3, 0, 3.0, 0.75, "mapping, figure eight under changed lighting"),
+    4: SessionPreset(4, "laps", 3.0, 1.3, 4, 1000, 0.0, 1.0, "another world: shares no place with 1-3"),
+    5: SessionPreset(5, "laps", 24.0, 1.0, 5, 0, 0.0, 1.0, "localisation inside the area of 1-3"),
+}
+
+
+def session_preset(session: int) -> SessionPreset:
+    """The preset of ``session`` (1-5); an InputError names the valid ones otherwise."""
+    from ..errors import InputError
+
+    if session not in SESSIONS:
+        raise InputError(f"unknown session {session!r}; use one of {', '.join(map(str, SESSIONS))}")
+    return SESSIONS[session]
+
+
+def session_start_ns(session: int) -> int:
+    """First stamp of a session: ``session`` days after the plain demo log's."""
+    return START_NS + int(session) * DAY_NS
+
+
+def world_frame(world_seed: int) -> str:
+    """Frame of a session's ground truth: ``world`` for world 0, ``world_<seed>`` for another world."""
+    return rig.WORLD_FRAME if int(world_seed) == 0 else f"{rig.WORLD_FRAME}_{int(world_seed)}"
