@@ -27,6 +27,8 @@ COMMAND_MODULES = [
     "vocab",
     "eval_lcd",
     "run",
+    "localize",
+    "map",
     "batch",
     "demo",
     "ate",

@@ -1,0 +1,46 @@
+"""`slam-lcd localize LOG --map DIR --out OUT`: localise a log against a saved map without changing it."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from .run import add_config_args, add_source_args, config_from_args, config_inputs
+
+
+def register(sub) -> None:
+    p = sub.add_parser("localize", help="localise a log against a saved map (the map is only read)",
+                       description="Stream a log through keyframe selection and SuperPoint, match each keyframe "
+                                   "against the map's keyframes (Bag of SuperPoints, graph verification, metric "
+                                   "pose), keep the matches its odometry confirms, and write its trajectory in the "
+                                   "map frame. The map folder is never written to.")
+    p.add_argument("log", help="ROS1 .bag, rosbag2 folder or .mcap file")
+    p.add_argument("--map", required=True, metavar="DIR", help="the map folder (from `slam-lcd run --map`; required)")
+    p.add_argument("-o", "--out", required=True,
+                   help="output folder (required; created if missing): localized.tum, keyframes_localized.tum, "
+                        "localization.csv, report.json/.md/.html and the run's usual files")
+    add_source_args(p)
+    p.add_argument("--no-mcap", action="store_true", help="do not write corrected.mcap (default: write it)")
+    add_config_args(p)
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from ..features import load_extractor
+    from ..map.session_map import Map, extractor_meta
+    from ..map.summary import localisation_lines
+    from ..runner import run_log
+
+    cfg = config_from_args(args)
+    extractor = load_extractor(cfg.features)
+    m = Map.open(args.map, features=extractor_meta(extractor, cfg.map.descriptor_form), conf=cfg.map)
+    inputs = dict(config_inputs(args), **{"--map": args.map})
+    res = run_log(args.log, Path(args.out), cfg, image_topic=args.image_topic, odom_topic=args.odom_topic,
+                  depth_topic=args.depth_topic, gt_topic=args.gt_topic, gt_file=args.gt,
+                  progress=not args.no_progress, write_mcap=not args.no_mcap, input_paths=inputs,
+                  command_line=getattr(args, "command_line", None), overrides=list(args.overrides),
+                  calib=args.calib, right_topic=args.right_topic, map=m, map_mode="localize", extractor=extractor)
+    if res.localization is not None:
+        for line in localisation_lines(res.localization):
+            print(line)
+    print(f"outputs in {res.out_dir}/ ({', '.join(res.outputs)})"
+          + (" -- a partial set, see PARTIAL.txt" if res.interrupted else ""))
+    return 130 if res.interrupted else 0

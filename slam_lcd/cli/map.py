@@ -1,0 +1,92 @@
+"""`slam-lcd map info DIR` and `slam-lcd map export DIR --to FMT OUT`: look into a saved map."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+FORMATS = ("tum", "kitti", "euroc", "mcap")
+
+
+def register(sub) -> None:
+    p = sub.add_parser("map", help="inspect or export a multi-session map (info, export)",
+                       description="Inspect a map folder written by `slam-lcd run --map`, or export every "
+                                   "session's trajectory in the map frame.")
+    msub = p.add_subparsers(dest="map_command", metavar="SUBCOMMAND")
+    msub.required = True
+    i = msub.add_parser("info", help="sessions, keyframes, loops within and between sessions, components, size")
+    i.add_argument("map_dir", metavar="DIR", help="map folder")
+    i.add_argument("--json", action="store_true", help="print the summary as JSON (default: text)")
+    i.set_defaults(func=info)
+    e = msub.add_parser("export", help="every session's keyframe trajectory in the map frame")
+    e.add_argument("map_dir", metavar="DIR", help="map folder")
+    e.add_argument("--to", choices=FORMATS, default="tum",
+                   help="tum / kitti / euroc: one file per session in the folder OUT; mcap: one MCAP file OUT with a "
+                        "PoseStamped topic per session in the map frame (default: tum)")
+    e.add_argument("out", metavar="OUT", help="output folder (tum, kitti, euroc) or .mcap file")
+    e.set_defaults(func=export)
+
+
+def _open(path):
+    from ..map.session_map import Map
+
+    return Map.open(path)
+
+
+def _size(root: Path) -> int:
+    return sum(p.stat().st_size for p in root.rglob("*") if p.is_file())
+
+
+def info(args) -> int:
+    from ..map.summary import map_summary, summary_lines
+
+    m = _open(args.map_dir)
+    s = map_summary(m)
+    s["bytes"] = _size(Path(args.map_dir))
+    s["bytes_per_keyframe"] = s["bytes"] / max(1, s["n_keyframes"])
+    s["schema"], s["features"] = 1, m.manifest.features.get("kind")
+    if args.json:
+        print(json.dumps(s, indent=2))
+        return 0
+    for line in summary_lines(s):
+        print(line)
+    print(f"loops within sessions: {s['loops_within_sessions']}; between sessions by pair: "
+          + (", ".join(f"{k}: {v}" for k, v in s["inter_session_accepted_by_pair"].items()) or "none"))
+    print("components: " + "; ".join("[" + ", ".join(c) + "]" for c in s["components"]))
+    print(f"features: {s['features']}; size on disk: {s['bytes'] / 1e6:.1f} MB "
+          f"({s['bytes_per_keyframe'] / 1e3:.0f} kB per keyframe)")
+    return 0
+
+
+def export(args) -> int:
+    from ..atomic import atomic_path, check_no_clash
+    from ..io.trajectory_files import write_trajectory
+    from ..map.store import MANIFEST
+
+    m = _open(args.map_dir)
+    out = Path(args.out)
+    check_no_clash([out], {"the map": Path(args.map_dir)})
+    names = m.session_names
+    if args.to == "mcap":
+        from ..io.messages import pose_stamped_msg
+        from ..io.writers import open_writer
+
+        with open_writer(out, "mcap") as w:
+            for i, name in enumerate(names):
+                traj = m.session_trajectory(i)
+                comp = m.manifest.sessions[i]["component"]
+                frame = "map" if comp == m.manifest.sessions[0]["component"] else f"map_{comp}"
+                for st, T in zip(traj.stamps, traj.poses):
+                    w.write(f"/map/{_topic(name)}/pose", pose_stamped_msg(T, int(st), frame), int(st))
+        print(f"{out}: {len(names)} sessions as /map/<session>/pose")
+        return 0
+    suffix = {"tum": ".tum", "kitti": ".txt", "euroc": ".csv"}[args.to]
+    with atomic_path(out, directory=True) as tmp:
+        tmp.mkdir(parents=True)
+        for i, name in enumerate(names):
+            write_trajectory(tmp / f"{_topic(name)}{suffix}", m.session_trajectory(i), args.to)
+    print(f"{out}/: {len(names)} session trajectories ({args.to}) from {Path(args.map_dir) / MANIFEST}")
+    return 0
+
+
+def _topic(name: str) -> str:
+    return "".join(ch if ch.isalnum() or ch == "_" else "_" for ch in name) or "session"
