@@ -60,6 +60,7 @@ def session_ates(m) -> dict[str, dict]:
 def map_summary(m, joined=None, *, current: str | None = None, pipe=None) -> dict:
     """The map as report.json / ``map info`` give it (plain JSON types)."""
     sess_of = {int(k): m.manifest.sessions[si]["name"] for si, s in enumerate(m.sessions) for k in s.ids}
+    gt_of = {int(k): s.T_gt[i, :3, 3] for s in m.sessions for i, k in enumerate(s.ids)}
     g = m.graph
     inter = []
     within = accepted_within = 0
@@ -69,8 +70,11 @@ def map_summary(m, joined=None, *, current: str | None = None, pipe=None) -> dic
             within += 1
             accepted_within += bool(acc)
             continue
+        # ground-truth distance between the two keyframes (sessions recorded with ground truth in one frame)
+        d = float(np.linalg.norm(gt_of[int(q)] - gt_of[int(mt)])) if int(q) in gt_of and int(mt) in gt_of else None
         inter.append({"query_id": int(q), "match_id": int(mt), "query_session": b, "match_session": a,
-                      "accepted": bool(acc), "reason": str(why)})
+                      "accepted": bool(acc), "reason": str(why),
+                      "gt_distance_m": round(d, 4) if d is not None and np.isfinite(d) else None})
     ates = session_ates(m)
     first_comp = int(m.manifest.sessions[0]["component"]) if m.manifest.sessions else 0
     sessions = []
