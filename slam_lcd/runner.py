@@ -20,8 +20,6 @@ import time
 from collections import deque
 from pathlib import Path
 
-import numpy as np
-
 from .config import Config, validate_config
 from .errors import DamagedImageError, FileMissingError, PipelineError, stamp_text
 from .io import open_log
@@ -35,7 +33,8 @@ from .outputs.write import RUN_OUTPUTS, write_set
 from .progress import progress_bar
 from .sensors.messages import at_message, check_first_messages, decode_camera_of, decode_depth, decode_gray, decode_pose_of
 from .sensors.mounting import body_frame_of, calibrated_mounting, mounting_from_camera_info, static_transforms
-from .sensors.ground_truth import POSITION_ONLY_NOTE, decode_ground_truth, ground_truth_from_tf
+from .sensors.ground_truth import (POSITION_ONLY_NOTE, decode_ground_truth, ground_truth_from_messages,
+                                   ground_truth_from_tf)
 from .sensors.topics import Topics, choose_right_topic, choose_topics, configured_topics, copyable_topics, static_tf_topics
 from .types import Trajectory
 
@@ -386,10 +385,7 @@ def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame,
     if damaged:
         log.warning("%s: %d damaged image message(s) skipped; the first: %s", log_path, len(damaged),
                     damaged[0].problem)
-    if not gt_st:
-        return None
-    order = np.argsort(np.array(gt_st, np.int64), kind="stable")
-    return Trajectory(np.array(gt_st, np.int64)[order], np.array(gt_T)[order])
+    return ground_truth_from_messages(gt_st, gt_T, log_path, topics.gt)
 
 
 def _no_keyframe_reason(pipe, topics: Topics, n_frames: int) -> str:

