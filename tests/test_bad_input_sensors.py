@@ -85,3 +85,19 @@ def test_interpolation_on_real_ground_truth_with_a_repeated_stamp(shared_data):
     query = np.concatenate([gt.stamps[rep], gt.stamps[::300]])
     P = interpolate_poses(gt.stamps, gt.poses, query)
     assert np.allclose(P[: rep.size], gt.poses[rep], atol=1e-9)
+
+
+# ---------------------------------------------------------------------------- config keys that are not names
+
+
+@pytest.mark.parametrize("text,needle", [("1: 2\n", "key 1 in section top"),
+                                         ("lcd:\n  5: 3\n", "key 5 in section lcd"),
+                                         ("true: 1\n", "key True in section top")])
+def test_config_key_that_is_not_a_name_is_one_line(demo, tmp_path, capfd, text, needle):
+    """A config file whose key YAML reads as a number or a boolean: one line naming the file and the key."""
+    cfg = tmp_path / "bad.yaml"
+    cfg.write_text(text)
+    rc, _, err = run_cli(["run", demo, "--out", tmp_path / "out", "--config", cfg, "--no-progress"], capfd)
+    assert rc == 2, err
+    assert_one_line(err, "bad.yaml", needle, "not a name")
+    assert not (tmp_path / "out").exists()
