@@ -101,3 +101,17 @@ def test_config_key_that_is_not_a_name_is_one_line(demo, tmp_path, capfd, text, 
     assert rc == 2, err
     assert_one_line(err, "bad.yaml", needle, "not a name")
     assert not (tmp_path / "out").exists()
+
+
+# ---------------------------------------------------------------------------- make-demo-log numbers
+
+
+@pytest.mark.parametrize("flag,value", [("--rate", "nan"), ("--rate", "inf"), ("--laps", "0"), ("--laps", "nan"),
+                                        ("--seed", "-1")])
+def test_make_demo_log_bad_number_is_one_line(tmp_path, capfd, flag, value):
+    """A rate, lap count or seed that means nothing: one line naming the flag, before anything is written."""
+    out = tmp_path / "demo.mcap"
+    rc, _, err = run_cli(["make-demo-log", out, "--frames", "20", "--size", "160x120", flag, value], capfd)
+    assert rc == 2, err
+    assert_one_line(err, flag, value)
+    assert sorted(p.name for p in tmp_path.iterdir()) == []

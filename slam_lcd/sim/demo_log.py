@@ -24,6 +24,7 @@ The same arguments give byte-identical files.
 from __future__ import annotations
 
 import logging
+import math
 import os
 import time
 from dataclasses import dataclass, field
@@ -104,9 +105,19 @@ class _Scenario:
     world: object
 
 
+MAX_CAMERA_RATE_HZ = 1000.0  # a camera period of 1 ms; more is no camera, and the frames would never end
+MAX_ODOM_RATE_HZ = 10000.0
+
+
 def _scenario(frames, seed, kind, laps, width, height, camera_rate, odom_rate, stereo, hfov_deg=70.0) -> _Scenario:
-    if camera_rate <= 0 or odom_rate <= 0:
-        raise InputError("camera and odometry rates must be positive")
+    for name, rate, most in (("--rate (camera rate)", camera_rate, MAX_CAMERA_RATE_HZ),
+                             ("odometry rate", odom_rate, MAX_ODOM_RATE_HZ)):
+        if not 0 < float(rate) <= most:  # NaN fails too
+            raise InputError(f"{name} must be a number of Hz above 0 and at most {most:g}, got {rate}")
+    if not (math.isfinite(float(laps)) and laps > 0):
+        raise InputError(f"--laps must be a finite number above 0, got {laps}")
+    if int(seed) < 0:
+        raise InputError(f"--seed must be 0 or more, got {seed}")
     path = make_path(kind, laps=laps, seed=seed)
     cam_period = int(round(1e9 / camera_rate))
     if frames is None:
