@@ -115,3 +115,28 @@ def test_make_demo_log_bad_number_is_one_line(tmp_path, capfd, flag, value):
     assert rc == 2, err
     assert_one_line(err, flag, value)
     assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+# ---------------------------------------------------------------------------- feature cache entries
+
+
+def test_foreign_or_broken_feature_cache_entries_are_recomputed_with_one_warning(demo, tmp_path, capfd):
+    """A foreign ``.npz`` (other shapes) and a text file in the feature cache: skipped, recomputed, one warning;
+    the result is the one of a run on a clean cache."""
+    cached = ["--set", "features.kind=orb", "--set", f"features.cache_dir={tmp_path / 'cache'}", "--no-progress",
+              "--set", "run.plots=false", "--set", "run.loop_pictures=false", "--no-mcap"]
+    rc, _, err = run_cli(["run", demo, "--out", tmp_path / "first", *cached], capfd)
+    assert rc == 0, err
+    entries = sorted((tmp_path / "cache").rglob("*.npz"))
+    assert len(entries) >= 2
+    np.savez(entries[0], keypoints=np.zeros((5, 3), np.float32), scores=np.zeros(5, np.float32),
+             descriptors=np.zeros((5, 7), np.uint8), image_size=np.array([160, 120]), kind=np.array("orb"))
+    entries[1].write_text("not features\n")
+    rc, _, err = run_cli(["run", demo, "--out", tmp_path / "second", *cached], capfd)
+    assert rc == 0, err
+    warnings = _warnings(err)
+    assert len(warnings) == 1 and "feature cache entry skipped" in warnings[0], warnings
+    assert entries[0].name in warnings[0] or entries[1].name in warnings[0]
+    assert (tmp_path / "first" / "corrected.tum").read_text() == (tmp_path / "second" / "corrected.tum").read_text()
+    with np.load(entries[0], allow_pickle=False) as z:  # overwritten with this extractor's features
+        assert z["keypoints"].shape[1] == 2 and z["descriptors"].shape[1] == 32
