@@ -31,7 +31,8 @@ from .outputs.output_set import OutputSet
 from .outputs.result import RunResult
 from .outputs.write import RUN_OUTPUTS, write_set
 from .progress import progress_bar
-from .sensors.messages import at_message, check_first_messages, decode_camera_of, decode_depth, decode_gray, decode_pose_of
+from .sensors.messages import (at_message, check_first_messages, check_image_sizes, decode_camera_of, decode_depth,
+                               decode_gray, decode_pose_of)
 from .sensors.mounting import body_frame_of, calibrated_mounting, mounting_from_camera_info, static_transforms
 from .sensors.ground_truth import (POSITION_ONLY_NOTE, decode_ground_truth, ground_truth_from_messages,
                                    ground_truth_from_tf)
@@ -120,6 +121,7 @@ def run_log(
             topics = choose_topics(reader, **flags)
             calibrated = _calibrated_camera(calibration, topics, log_path)
             first = check_first_messages(reader, topics)
+            check_image_sizes(reader, topics, first, calibrated, calibration)
             result.topics = {k: v for k, v in vars(topics).items() if v}
             result.frames = _log_frames(first, topics)
             result.gt_source = (f"file {gt_file}" if gt_file is not None else

@@ -140,3 +140,60 @@ def test_foreign_or_broken_feature_cache_entries_are_recomputed_with_one_warning
     assert (tmp_path / "first" / "corrected.tum").read_text() == (tmp_path / "second" / "corrected.tum").read_text()
     with np.load(entries[0], allow_pickle=False) as z:  # overwritten with this extractor's features
         assert z["keypoints"].shape[1] == 2 and z["descriptors"].shape[1] == 32
+
+
+# ---------------------------------------------------------------------------- sizes that contradict the images
+
+
+@pytest.fixture(scope="module")
+def euroc(tmp_path_factory):
+    """A 40-frame EuRoC-layout log (160x120 stereo, no odometry, Leica PointStamped) and its Kalibr camchain."""
+    from slam_lcd.sim import make_demo_log
+
+    folder = tmp_path_factory.mktemp("sensors_euroc")
+    make_demo_log(folder / "eu.mcap", "mcap", frames=40, seed=3, width=160, height=120, layout="euroc")
+    return folder / "eu.mcap", folder / "camchain-eu.yaml"
+
+
+@pytest.mark.parametrize("size", ["[320, 240]", "[80, 60]"])
+def test_calibration_of_another_image_size_is_one_line(euroc, tmp_path, capfd, size):
+    """``--calib`` whose resolution is not the images': one line naming the calibration file, camera, topic, sizes."""
+    log, camchain = euroc
+    calib = tmp_path / "camchain.yaml"
+    calib.write_text(camchain.read_text().replace("resolution: [160, 120]", f"resolution: {size}"))
+    rc, _, err = run_cli(["run", log, "--out", tmp_path / "out", "--calib", calib, "--image-topic", "/cam0/image_raw",
+                          *ORB], capfd)
+    assert rc == 2, err
+    wh = size.strip("[]").replace(", ", "x")
+    assert_one_line(err, "camchain.yaml", "cam0", "/cam0/image_raw", wh, "160x120")
+    assert not (tmp_path / "out").exists()
+
+
+def _half_depth(msg):
+    """The same depth image at half the width and height (every second pixel)."""
+    import dataclasses
+
+    d = np.frombuffer(bytes(msg.data), np.uint16 if msg.encoding in ("16UC1", "mono16") else np.float32)
+    d = d.reshape(msg.height, msg.width)[::2, ::2]
+    return dataclasses.replace(msg, height=d.shape[0], width=d.shape[1], step=d.shape[1] * d.itemsize,
+                               data=np.frombuffer(np.ascontiguousarray(d).tobytes(), np.uint8))
+
+
+def _big_camera_info(msg):
+    import dataclasses
+
+    return dataclasses.replace(msg, width=msg.width * 2, height=msg.height * 2)
+
+
+@pytest.mark.parametrize("what,edit,needles", [
+    ("camera_info", _big_camera_info, ["/camera/camera_info", "320x240", "160x120"]),
+    ("depth", _half_depth, ["/camera/depth", "80x60", "160x120"]),
+])
+def test_camera_info_or_depth_of_another_size_is_one_line(demo, tmp_path, capfd, what, edit, needles):
+    """A CameraInfo for other-sized images, a depth image half the camera's size: one line naming topic and sizes."""
+    topic = "/camera/camera_info" if what == "camera_info" else "/camera/depth"
+    log = rewrite_log(demo, tmp_path / f"{what}.mcap", lambda t, i, msg: edit(msg) if t == topic else msg)
+    rc, _, err = run_cli(["run", log, "--out", tmp_path / "out", *ORB], capfd)
+    assert rc == 2, err
+    assert_one_line(err, f"{what}.mcap", *needles)
+    assert not (tmp_path / "out").exists()
