@@ -151,7 +151,7 @@ def euroc(tmp_path_factory):
     from slam_lcd.sim import make_demo_log
 
     folder = tmp_path_factory.mktemp("sensors_euroc")
-    make_demo_log(folder / "eu.mcap", "mcap", frames=40, seed=3, width=160, height=120, layout="euroc")
+    make_demo_log(folder / "eu.mcap", "mcap", frames=40, seed=0, width=160, height=120, layout="euroc")
     return folder / "eu.mcap", folder / "camchain-eu.yaml"
 
 
@@ -197,3 +197,28 @@ def test_camera_info_or_depth_of_another_size_is_one_line(demo, tmp_path, capfd,
     assert rc == 2, err
     assert_one_line(err, f"{what}.mcap", *needles)
     assert not (tmp_path / "out").exists()
+
+
+# ---------------------------------------------------------------------------- position-only ground truth
+
+
+def test_position_only_ground_truth_reports_no_rotation_error_and_no_rpe(euroc, tmp_path, capfd):
+    """PointStamped ground truth (EuRoC's Leica): report.json has no rotation figures (null, with the reason) and
+    no RPE; report.md and report.html print no rotation row and say "position only"."""
+    from slam_lcd.outputs.report_schema import check_report
+
+    log, camchain = euroc
+    out = tmp_path / "out"
+    rc, _, err = run_cli(["run", log, "--out", out, "--calib", camchain, "--image-topic", "/cam0/image_raw",
+                          "--gt-topic", "/leica/position", *ORB], capfd)
+    assert rc == 0, err
+    report = json.loads((out / "report.json").read_text())
+    assert check_report(report) == []
+    ev = report["eval"]
+    assert ev["gt_position_only"] and ev["rpe"] is None and "no orientation" in ev["not_measured"]
+    for side in ("before", "after"):
+        assert ev["ate"][side]["rotation_deg"] is None and ev["ate"][side]["translation_m"]["rmse"] > 0
+    md, html = (out / "report.md").read_text(), (out / "report.html").read_text()
+    for text in (md, html):
+        assert "rotation RMSE" not in text and text.count("translation RMSE") == 1  # the ATE's row, no RPE row
+        assert "Position only" in text

@@ -49,6 +49,11 @@ class RunResult:
     overrides: list[str] = field(default_factory=list)
 
     @property
+    def gt_position_only(self) -> bool:
+        """The ground truth has positions only (PointStamped): no rotation error, no RPE."""
+        return "position-only" in (self.alignment or "")
+
+    @property
     def ate_ratio(self) -> float | None:
         return ratio_or_none(self.ate_after, self.ate_before)
 

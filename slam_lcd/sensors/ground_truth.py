@@ -32,6 +32,9 @@ POINT_TYPE = "geometry_msgs/msg/PointStamped"
 GT_TYPES = (*POSE_GT_TYPES, POINT_TYPE)
 TF_TYPE = "tf2_msgs/msg/TFMessage"
 POSITION_ONLY_NOTE = "position-only ground truth (PointStamped): ATE on translation"
+# why a run against position-only ground truth reports no rotation error and no RPE
+POSITION_ONLY_REASON = ("a point has no orientation, so there is no rotation error and no RPE (the RPE takes each "
+                        "pair's motion in the ground truth's orientation)")
 
 log = logging.getLogger(__name__)
 
