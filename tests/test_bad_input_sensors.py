@@ -222,3 +222,17 @@ def test_position_only_ground_truth_reports_no_rotation_error_and_no_rpe(euroc, 
     for text in (md, html):
         assert "rotation RMSE" not in text and text.count("translation RMSE") == 1  # the ATE's row, no RPE row
         assert "Position only" in text
+
+
+# ---------------------------------------------------------------------------- weights that are no checkpoint
+
+
+def test_text_file_as_weights_is_said_to_be_no_checkpoint(demo, tmp_path, capfd):
+    """A text file given as --weights: one line saying it is not a checkpoint (not "pickled Python objects")."""
+    weights = tmp_path / "weights.txt"
+    weights.write_text("conv1a.weight 0.1 0.2 0.3\nthese are notes, not weights\n")
+    rc, _, err = run_cli(["run", demo, "--out", tmp_path / "out", "--weights", weights, "--no-progress"], capfd)
+    assert rc == 2, err
+    line = assert_one_line(err, "weights.txt", "not a PyTorch checkpoint", "text file")
+    assert "pickled" not in line
+    assert not (tmp_path / "out").exists()
