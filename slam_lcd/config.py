@@ -178,6 +178,12 @@ def _coerce(value: Any, tp: Any, where: str) -> Any:
 def _from_dict(cls, data: dict, where: str = ""):
     hints = typing.get_type_hints(cls)
     names = {f.name for f in dataclasses.fields(cls)}
+    odd = [k for k in data if not isinstance(k, str)]
+    if odd:  # YAML reads `1:`, `true:`, `null:` as a number, a boolean, nothing: never a key of ours
+        kind = {bool: "a boolean", int: "an integer", float: "a number", type(None): "null"}.get(
+            type(odd[0]), f"a {type(odd[0]).__name__}")
+        raise ConfigError(f"key {odd[0]!r} in section {where or 'top'} is not a name (YAML reads it as {kind}); "
+                          f"keys are names such as {min(names)}")
     unknown = set(data) - names
     if unknown:
         moved = [f"{where}.{u} moved to {MOVED_KEYS[f'{where}.{u}']}" for u in sorted(unknown) if f"{where}.{u}" in MOVED_KEYS]

@@ -289,10 +289,16 @@ def pose_from_list(values, where: str = "frontend.T_body_camera") -> np.ndarray:
 def interpolate_poses(stamps: np.ndarray, poses: np.ndarray, query: np.ndarray) -> np.ndarray:
     """SE(3) interpolation (slerp rotation, linear translation) of ``poses`` at ``query`` stamps.
 
-    Query stamps outside the range are clamped to the first/last pose.
+    Query stamps outside the range are clamped to the first/last pose. ``stamps`` must not
+    decrease; a repeated stamp (real ground-truth files have them) counts with its first pose.
     """
     stamps = np.asarray(stamps, dtype=np.int64)
     query = np.asarray(query, dtype=np.int64)
+    if len(stamps) > 1:
+        first = np.ones(len(stamps), bool)
+        first[1:] = stamps[1:] != stamps[:-1]
+        if not first.all():
+            stamps, poses = stamps[first], np.asarray(poses)[first]
     if len(stamps) == 1:
         return np.repeat(poses[:1], len(query), axis=0)
     if len(stamps) == 2 and len(query) == 1:  # the per-frame case of a stream: no scipy set-up

@@ -20,8 +20,6 @@ import time
 from collections import deque
 from pathlib import Path
 
-import numpy as np
-
 from .config import Config, validate_config
 from .errors import DamagedImageError, FileMissingError, PipelineError, stamp_text
 from .io import open_log
@@ -33,9 +31,11 @@ from .outputs.output_set import OutputSet
 from .outputs.result import RunResult
 from .outputs.write import RUN_OUTPUTS, write_set
 from .progress import progress_bar
-from .sensors.messages import at_message, check_first_messages, decode_camera_of, decode_depth, decode_gray, decode_pose_of
+from .sensors.messages import (at_message, check_first_messages, check_image_sizes, decode_camera_of, decode_depth,
+                               decode_gray, decode_pose_of)
 from .sensors.mounting import body_frame_of, calibrated_mounting, mounting_from_camera_info, static_transforms
-from .sensors.ground_truth import POSITION_ONLY_NOTE, decode_ground_truth, ground_truth_from_tf
+from .sensors.ground_truth import (POSITION_ONLY_NOTE, decode_ground_truth, ground_truth_from_messages,
+                                   ground_truth_from_tf)
 from .sensors.topics import Topics, choose_right_topic, choose_topics, configured_topics, copyable_topics, static_tf_topics
 from .types import Trajectory
 
@@ -128,6 +128,7 @@ def run_log(
             topics = choose_topics(reader, **flags)
             calibrated = _calibrated_camera(calibration, topics, log_path)
             first = check_first_messages(reader, topics)
+            check_image_sizes(reader, topics, first, calibrated, calibration)
             result.topics = {k: v for k, v in vars(topics).items() if v}
             result.frames = _log_frames(first, topics)
             result.gt_source = (f"file {gt_file}" if gt_file is not None else
@@ -414,10 +415,7 @@ def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame,
     if damaged:
         log.warning("%s: %d damaged image message(s) skipped; the first: %s", log_path, len(damaged),
                     damaged[0].problem)
-    if not gt_st:
-        return None
-    order = np.argsort(np.array(gt_st, np.int64), kind="stable")
-    return Trajectory(np.array(gt_st, np.int64)[order], np.array(gt_T)[order])
+    return ground_truth_from_messages(gt_st, gt_T, log_path, topics.gt)
 
 
 def _no_keyframe_reason(pipe, topics: Topics, n_frames: int) -> str:

@@ -8,13 +8,17 @@ One ``.npz`` per image under ``<root>/<extractor fingerprint>/<log key>/<topic k
 - the log key hashes the log's resolved path, size and modification time (for a rosbag2
   folder: of every file in it), so an edited or replaced log is never served stale features.
 
-Files are written atomically and read with ``allow_pickle=False``; an unreadable entry is
-treated as a miss and recomputed.
+Files are written atomically and read with ``allow_pickle=False``. An entry that does not load,
+or is not what this extractor writes for this image (a foreign ``.npz``: other arrays, shapes,
+descriptor width or type, image size, kind; NaN or out-of-image keypoints), is treated as a
+miss, recomputed and overwritten; the first such entry of a cache is named in one warning.
 """
 from __future__ import annotations
 
 import hashlib
+import logging
 import re
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +27,12 @@ from ..atomic import atomic_path
 from ..types import Features
 from .extract import Extractor
 from .weights import cache_dir
+
+_log = logging.getLogger(__name__)
+
+
+class _UnusableEntry(Exception):
+    """A cache entry that is not this extractor's features of this image."""
 
 
 def log_key(log: str | Path) -> str:
@@ -54,6 +64,7 @@ class FeatureCache:
         self._log_keys: dict[str, str] = {}
         self.hits = 0
         self.misses = 0
+        self.unusable = 0  # entries that did not load or were not this extractor's: recomputed
 
     def path(self, log: str | Path, topic: str, stamp: int) -> Path:
         lk = self._log_keys.get(str(log))
@@ -61,22 +72,51 @@ class FeatureCache:
             lk = self._log_keys[str(log)] = log_key(log)
         return self.base / lk / topic_key(topic) / f"{int(stamp)}.npz"
 
-    def get(self, log: str | Path, topic: str, stamp: int) -> Features | None:
+    def get(self, log: str | Path, topic: str, stamp: int, image_size: tuple[int, int] | None = None) -> Features | None:
+        """The cached features, or None (a miss) when there are none or the entry cannot be used
+        (``image_size``: (width, height) the entry must have been made from)."""
         p = self.path(log, topic, stamp)
         if not p.is_file():
             return None
         try:
             with np.load(p, allow_pickle=False) as z:
-                w, h = (int(v) for v in z["image_size"])
-                return Features(
-                    keypoints=z["keypoints"].astype(np.float32),
-                    scores=z["scores"].astype(np.float32),
-                    descriptors=z["descriptors"],
-                    image_size=(w, h),
-                    kind=str(z["kind"]),
-                )
-        except Exception:  # truncated / foreign file: recompute and overwrite
+                return self._checked(z, image_size)
+        except Exception as e:  # truncated / foreign file: recompute and overwrite
+            self.unusable += 1
+            if self.unusable == 1:
+                why = (e if isinstance(e, _UnusableEntry) else "not an .npz (zip) file" if not zipfile.is_zipfile(p)
+                       else f"it does not load: {type(e).__name__}: {e}")
+                _log.warning("%s: feature cache entry skipped (%s); it and any other such entry are recomputed "
+                            "and overwritten", p, " ".join(str(why).split())[:200])
             return None
+
+    def _checked(self, z, image_size) -> Features:
+        missing = [k for k in ("keypoints", "scores", "descriptors", "image_size", "kind") if k not in z.files]
+        if missing:
+            raise _UnusableEntry(f"no array {', '.join(missing)}: not a slam-lcd feature file")
+        kp, sc, desc, size = z["keypoints"], z["scores"], z["descriptors"], z["image_size"]
+        kind = str(z["kind"])
+        ext = self.extractor
+        if ext.kind and kind != ext.kind:
+            raise _UnusableEntry(f"features of kind {kind!r}, not {ext.kind!r}")
+        if size.shape != (2,) or size.dtype.kind not in "iu":
+            raise _UnusableEntry(f"image_size of shape {size.shape}, not (width, height)")
+        w, h = (int(v) for v in size)
+        if image_size is not None and (w, h) != tuple(image_size):
+            raise _UnusableEntry(f"made from a {w}x{h} image, not {image_size[0]}x{image_size[1]}")
+        n = kp.shape[0] if kp.ndim == 2 else -1
+        if kp.ndim != 2 or kp.shape[1] != 2 or kp.dtype.kind != "f":
+            raise _UnusableEntry(f"keypoints of shape {kp.shape} ({kp.dtype}), not N x 2 floats")
+        if sc.shape != (n,) or desc.ndim != 2 or desc.shape[0] != n:
+            raise _UnusableEntry(f"scores {sc.shape} and descriptors {desc.shape} do not fit {n} keypoints")
+        if ext.descriptor_dim and (desc.shape[1] != ext.descriptor_dim
+                                   or desc.dtype != np.dtype(ext.descriptor_dtype)):
+            raise _UnusableEntry(f"descriptors {desc.shape[1]} x {desc.dtype}, not {ext.descriptor_dim} x "
+                                 f"{np.dtype(ext.descriptor_dtype)}")
+        if n and (not np.all(np.isfinite(kp)) or kp.min() < -1 or kp[:, 0].max() > w or kp[:, 1].max() > h):
+            raise _UnusableEntry(f"keypoints outside the {w}x{h} image (or NaN)")
+        return Features(keypoints=kp.astype(np.float32), scores=sc.astype(np.float32), descriptors=desc,
+                        image_size=(w, h), kind=kind)
 
     def put(self, log: str | Path, topic: str, stamp: int, feats: Features) -> Path:
         p = self.path(log, topic, stamp)
@@ -94,7 +134,7 @@ class FeatureCache:
 
     def extract(self, log: str | Path, topic: str, stamp: int, image: np.ndarray) -> Features:
         """Cached features if present, else extract and store them."""
-        f = self.get(log, topic, stamp)
+        f = self.get(log, topic, stamp, _size_of(image))
         if f is not None:
             self.hits += 1
             return f
@@ -105,7 +145,7 @@ class FeatureCache:
 
     def extract_batch(self, log: str | Path, topic: str, stamps: list[int], images: list[np.ndarray]) -> list[Features]:
         """Batched version: only the misses go through the network, in one batch."""
-        out: list[Features | None] = [self.get(log, topic, s) for s in stamps]
+        out: list[Features | None] = [self.get(log, topic, s, _size_of(im)) for s, im in zip(stamps, images)]
         todo = [i for i, f in enumerate(out) if f is None]
         self.hits += len(stamps) - len(todo)
         self.misses += len(todo)
@@ -114,3 +154,9 @@ class FeatureCache:
                 self.put(log, topic, stamps[i], f)
                 out[i] = f
         return out  # type: ignore[return-value]
+
+
+def _size_of(image) -> tuple[int, int] | None:
+    """(width, height) of an image array, or None (not an array: the entry's size is not checked)."""
+    shape = getattr(image, "shape", None)
+    return (int(shape[1]), int(shape[0])) if shape is not None and len(shape) >= 2 else None

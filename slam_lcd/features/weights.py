@@ -145,11 +145,40 @@ def _unwrap(obj):
     return obj
 
 
+def _check_checkpoint_container(path: Path) -> None:
+    """A PyTorch checkpoint is a zip archive (``torch.save``) or, in the legacy format, a pickle
+    (its first byte 0x80); anything else (a text file, an image) is said to be no checkpoint,
+    before torch reads its bytes as pickle opcodes."""
+    import zipfile
+
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4)
+    except OSError as e:
+        raise WeightsError(f"cannot read the weights file ({e.strerror or e})", path) from None
+    if not head:
+        raise WeightsError("is empty, not a PyTorch checkpoint", path)
+    if head[:1] != b"\x80" and head != b"PK\x03\x04" and not zipfile.is_zipfile(path):  # a cut zip: torch says
+        kind = "a text file" if _looks_like_text(path) else "neither a zip archive nor a pickle"
+        raise WeightsError(f"is not a PyTorch checkpoint ({kind}); give a file written by torch.save", path)
+
+
+def _looks_like_text(path: Path) -> bool:
+    with open(path, "rb") as fh:
+        chunk = fh.read(4096)
+    try:
+        chunk.decode("utf-8")
+    except UnicodeDecodeError:
+        return False
+    return b"\x00" not in chunk
+
+
 def load_state_dict_checked(model: "torch.nn.Module", path: str | Path) -> None:
     """Load ``path`` into ``model`` with ``strict=True``; any problem is a one-line WeightsError."""
     import torch  # here, not at import: `slam-lcd weights` and the resolver need no torch
 
     path = Path(path)
+    _check_checkpoint_container(path)
     try:
         obj = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as e:  # corrupt zip/pickle, truncated file, not a torch file

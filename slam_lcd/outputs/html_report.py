@@ -81,6 +81,8 @@ def _errors_table(ev: dict) -> list[str]:
         ratio = ba["ratio_after_before"]
         for part, unit, key in (("translation", "m", "translation_m"), ("rotation", "deg", "rotation_deg")):
             b, a = ba["before"][key], ba["after"][key]
+            if b is None:  # position-only ground truth: no rotation error
+                continue
             r = "" if part == "rotation" else ("odometry error ~0: no ratio" if ratio is None else f"{100 * ratio:.1f}%")
             if part == "rotation" and b["rmse"] >= 1e-6:
                 r = f"{100 * a['rmse'] / b['rmse']:.1f}%"
@@ -89,6 +91,8 @@ def _errors_table(ev: dict) -> list[str]:
             out.append(f"<tr><td class=t>{name} {part} max ({unit})</td><td>{b['max']:.4f}</td>"
                        f"<td>{a['max']:.4f}</td><td></td></tr>")
     out.append("</table>")
+    if ev.get("not_measured"):
+        out.append(f"<p>Position only (PointStamped ground truth): {_e(ev['not_measured'])}.</p>")
     return out
 
 

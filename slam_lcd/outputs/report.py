@@ -14,17 +14,20 @@ from pathlib import Path
 from .. import __version__
 from ..atomic import write_text
 from ..backend.pose_graph import ACCEPTED
+from ..sensors.ground_truth import POSITION_ONLY_REASON
 from .report_schema import REPORT_SCHEMA_VERSION
 from .result import RunResult, ratio_or_none
 
 
 def _errors_dict(translation, rotation, n: int) -> dict:
-    return {"translation_m": translation.to_dict(), "rotation_deg": rotation.to_dict(), "pairs": int(n)}
+    """``rotation`` None: not measured (position-only ground truth), null in report.json."""
+    return {"translation_m": translation.to_dict(), "rotation_deg": rotation.to_dict() if rotation is not None else None,
+            "pairs": int(n)}
 
 
-def _before_after(before, after) -> dict:
-    return {"before": _errors_dict(before.translation, before.rotation, len(before.errors)),
-            "after": _errors_dict(after.translation, after.rotation, len(after.errors)),
+def _before_after(before, after, rotation: bool = True) -> dict:
+    return {"before": _errors_dict(before.translation, before.rotation if rotation else None, len(before.errors)),
+            "after": _errors_dict(after.translation, after.rotation if rotation else None, len(after.errors)),
             "ratio_after_before": ratio_or_none(after.rmse, before.rmse)}
 
 
@@ -52,12 +55,13 @@ def report_facts(result: RunResult, cfg, rows: list[dict], ate_before, ate_after
     ev = None
     if ate_before is not None:
         e = cfg.eval
+        position_only = result.gt_position_only  # PointStamped: no rotation error, no RPE (the rotations are not known)
         ev = {"alignment": e.align, "t_max_diff_s": float(e.t_max_diff), "t_offset_s": float(e.t_offset),
               "rpe_delta": float(e.rpe_delta), "rpe_delta_unit": e.rpe_delta_unit,
-              "ate": _before_after(ate_before, ate_after),
-              "rpe": _before_after(rpe_before, rpe_after) if rpe_before is not None else None,
-              # PointStamped ground truth: ATE on translation only (the rotations are not known)
-              "gt_position_only": "position-only" in (result.alignment or "")}
+              "ate": _before_after(ate_before, ate_after, rotation=not position_only),
+              "rpe": (_before_after(rpe_before, rpe_after) if rpe_before is not None and not position_only else None),
+              "gt_position_only": position_only,
+              "not_measured": POSITION_ONLY_REASON if position_only else None}
     return {
         "schema": REPORT_SCHEMA_VERSION,
         "slam_lcd_version": __version__,
@@ -90,9 +94,12 @@ def command_text(command_line) -> str:
 def _stats_line(name: str, ba: dict, unit_t="m", unit_r="deg") -> list[str]:
     b, a = ba["before"], ba["after"]
     ratio = ba["ratio_after_before"]
-    return [f"| {name} translation RMSE ({unit_t}) | {b['translation_m']['rmse']:.4f} | {a['translation_m']['rmse']:.4f} | "
-            + (f"{100 * ratio:.1f}% |" if ratio is not None else "(odometry error ~0) |"),
-            f"| {name} rotation RMSE ({unit_r}) | {b['rotation_deg']['rmse']:.3f} | {a['rotation_deg']['rmse']:.3f} | |"]
+    lines = [f"| {name} translation RMSE ({unit_t}) | {b['translation_m']['rmse']:.4f} | {a['translation_m']['rmse']:.4f} | "
+             + (f"{100 * ratio:.1f}% |" if ratio is not None else "(odometry error ~0) |")]
+    if b["rotation_deg"] is not None:  # None: position-only ground truth
+        lines.append(f"| {name} rotation RMSE ({unit_r}) | {b['rotation_deg']['rmse']:.3f} | "
+                     f"{a['rotation_deg']['rmse']:.3f} | |")
+    return lines
 
 
 def write_report(out_dir: Path, facts: dict, summary_lines: list[str]) -> None:
@@ -110,6 +117,8 @@ def write_report(out_dir: Path, facts: dict, summary_lines: list[str]) -> None:
         md += _stats_line("ATE", ev["ate"])
         if ev["rpe"] is not None:
             md += _stats_line(f"RPE ({ev['rpe_delta']:g} {ev['rpe_delta_unit']})", ev["rpe"])
+        if ev.get("not_measured"):
+            md += ["", f"Position only (PointStamped ground truth): {ev['not_measured']}."]
     if facts["accepted_loops"]:
         md += ["", "## Accepted loops", "", "| query | match | inliers | GT distance (m) | error (m / deg) |",
                "|---|---|---|---|---|"]

@@ -19,7 +19,8 @@ _STATS = {"type": "object", "required": ["rmse", "mean", "median", "std", "min",
           "properties": {k: _NUM for k in ("rmse", "mean", "median", "std", "min", "max")}}
 _ERRORS = {  # one trajectory's ATE or RPE: translation (m) and rotation (deg) statistics
     "type": "object", "required": ["translation_m", "rotation_deg", "pairs"],
-    "properties": {"translation_m": _STATS, "rotation_deg": _STATS, "pairs": {"type": "integer", "minimum": 0}},
+    "properties": {"translation_m": _STATS, "rotation_deg": {**_STATS, "type": ["object", "null"]},  # null: position-only GT
+                   "pairs": {"type": "integer", "minimum": 0}},
 }
 _BEFORE_AFTER = {
     "type": "object", "required": ["before", "after", "ratio_after_before"],
@@ -66,6 +67,7 @@ REPORT_SCHEMA: dict[str, Any] = {
                               "gt_position_only"],
                  "properties": {"alignment": {"enum": ["none", "se3", "sim3", "scale"]},
                                 "gt_position_only": {"type": "boolean"},
+                                "not_measured": {"type": ["string", "null"]},  # why no rotation error / RPE
                                 "t_max_diff_s": _NUM, "t_offset_s": _NUM, "rpe_delta": _NUM,
                                 "rpe_delta_unit": {"enum": ["frames", "m"]},
                                 "ate": _BEFORE_AFTER, "rpe": {"type": ["object", "null"], **{

@@ -53,6 +53,11 @@ class RunResult:
     localization: dict | None = None
 
     @property
+    def gt_position_only(self) -> bool:
+        """The ground truth has positions only (PointStamped): no rotation error, no RPE."""
+        return "position-only" in (self.alignment or "")
+
+    @property
     def ate_ratio(self) -> float | None:
         return ratio_or_none(self.ate_after, self.ate_before)
 

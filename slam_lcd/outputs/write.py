@@ -127,7 +127,7 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
         skipped.append("graph.g2o: not written (no keyframe yet)")
 
     rows = loop_rows(pipe.candidate_records, pipe.loop_records, pipe.keyframes, gt,
-                     position_only="position-only" in (result.alignment or ""), keyframe_poses=kf_corr)
+                     position_only=result.gt_position_only, keyframe_poses=kf_corr)
     write_loops_csv(out_dir / "loops.csv", rows)
     outputs.append("loops.csv")
 
@@ -148,7 +148,7 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
         except SlamLcdError as e:  # the trajectories are still worth having
             ate_before = ate_after = None
             log.warning("ATE against the ground truth not computed: %s", e.problem)
-    if ate_before is not None:
+    if ate_before is not None and not result.gt_position_only:  # RPE needs the ground truth's orientation
         try:
             rpe_before, rpe_after = (rpe_with_config(gt, t, cfg.eval) for t in (odom, corrected))
         except SlamLcdError as e:  # e.g. a log shorter than one RPE step

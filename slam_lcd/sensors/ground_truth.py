@@ -17,9 +17,11 @@ odometry's body is not estimated and stays in the ATE (docs/io.md says how much)
 """
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
-from ..errors import InputError, MessageEncodingError
+from ..errors import InputError, MessageEncodingError, stamp_text
 from ..io.decode import decode_pose
 from ..io.tf import TfBuffer, TfLookupError
 from ..types import Trajectory
@@ -30,6 +32,11 @@ POINT_TYPE = "geometry_msgs/msg/PointStamped"
 GT_TYPES = (*POSE_GT_TYPES, POINT_TYPE)
 TF_TYPE = "tf2_msgs/msg/TFMessage"
 POSITION_ONLY_NOTE = "position-only ground truth (PointStamped): ATE on translation"
+# why a run against position-only ground truth reports no rotation error and no RPE
+POSITION_ONLY_REASON = ("a point has no orientation, so there is no rotation error and no RPE (the RPE takes each "
+                        "pair's motion in the ground truth's orientation)")
+
+log = logging.getLogger(__name__)
 
 
 def split_tf_spec(spec: str) -> tuple[str, str | None, str | None]:
@@ -69,3 +76,22 @@ def ground_truth_from_tf(reader, topic: str, parent: str, child: str, static_top
     except TfLookupError as e:
         raise InputError(f"--gt-topic {topic}:{parent}:{child}: {e.problem}", reader.path) from None
     return Trajectory(stamps, poses, None, frame_id=parent.lstrip("/"), child_frame_id=child.lstrip("/"))
+
+
+def ground_truth_from_messages(stamps, poses, log_path, topic: str) -> Trajectory | None:
+    """The ground truth read from ``topic`` while the log streams, in time order (None: no message).
+
+    A repeated stamp is kept with one warning line, as ``slam-lcd ate`` does with a file: the
+    ATE's time association picks one of the poses, and where the ground truth is interpolated
+    (at keyframe stamps) the first pose of the stamp counts.
+    """
+    if not len(stamps):
+        return None
+    st = np.asarray(stamps, np.int64)
+    order = np.argsort(st, kind="stable")
+    st = st[order]
+    rep = np.flatnonzero(np.diff(st) == 0)
+    if rep.size:
+        log.warning("%s: topic %s: %d repeated ground-truth stamp(s) (first: %s); both poses are kept",
+                    log_path, topic, int(rep.size), stamp_text(int(st[rep[0]])))
+    return Trajectory(st, np.asarray(poses)[order])

@@ -12,7 +12,8 @@ import contextlib
 
 import numpy as np
 
-from ..errors import DamagedImageError, MessageEncodingError, PipelineError, SlamLcdError, in_context, stamp_text
+from ..errors import (CalibrationError, DamagedImageError, MessageEncodingError, PipelineError, SlamLcdError,
+                      in_context, stamp_text)
 from ..vision.camera import normalise_camera
 from ..io.decode import decode_camera_info, decode_compressed_image, decode_image, decode_pose
 from ..types import CameraModel
@@ -107,3 +108,51 @@ def check_first_messages(reader, topics) -> dict:
             pass  # one damaged frame is skipped while streaming (and counted in a warning)
         first[topic] = m
     return first
+
+
+def _size(wh) -> str:
+    return f"{wh[0]}x{wh[1]}"
+
+
+def check_image_sizes(reader, topics, first: dict, calibrated=None, calibration=None) -> None:
+    """The camera model and the depth images must be of the images' size; else one line naming both.
+
+    Checked on the first messages (:func:`check_first_messages`), before any work: the
+    calibration file's ``resolution`` of the image topic's camera, the CameraInfo's
+    width x height (0 x 0: not stated, not checked) and the depth image's size against the
+    first image's. Nothing is resampled: intrinsics of another size put every point in the
+    wrong place, and a depth image of another size gives the wrong depth to every pixel.
+    """
+    m = first.get(topics.image)
+    if m is None:
+        return
+    try:
+        img = decode_any_image(m)
+    except SlamLcdError:
+        return  # a damaged first frame: the stream skips it (and says so)
+    image = (int(img.shape[1]), int(img.shape[0]))
+    if calibrated is not None:
+        cam = calibrated.camera
+        if (cam.width, cam.height) != image:
+            source = calibration.sources[0] if calibration is not None and calibration.sources else None
+            raise CalibrationError(f"camera {calibrated.name} has resolution {_size((cam.width, cam.height))} but "
+                                   f"the images of {topics.image} in {reader.path} are {_size(image)}; give the "
+                                   "calibration of this camera at this image size", source)
+    info = first.get(topics.camera_info) if topics.camera_info else None
+    if info is not None:
+        w, h = int(info.msg.width), int(info.msg.height)
+        if (w, h) != (0, 0) and (w, h) != image:
+            raise PipelineError(f"CameraInfo {topics.camera_info} is for {_size((w, h))} images but the images of "
+                                f"{topics.image} are {_size(image)}: the intrinsics do not fit the images",
+                                reader.path)
+    d = first.get(topics.depth) if topics.depth else None
+    if d is not None:
+        try:
+            depth = decode_depth(d)
+        except SlamLcdError:
+            return
+        dsize = (int(depth.shape[1]), int(depth.shape[0]))
+        if dsize != image:
+            raise PipelineError(f"depth images of {topics.depth} are {_size(dsize)} but the images of {topics.image} "
+                                f"are {_size(image)}: depth must be registered to the image, pixel for pixel",
+                                reader.path)

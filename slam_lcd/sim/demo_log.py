@@ -28,6 +28,7 @@ The same arguments give byte-identical files.
 from __future__ import annotations
 
 import logging
+import math
 import os
 import time
 from dataclasses import dataclass, field
@@ -129,6 +130,10 @@ class _Scenario:
         return build_world(self.world_seed)  # cached per seed; built only when rendering
 
 
+MAX_CAMERA_RATE_HZ = 1000.0  # a camera period of 1 ms; more is no camera, and the frames would never end
+MAX_ODOM_RATE_HZ = 10000.0
+
+
 def _scenario(frames, seed, kind, laps, width, height, camera_rate, odom_rate, stereo, hfov_deg=70.0, *,
               world_seed: int | None = None, start_at: float | None = None, lighting: float = 0.0,
               exposure: float = 1.0, start_ns: int = START_NS, odom_at_start: bool = False,
@@ -138,8 +143,14 @@ def _scenario(frames, seed, kind, laps, width, height, camera_rate, odom_rate, s
     Cheap (no world is built until ``.world`` is read), so the routes and odometry of
     sessions can be studied without rendering.
     """
-    if camera_rate <= 0 or odom_rate <= 0:
-        raise InputError("camera and odometry rates must be positive")
+    for name, rate, most in (("--rate (camera rate)", camera_rate, MAX_CAMERA_RATE_HZ),
+                             ("odometry rate", odom_rate, MAX_ODOM_RATE_HZ)):
+        if not 0 < float(rate) <= most:  # NaN fails too
+            raise InputError(f"{name} must be a number of Hz above 0 and at most {most:g}, got {rate}")
+    if not (math.isfinite(float(laps)) and laps > 0):
+        raise InputError(f"--laps must be a finite number above 0, got {laps}")
+    if int(seed) < 0:
+        raise InputError(f"--seed must be 0 or more, got {seed}")
     if not np.isfinite(exposure) or exposure <= 0:
         raise InputError(f"exposure must be a positive factor, got {exposure}")
     if not np.isfinite(lighting) or lighting < 0:
