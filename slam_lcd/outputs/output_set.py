@@ -48,8 +48,10 @@ class OutputSet:
     # ------------------------------------------------------------------ before any work
     def check(self, inputs: Mapping[str, str | Path | None]) -> None:
         """Refuse clashes with inputs and unwritable targets, writing nothing."""
+        # clashes first: the writability probe must not touch an input folder either
+        check_no_clash({"the output folder": self.target, **{n: self.target / n for n in self.names}}, inputs,
+                       merged=[self.target])
         check_writable_target(self.target, folder=True)
-        check_no_clash([self.target, *(self.target / n for n in self.names)], inputs)
 
     # ------------------------------------------------------------------ writing
     @property
