@@ -1,9 +1,10 @@
 """Atomic output: write to a temporary name beside the target, then rename into place.
 
-A crash or Ctrl-C never leaves a half-written output under the final name, nor a
-temporary file beside it (creating and removing the temporary folder, and the final
-rename, run with Ctrl-C held back: :func:`slam_lcd.interrupts.defer_sigint`), and an input
-file can never be overwritten by accident (``guard_not_input``, :func:`check_no_clash`).
+A Ctrl-C, SIGTERM or SIGHUP never leaves a half-written output under the final name, nor a
+temporary folder beside it (creating the temporary folder and the final rename run with
+those signals held back, :func:`slam_lcd.interrupts.defer_sigint`; removing it runs to its
+end whatever arrives, :func:`slam_lcd.interrupts.finish`), and an input can never be
+overwritten by accident (``guard_not_input``, :func:`check_no_clash`).
 """
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ import tempfile
 from pathlib import Path
 from typing import Iterable, Iterator, Mapping
 
-from .interrupts import defer_sigint
+from .interrupts import defer_sigint, finish
 
 
 @contextlib.contextmanager
@@ -26,16 +27,17 @@ def atomic_path(target: str | Path, *, directory: bool = False) -> Iterator[Path
     """
     target = Path(target)
     target.parent.mkdir(parents=True, exist_ok=True)
-    with defer_sigint():
-        tmpdir = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
-    tmp = tmpdir / target.name
-    try:
+    made: list[Path] = []
+    try:  # from before the folder exists: a signal held while it is made is raised inside this try
+        with defer_sigint():
+            made.append(Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent)))
+        tmp = made[0] / target.name
         yield tmp
         with defer_sigint():
             replace_path(tmp, target)
     finally:
-        with defer_sigint():
-            shutil.rmtree(tmpdir, ignore_errors=True)
+        if made:
+            finish(shutil.rmtree, made[0], True)
 
 
 def replace_path(src: Path, target: Path) -> None:

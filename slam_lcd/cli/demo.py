@@ -106,4 +106,6 @@ def run(args) -> int:
     for line in res.summary_lines():
         print(f"  {line}")
     print(f"outputs in {res.out_dir}/ (corrected.tum, loops.csv, report.md, trajectory.png, ...)")
-    return 130 if res.interrupted else 0
+    from ..interrupts import exit_status
+
+    return exit_status() if res.interrupted else 0  # 130 Ctrl-C, 143 SIGTERM, 129 SIGHUP
