@@ -220,3 +220,63 @@ def test_atomic_writers_leave_no_temporary_under_a_storm_of_signals(tmp_path):
     writes, stopped = map(int, out.split())
     assert stopped > 50 and writes > 50, (writes, stopped, sent)
     assert sorted(x.name for x in d.iterdir()) <= ["t.bin", "t.mcap"], sorted(x.name for x in d.iterdir())
+
+
+def _batch_started(small_log, tmp_path, tag: str):
+    """`batch` of three copies of the small log on a pool of 2 workers, returned once a worker is mid-log."""
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    for name in "abc":
+        shutil.copy(small_log, logs / f"{name}.mcap")
+    out = tmp_path / "out"
+    p = _start(["batch", logs, "--out", out, "--workers", "2", *ORB], tag=tag)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and p.poll() is None:
+        if out.is_dir() and any(x.name.startswith(".slam-lcd-staging") for x in out.iterdir()):
+            return p, out
+        time.sleep(0.05)
+    _, err = p.communicate(timeout=60)
+    pytest.fail(f"no log started (rc {p.returncode}): {err}")
+
+
+def _none_alive(tag: str, within_s: float) -> list[int]:
+    deadline = time.monotonic() + within_s
+    while (alive := _tagged(tag)) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    return alive
+
+
+@pytest.mark.skipif(not Path("/proc/self/environ").exists(), reason="needs /proc")
+def test_batch_killed_by_sigterm_stops_its_workers_and_writes_a_partial_summary(small_log, tmp_path):
+    """SIGTERM to the batch's driver: exit 143, the running logs write partial sets, the summary is
+    written marked partial, no staging folder stays, and 5 s later no process of the batch is alive
+    (workers, fork server, resource tracker)."""
+    tag = uuid.uuid4().hex
+    p, out = _batch_started(small_log, tmp_path, tag)
+    p.send_signal(signal.SIGTERM)
+    stdout, err = p.communicate(timeout=120)
+    assert p.returncode == 143, (stdout, err)
+    assert "Traceback" not in err, err
+    assert not _none_alive(tag, 5.0), "processes of the batch still alive 5 s after it ended"
+    assert "SIGTERM" in (out / "PARTIAL.txt").read_text()
+    assert (out / "summary.csv").exists()
+    assert not leftovers(out), leftovers(out)
+    for d in out.iterdir():  # a log's folder is complete or marked partial, never a mix
+        if d.is_dir():
+            assert (d / "PARTIAL.txt").exists() or (d / "report.json").exists(), sorted(x.name for x in d.iterdir())
+
+
+@pytest.mark.skipif(not Path("/proc/self/environ").exists(), reason="needs /proc")
+def test_batch_driver_killed_outright_stops_its_workers(small_log, tmp_path):
+    """The driver killed with SIGKILL (nothing of it runs): its workers notice, stop their logs (a set
+    marked partial or nothing), run nothing more and exit, and the fork server and resource tracker go
+    with them; a later run into a log's folder finds no staging folder of a gone process."""
+    tag = uuid.uuid4().hex
+    p, out = _batch_started(small_log, tmp_path, tag)
+    p.kill()
+    p.communicate(timeout=60)
+    assert not _none_alive(tag, 10.0), "processes of the batch still alive 10 s after its driver died"
+    assert not leftovers(out), leftovers(out)
+    for d in out.iterdir():  # a log's folder is complete or marked partial, never a mix
+        if d.is_dir():
+            assert (d / "PARTIAL.txt").exists() or (d / "report.json").exists(), sorted(x.name for x in d.iterdir())
