@@ -16,13 +16,23 @@ def _forget_caught_keyboard_interrupt() -> None:
     exec("None", {})  # noqa: S102 - a constant; the call itself is what clears the flag
 
 
+from .interrupts import STOP_SIGNALS, Terminated, exit_status, install_stop_signals, interrupt_behind
+
+install_stop_signals()  # SIGTERM / SIGHUP while the command line loads: one line too
 try:
     from .cli.main import main
-except KeyboardInterrupt:  # Ctrl-C while the command line loads (imports run dataclasses' exec): one line
-    print("slam-lcd: interrupted", file=sys.stderr)
+except (KeyboardInterrupt, ImportError) as caught:  # Ctrl-C while the command line loads: one line
+    e = interrupt_behind(caught)  # an extension module interrupted while it initialised: ImportError from it
+    if e is None:
+        raise
+    print(f"slam-lcd: terminated ({e})" if isinstance(e, Terminated) else "slam-lcd: interrupted", file=sys.stderr)
     _forget_caught_keyboard_interrupt()
-    sys.exit(130)
+    sys.exit(exit_status(e))
 
 status = main()
+import signal  # noqa: E402
+
+for _s in STOP_SIGNALS:  # the command has ended: a SIGTERM now must not turn its status into a traceback
+    signal.signal(_s, signal.SIG_IGN)
 _forget_caught_keyboard_interrupt()
 sys.exit(status)

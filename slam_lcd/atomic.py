@@ -1,9 +1,10 @@
 """Atomic output: write to a temporary name beside the target, then rename into place.
 
-A crash or Ctrl-C never leaves a half-written output under the final name, nor a
-temporary file beside it (creating and removing the temporary folder, and the final
-rename, run with Ctrl-C held back: :func:`slam_lcd.interrupts.defer_sigint`), and an input
-file can never be overwritten by accident (``guard_not_input``, :func:`check_no_clash`).
+A Ctrl-C, SIGTERM or SIGHUP never leaves a half-written output under the final name, nor a
+temporary folder beside it (creating the temporary folder and the final rename run with
+those signals held back, :func:`slam_lcd.interrupts.defer_sigint`; removing it runs to its
+end whatever arrives, :func:`slam_lcd.interrupts.finish`), and an input can never be
+overwritten by accident (``guard_not_input``, :func:`check_no_clash`).
 """
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ import tempfile
 from pathlib import Path
 from typing import Iterable, Iterator, Mapping
 
-from .interrupts import defer_sigint
+from .interrupts import defer_sigint, finish
 
 
 @contextlib.contextmanager
@@ -26,16 +27,17 @@ def atomic_path(target: str | Path, *, directory: bool = False) -> Iterator[Path
     """
     target = Path(target)
     target.parent.mkdir(parents=True, exist_ok=True)
-    with defer_sigint():
-        tmpdir = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
-    tmp = tmpdir / target.name
-    try:
+    made: list[Path] = []
+    try:  # from before the folder exists: a signal held while it is made is raised inside this try
+        with defer_sigint():
+            made.append(Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent)))
+        tmp = made[0] / target.name
         yield tmp
         with defer_sigint():
             replace_path(tmp, target)
     finally:
-        with defer_sigint():
-            shutil.rmtree(tmpdir, ignore_errors=True)
+        if made:
+            finish(shutil.rmtree, made[0], True)
 
 
 def replace_path(src: Path, target: Path) -> None:
@@ -86,20 +88,51 @@ def _inside(path: Path, folder: Path) -> bool:
         return False
 
 
-def check_no_clash(outputs: Iterable[str | Path], inputs: Mapping[str, str | Path | None]) -> None:
-    """Refuse, before any work, an output that is an input or lies inside an input folder.
+def _log_folder(path: Path) -> Path | None:
+    """The rosbag2 folder a file belongs to (its ``.db3`` / ``.mcap`` beside ``metadata.yaml``), if any."""
+    if path.is_file() and (path.parent / "metadata.yaml").is_file():
+        return path.parent
+    return None
 
-    ``inputs`` maps what the input is (``'log'``, ``'--gt'``, ``'--config'`` ...) to its path;
-    None values are skipped. The error names the output, the flag and the input path.
+
+def check_no_clash(outputs: Iterable[str | Path] | Mapping[str, str | Path | None],
+                   inputs: Mapping[str, str | Path | None], *, merged: Iterable[str | Path] = ()) -> None:
+    """Refuse, before any work, outputs that would change an input or each other.
+
+    ``outputs`` maps what each output is (``'OUT'``, ``'--loops-csv'`` ...) to its path (a
+    plain list names them by their paths); ``inputs`` maps what each input is (``'the log'``,
+    ``'--gt'``, ``'--config'`` ...) to its path. None values are skipped. Refused:
+
+    - an output that is an input (same file: symlinks and hard links included);
+    - an output inside an input folder (a rosbag2 bag, an image folder; a file of a rosbag2
+      bag counts as its whole folder);
+    - an input inside an output folder, which the output would replace or remove;
+    - two outputs on one path, or an output inside another output's folder.
+
+    ``merged``: outputs that are folders merged into rather than replaced (an output set's
+    folder, :class:`slam_lcd.outputs.output_set.OutputSet`): files of other names inside
+    them (inputs, other outputs) are left alone, so only their own names count.
+    The error names the output, its flag and the other path.
     """
     from .errors import InputError
 
-    outs = [Path(o) for o in outputs]
+    if isinstance(outputs, Mapping):
+        outs = [(str(w), Path(o)) for w, o in outputs.items() if o is not None and str(o) != ""]
+    else:
+        outs = [(str(o), Path(o)) for o in outputs if o is not None and str(o) != ""]
+    kept = {Path(m).resolve() for m in merged}
+    replaced = [(w, o) for w, o in outs if o.resolve() not in kept]
+    ins = []
     for what, inp in inputs.items():
         if inp is None or str(inp) == "":
             continue
         ip = Path(inp)
-        for o in outs:
+        ins.append((what, ip, inp))
+        folder = _log_folder(ip)
+        if folder is not None:
+            ins.append((f"{what} (its rosbag2 folder)", folder, folder))
+    for what, ip, inp in ins:
+        for _, o in outs:
             if same_path(o, ip):
                 raise InputError(
                     f"this output would overwrite the input given as {what} ({inp}); "
@@ -108,6 +141,19 @@ def check_no_clash(outputs: Iterable[str | Path], inputs: Mapping[str, str | Pat
                 raise InputError(
                     f"this output lies inside the input folder given as {what} ({inp}); "
                     "refusing to write into an input", o)
+        for _, o in replaced:
+            if _inside(ip, o):
+                raise InputError(
+                    f"the input given as {what} ({inp}) lies inside this output folder, which would replace "
+                    "it; refusing to write over an input: choose another output", o)
+    for i, (wa, a) in enumerate(outs):
+        for wb, b in outs[i + 1:]:
+            if same_path(a, b):
+                raise InputError(f"two outputs on one path ({wa} and {wb}); give each its own path", b)
+        for wb, b in replaced:
+            if b is not a and not same_path(a, b) and _inside(a, b):
+                raise InputError(f"this output ({wa}) lies inside the output folder {wb}, which is written as a "
+                                 "whole; give each its own path", a)
 
 
 def guard_not_input(out: str | Path, *inputs: str | Path) -> None:

@@ -1,12 +1,19 @@
-"""Ctrl-C that waits for a short critical section to finish.
+"""Ctrl-C, SIGTERM and SIGHUP: one way to stop, which waits for a short critical section to finish.
 
 Why: a few steps must happen together or not at all (iSAM2 update and the pose graph's
 bookkeeping, renaming an output set into place, removing a temporary folder). Python
 raises ``KeyboardInterrupt`` between any two bytecodes, so a Ctrl-C in the middle of such
-a step would leave half of it done. :func:`defer_sigint` holds SIGINT back for the
-duration of the block and re-raises it right after, so the state is consistent on either
+a step would leave half of it done. :func:`defer_sigint` holds the stop signals back for the
+duration of the block and re-raises them right after, so the state is consistent on either
 side of the interrupt. It does nothing outside the main thread (signals are only
-delivered there) or when someone else installed a SIGINT handler.
+delivered there) or for a signal whose handler someone else installed.
+
+SIGTERM (``timeout``, ``systemd``, ``docker stop``, cluster schedulers) and SIGHUP (the
+terminal closed) take the same path as Ctrl-C once :func:`install_stop_signals` ran (the
+command line does it first): they raise :class:`Terminated`, a ``KeyboardInterrupt``, so
+every ``except KeyboardInterrupt`` / ``finally`` that makes Ctrl-C safe makes them safe too.
+The exit status says which signal stopped the command (:func:`exit_status`): 130 for Ctrl-C,
+143 for SIGTERM, 129 for SIGHUP (128 + the signal's number, as a shell reports it).
 """
 from __future__ import annotations
 
@@ -15,36 +22,139 @@ import signal
 import sys
 import threading
 
+# signals turned into Terminated (SIGHUP does not exist on every platform)
+STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGTERM", "SIGHUP") if hasattr(signal, n))
+_received: list[int] = []  # the stop signals this process took, first first (exit status, messages)
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM or SIGHUP, raised where a Ctrl-C would be (``signum`` says which)."""
+
+    def __init__(self, signum: int):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+def _terminate(signum, frame):  # noqa: ARG001 - signal handler signature
+    _received.append(signum)
+    raise Terminated(signum)
+
+
+def install_stop_signals() -> None:
+    """Make SIGTERM and SIGHUP raise :class:`Terminated` in the main thread (the command line's set-up).
+
+    A signal someone set to be ignored (``nohup``) stays ignored; the handlers of a caller
+    that installed its own are left alone.
+    """
+    _received.clear()
+    if threading.current_thread() is not threading.main_thread():
+        return
+    for s in STOP_SIGNALS:
+        try:
+            if signal.getsignal(s) in (signal.SIG_DFL, _terminate):
+                signal.signal(s, _terminate)
+        except (ValueError, OSError):  # pragma: no cover - no signal support here
+            pass
+
+
+def _is_ours(signum: int, handler) -> bool:
+    return handler is (signal.default_int_handler if signum == signal.SIGINT else _terminate)
+
+
+def signal_name(exc: BaseException | None = None) -> str:
+    """'SIGTERM' / 'SIGHUP' for a stop by that signal (``exc`` or the first one this process took), else 'Ctrl-C'."""
+    if isinstance(exc, Terminated):
+        return signal.Signals(exc.signum).name
+    if exc is None and _received:
+        return signal.Signals(_received[0]).name
+    return "Ctrl-C"
+
+
+def interrupted_word() -> str:
+    """'interrupted' after a Ctrl-C, 'interrupted (SIGTERM)' after that signal (warning lines)."""
+    name = signal_name()
+    return "interrupted" if name == "Ctrl-C" else f"interrupted ({name})"
+
+
+def exit_status(exc: BaseException | None = None) -> int:
+    """Exit status of a command stopped by ``exc`` (or, None, by the first stop signal taken): 128 + signal."""
+    if isinstance(exc, Terminated):
+        return 128 + exc.signum
+    if exc is None and _received:
+        return 128 + _received[0]
+    return 128 + signal.SIGINT
+
+
+def interrupt_behind(exc: BaseException) -> KeyboardInterrupt | None:
+    """The Ctrl-C / SIGTERM that caused ``exc``, if any (an extension module whose initialisation
+    the signal interrupted raises ``ImportError: initialization failed`` from it)."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None
+
 
 @contextlib.contextmanager
 def defer_sigint():
-    """Run the block with Ctrl-C postponed; a Ctrl-C during it is raised when it ends."""
+    """Run the block with Ctrl-C, SIGTERM and SIGHUP postponed; one that came is raised when it ends."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     try:
-        previous = signal.getsignal(signal.SIGINT)
+        held = {s: signal.getsignal(s) for s in (signal.SIGINT, *STOP_SIGNALS)}
     except (ValueError, OSError):  # pragma: no cover - no signal support here
         yield
         return
-    if previous is not signal.default_int_handler:
-        yield  # a custom handler (or SIG_IGN) owns Ctrl-C: leave it alone
-        return
-    received = []
+    held = {s: h for s, h in held.items() if _is_ours(s, h)}  # a custom handler (or SIG_IGN) owns the rest
+    received: list[int] = []
 
     def hold(signum, frame):  # noqa: ARG001 - signal handler signature
         received.append(signum)
 
-    signal.signal(signal.SIGINT, hold)
+    installed = []
     try:
+        for s, h in held.items():
+            signal.signal(s, hold)
+            installed.append((s, h))
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for s, h in installed:
+            signal.signal(s, h)
         if received:
+            stop = [s for s in received if s != signal.SIGINT]
+            if stop:
+                _received.append(stop[0])
+                raise Terminated(stop[0])
             raise KeyboardInterrupt
 
 
-_resend = threading.Event()  # set by the hook below: the helper thread sends SIGINT again
+defer_interrupts = defer_sigint  # the same, by what it does
+
+
+def finish(step, *args) -> None:
+    """Run ``step(*args)`` to its end whatever stop signals arrive; the first one is raised afterwards.
+
+    For clean-up (removing a temporary folder): an interrupt that lands before the deferral
+    starts makes the step run again instead of being skipped (so it must be harmless to repeat).
+    """
+    pending = None
+    done = False
+    while not done:
+        try:
+            with defer_sigint():
+                step(*args)
+                done = True
+        except KeyboardInterrupt as e:
+            pending = pending or e
+    if pending is not None:
+        raise pending
+
+
+_resend = threading.Event()  # set by the hook below: the helper thread sends the signal again
+_resend_signals: list[int] = []
 _resender: threading.Thread | None = None
 
 
@@ -52,7 +162,8 @@ def _resend_sigint() -> None:
     while True:
         _resend.wait()
         _resend.clear()
-        signal.raise_signal(signal.SIGINT)
+        while _resend_signals:
+            signal.raise_signal(_resend_signals.pop(0))
 
 
 def keep_lost_interrupts() -> None:
@@ -79,10 +190,12 @@ def keep_lost_interrupts() -> None:
 
     def hook(unraisable) -> None:
         if (unraisable.exc_type is not None and issubclass(unraisable.exc_type, KeyboardInterrupt)
-                and threading.current_thread() is threading.main_thread()
-                and callable(signal.getsignal(signal.SIGINT))):
-            _resend.set()
-            return
+                and threading.current_thread() is threading.main_thread()):
+            signum = getattr(unraisable.exc_value, "signum", signal.SIGINT)  # a SIGTERM is sent again as one
+            if callable(signal.getsignal(signum)):
+                _resend_signals.append(signum)
+                _resend.set()
+                return
         previous(unraisable)
 
     hook._slam_lcd_keeps_interrupts = True

@@ -21,6 +21,7 @@ from collections import deque
 from pathlib import Path
 
 from .config import Config, validate_config
+from .interrupts import interrupted_word
 from .errors import DamagedImageError, FileMissingError, PipelineError, stamp_text
 from .io import open_log
 from .io.prefetch import prefetched
@@ -192,7 +193,8 @@ def run_log(
         try:
             pipe.finalize(flush=not result.interrupted)
         except KeyboardInterrupt:  # Ctrl-C (maybe a second one): skip the back end's final re-check
-            log.warning("interrupted%s: the back end's final re-check is skipped", " again" if result.interrupted else "")
+            log.warning("%s%s: the back end's final re-check is skipped", interrupted_word(),
+                        " again" if result.interrupted else "")
             notes.append("The back end's final re-check (GNC) was interrupted and skipped.")
             result.interrupted = True
         if not result.interrupted and not pipe.keyframes:
@@ -403,7 +405,7 @@ def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame,
                 pipe.add_image(stamp, left, right_image=right)
     except KeyboardInterrupt:
         result.interrupted = True
-        log.warning("interrupted: writing the partial result")
+        log.warning("%s: writing the partial result", interrupted_word())
     finally:
         stream.close()  # the reading stops before the spool is finished
         bar.close()

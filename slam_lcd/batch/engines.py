@@ -82,7 +82,7 @@ class LocalPoolEngine(Engine):
         ctx.set_forkserver_preload(PRELOAD)
         stop = ctx.Event()
         ex = ProcessPoolExecutor(max_workers=min(self.workers, len(tasks)) or 1, mp_context=ctx,
-                                 initializer=pool_worker_init, initargs=(stop, shared.threads))
+                                 initializer=pool_worker_init, initargs=(stop, shared.threads, os.getpid()))
         futures = {ex.submit(run_task, t, shared): t for t in tasks}
         pending = set(futures)
         try:
@@ -99,7 +99,29 @@ class LocalPoolEngine(Engine):
                     on_row(_future_row(f, futures[f]))
             raise
         finally:
-            ex.shutdown(wait=True, cancel_futures=True)
+            _shut_down(ex, stop)
+
+
+def _shut_down(ex, stop) -> None:
+    """Stop the pool on every way out: wait for its workers; a further interrupt kills them.
+
+    A worker left running would go on with the logs queued to it after the batch stopped (and
+    publish them); its own watcher stops it should this process die outright
+    (:func:`slam_lcd.batch.worker.pool_worker_init`).
+    """
+    try:
+        ex.shutdown(wait=True, cancel_futures=True)
+    except BaseException:  # a second Ctrl-C / SIGTERM while waiting: no more waiting
+        stop.set()
+        for p in list((getattr(ex, "_processes", None) or {}).values()):
+            try:
+                p.kill()
+            except (OSError, ValueError):
+                pass
+        try:
+            ex.shutdown(wait=False, cancel_futures=True)
+        finally:
+            raise
 
 
 def _future_row(f, task: LogTask) -> dict:

@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterable, Sequence
 
+from ..atomic import check_no_clash
 from ..config import Config, validate_config
 from ..errors import FileMissingError, InputError
 from ..interrupts import defer_sigint
@@ -167,6 +168,9 @@ def run_batch(
     entries = discover_logs(logs)
     inputs = {f"log {e.name}": e.path for e in entries}
     inputs.update({"--gt-dir": gt_dir, "--vocab": vocab, **(input_paths or {})})
+    # a log's own folder (DIR/<log name>) must not be a log, nor hold one it would replace
+    folders = {f"the output folder of log {e.name}": out / e.name for e in entries}
+    check_no_clash(folders, inputs, merged=folders.values())
     summary_set(out).check(inputs)
     eng = engine or make_engine(ray, workers, cfg)
     env = _prepare_shared(cfg, vocab)

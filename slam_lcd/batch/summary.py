@@ -61,7 +61,9 @@ def summary_md(rows: Sequence[dict], *, engine: str, wall_s: float, interrupted:
     counts = {s: sum(1 for r in rows if r["status"] == s) for s in dict.fromkeys(r["status"] for r in rows)}
     lines = ["# slam-lcd batch summary", ""]
     if interrupted:
-        lines += ["**Interrupted (Ctrl-C): a partial summary.** Logs marked `interrupted` hold a result marked",
+        from ..interrupts import signal_name
+
+        lines += [f"**Interrupted ({signal_name()}): a partial summary.** Logs marked `interrupted` hold a result marked",
                   "partial (or nothing); `cancelled` ones were not run. Run the same command again to finish.", ""]
     lines += [f"- {len(rows)} logs: " + ", ".join(f"{n} {s}" for s, n in counts.items()),
               f"- engine: {engine}; batch wall time {wall_s:.1f} s", "",
@@ -125,7 +127,9 @@ def write_summary(out_dir: str | Path, rows: Sequence[dict], *, engine: str, wal
     try:
         if interrupted:
             not_done = [r["name"] for r in rows if r["status"] in ("interrupted", "cancelled")]
-            outputs.mark_partial("This batch was interrupted (Ctrl-C): the summary lists every log, but these did "
+            from ..interrupts import signal_name
+
+            outputs.mark_partial(f"This batch was interrupted ({signal_name()}): the summary lists every log, but these did "
                                  f"not finish: {', '.join(not_done) or '(none)'}. Run the same command again to "
                                  "finish them (logs with complete outputs are skipped).")
         write_text(outputs.staging / "summary.csv", summary_csv(rows))

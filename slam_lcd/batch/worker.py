@@ -117,27 +117,39 @@ def limit_threads(n: int | None) -> None:
 
 
 # --------------------------------------------------------------------------- Ctrl-C in a local pool
-_POOL = {"stop": None}
+_POOL = {"stop": None, "orphaned": False}
 _RUNNING = threading.Event()
+DRIVER_POLL_S = 0.25  # how often a pool worker checks that the batch's driver is still there
+ORPHAN_STOP_S = 60.0  # the most an orphaned worker waits for its running log to write its partial set
 
 
-def pool_worker_init(stop_event, threads: int | None) -> None:
+def pool_worker_init(stop_event, threads: int | None, driver_pid: int | None = None) -> None:
     """Initializer of a local-pool worker process (see the module docstring, Ctrl-C).
 
     The worker leaves the terminal's process group, so a Ctrl-C reaches only the driver,
     which passes it on through ``stop_event``: each running log gets exactly one SIGINT.
+    SIGTERM and SIGHUP sent to the worker itself (``systemd`` stops every process of a
+    service) stop its running log the same way; an idle worker leaves them to the driver.
+    When the driver (``driver_pid``) is gone, whatever killed it, the worker stops its running
+    log (a partial set), runs nothing more and exits.
     """
+    from ..interrupts import STOP_SIGNALS
+
     try:
         os.setpgrp()
     except OSError:  # pragma: no cover - already a group leader
         pass
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for s in STOP_SIGNALS:
+        signal.signal(s, signal.SIG_IGN)
     keep_lost_interrupts()  # the SIGINT a stop forwards must not be lost in a finaliser either
     _POOL["stop"] = stop_event
     if threads:
         for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
             os.environ[var] = str(threads)
     threading.Thread(target=_forward_stop, args=(stop_event,), name="slam-lcd-batch-stop", daemon=True).start()
+    if driver_pid is not None:
+        threading.Thread(target=_watch_driver, args=(driver_pid,), name="slam-lcd-batch-driver", daemon=True).start()
 
 
 def _forward_stop(stop_event) -> None:
@@ -146,20 +158,41 @@ def _forward_stop(stop_event) -> None:
         signal.raise_signal(signal.SIGINT)
 
 
+def _watch_driver(driver_pid: int) -> None:
+    """Stop this worker once the batch's driver is gone (see :func:`pool_worker_init`)."""
+    from ..outputs.output_set import _process_alive
+
+    while _process_alive(driver_pid) and os.getppid() != 1:
+        time.sleep(DRIVER_POLL_S)
+    _POOL["orphaned"] = True
+    if _RUNNING.is_set():
+        signal.raise_signal(signal.SIGINT)  # the running log writes its partial set
+        deadline = time.monotonic() + ORPHAN_STOP_S
+        while _RUNNING.is_set() and time.monotonic() < deadline:
+            time.sleep(0.05)
+    os._exit(128 + signal.SIGTERM)
+
+
 # --------------------------------------------------------------------------- one log
 def run_task(task: LogTask, shared: SharedWork) -> dict:
     """Run one log and return its summary row; never raises for a failing log (an error row)."""
+    from ..interrupts import STOP_SIGNALS, _terminate
+
     stop = _POOL["stop"]
     if stop is None:
         return _run(task, shared)
     _RUNNING.set()  # before the stop check: a stop set after it is forwarded as SIGINT
     signal.signal(signal.SIGINT, signal.default_int_handler)
+    for s in STOP_SIGNALS:
+        signal.signal(s, _terminate)
     try:
-        if stop.is_set():
+        if stop.is_set() or _POOL["orphaned"]:
             return cancelled_row(task.name, task.log, task.out_dir)
         return _run(task, shared)
     finally:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+        for s in STOP_SIGNALS:
+            signal.signal(s, signal.SIG_IGN)
         _RUNNING.clear()
 
 

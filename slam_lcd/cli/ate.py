@@ -21,7 +21,7 @@ from ..atomic import write_text
 from ..errors import InputError
 from ..eval.relations import APE_RELATIONS, RPE_RELATIONS
 from ..io.trajectory_files import FORMATS
-from .util import check_output_path, write_guard
+from .util import check_outputs, write_guard
 
 DELTA_UNIT_NAMES = {"f": "f", "frames": "f", "m": "m", "d": "d", "deg": "d", "r": "r", "rad": "r"}
 
@@ -120,11 +120,8 @@ def _check_args(args) -> None:
             raise InputError(f"--delta in frames must be a whole number, got {args.delta}")
         if not math.isfinite(args.delta_tol) or args.delta_tol < 0:
             raise InputError(f"--delta_tol must be >= 0, got {args.delta_tol}")
-    outs = [o for o in (args.save_plot, args.save_results, args.json) if o is not None]
-    for o in outs:
-        check_output_path(o, args.ref, args.est, args.ref_times, args.est_times)
-    if len({str(Path(o).resolve()) for o in outs}) < len(outs):
-        raise InputError("--save_plot, --save_results and --json must name different files")
+    check_outputs({"--save_plot": args.save_plot, "--save_results": args.save_results, "--json": args.json},
+                  {"REF": args.ref, "EST": args.est, "--ref-times": args.ref_times, "--est-times": args.est_times})
 
 
 @contextlib.contextmanager

@@ -2,7 +2,8 @@
 
 Exit status: 0 when every log is ok or skipped; 2 when any log failed (its error row says
 why; the others ran) or when the batch cannot start (bad flags, no log, unwritable --out);
-130 after a Ctrl-C (finished logs kept, the summary written marked partial).
+130 after a Ctrl-C, 143 after SIGTERM, 129 after SIGHUP (finished logs kept, running ones write
+partial sets, the workers stopped, the summary written marked partial).
 """
 from __future__ import annotations
 
@@ -63,5 +64,7 @@ def run(args) -> int:
     for line in res.summary_lines():
         print(line)
     if res.interrupted:
-        return 130
+        from ..interrupts import exit_status
+
+        return exit_status()  # 130 Ctrl-C, 143 SIGTERM, 129 SIGHUP
     return 2 if res.failed else 0

@@ -84,11 +84,17 @@ def run(args) -> int:
     from ..demo import ensure_demo_log
     from ..runner import run_log
 
+    from ..atomic import check_no_clash
+    from ..demo import demo_log_path
+
+    width, height = args.size
+    # the demo log (written into the cache) and --out are two outputs: never one path
+    check_no_clash({"the demo log": demo_log_path(args.frames, args.seed, width, height), "--out": args.out},
+                   config_inputs(args), merged=[args.out])
     # resolve the weights first: the notice (or a named file's error) comes before any work
     cfg, extractor, notice = load_demo_extractor(args)
     if notice:
         print(notice, flush=True)
-    width, height = args.size
     log_path = ensure_demo_log(frames=args.frames, seed=args.seed, rebuild=args.rebuild,
                                progress=not args.no_progress, width=width, height=height)
     print(f"demo log: {log_path}", flush=True)
@@ -100,4 +106,6 @@ def run(args) -> int:
     for line in res.summary_lines():
         print(f"  {line}")
     print(f"outputs in {res.out_dir}/ (corrected.tum, loops.csv, report.md, trajectory.png, ...)")
-    return 130 if res.interrupted else 0
+    from ..interrupts import exit_status
+
+    return exit_status() if res.interrupted else 0  # 130 Ctrl-C, 143 SIGTERM, 129 SIGHUP

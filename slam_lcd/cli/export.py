@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from ..errors import InputError
 from .run import add_alias
-from .util import check_output_path, write_guard
+from .util import check_outputs, write_guard
 from ..io.trajectory_files import FORMATS
 
 LOG_TARGETS = ("mcap", "rosbag1", "rosbag2")
@@ -54,11 +54,11 @@ def run(args) -> int:
     args.out = args.out or args.out_opt
     if not args.out:
         raise InputError("no output path: give OUT (or -o/--out OUT)")
-    check_output_path(args.out, args.traj, args.times)
-    if args.times_out is not None:
-        if args.to != "kitti":
-            raise InputError("--times-out only applies to --to kitti (the other formats keep their stamps)")
-        check_output_path(args.times_out, args.traj, args.times, args.out)
+    if args.times_out is not None and args.to != "kitti":
+        raise InputError("--times-out only applies to --to kitti (the other formats keep their stamps)")
+    # no output on or inside an input (the log of LOG:TOPIC, its rosbag2 folder), none on another
+    check_outputs({"OUT": args.out, "--times-out": args.times_out}, {"TRAJ": args.traj, "--times": args.times},
+                  folders=("OUT",) if args.to == "rosbag2" else ())
     for opt in ("topic", "frame_id", "child_frame_id"):
         if args.to not in LOG_TARGETS and getattr(args, opt) not in (None, DEFAULT_TOPIC):
             flag = "--out-topic" if opt == "topic" else f"--{opt.replace('_', '-')}"

@@ -71,16 +71,27 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: list[str] | None = None) -> int:
-    from ..interrupts import keep_lost_interrupts
+def stopped_line(prefix: str, exc: BaseException) -> str:
+    """``slam-lcd run: interrupted`` (Ctrl-C) or ``slam-lcd run: terminated (SIGTERM)``."""
+    from ..interrupts import Terminated, signal_name
 
+    return f"{prefix}: terminated ({signal_name(exc)})" if isinstance(exc, Terminated) else f"{prefix}: interrupted"
+
+
+def main(argv: list[str] | None = None) -> int:
+    from ..interrupts import exit_status, install_stop_signals, interrupt_behind, keep_lost_interrupts
+
+    install_stop_signals()  # SIGTERM and SIGHUP take Ctrl-C's path (exit 143 / 129)
     keep_lost_interrupts()  # a Ctrl-C that lands in a finaliser still stops the command
     try:
         parser = build_parser()  # imports every subcommand module: a Ctrl-C here is one line too
         args = parser.parse_args(argv)
-    except KeyboardInterrupt:
-        print("slam-lcd: interrupted", file=sys.stderr)
-        return 130
+    except (KeyboardInterrupt, ImportError) as caught:
+        e = interrupt_behind(caught)  # an extension module interrupted while it initialised: ImportError
+        if e is None:
+            raise
+        print(stopped_line("slam-lcd", e), file=sys.stderr)
+        return exit_status(e)
     except SystemExit as e:  # usage errors (one line, already printed), --help, --version
         return int(e.code or 0) if not isinstance(e.code, str) else 2
     logging.basicConfig(
@@ -112,9 +123,15 @@ def main(argv: list[str] | None = None) -> int:
         where = f"{e.filename}: " if getattr(e, "filename", None) else ""
         print(f"slam-lcd {args.command}: error: {where}{e.strerror or e}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print(f"slam-lcd {args.command}: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as e:
+        print(stopped_line(f"slam-lcd {args.command}", e), file=sys.stderr)
+        return exit_status(e)
+    except ImportError as caught:  # a module imported late (torch, GTSAM) whose initialisation a signal stopped
+        e = interrupt_behind(caught)
+        if e is None or args.debug:
+            raise
+        print(stopped_line(f"slam-lcd {args.command}", e), file=sys.stderr)
+        return exit_status(e)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -79,10 +79,11 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ..atomic import check_writable_target
     from ..errors import InputError
     from ..sim import make_demo_log
-    from .util import write_guard
+    from ..sim.demo_log import loops_path_for
+    from ..sim.layouts import camchain_path_for
+    from .util import check_outputs, write_guard
     from ..io.writers import format_for_path
 
     w, h = args.size
@@ -92,10 +93,14 @@ def run(args) -> int:
     if not args.out:
         raise InputError("no output path: give OUT (or -o/--out OUT)")
     fmt = args.fmt or format_for_path(Path(args.out))
-    # before rendering: an unwritable target (read-only, /proc, a file in the way) fails now
-    check_writable_target(args.out, folder=fmt in ("rosbag2", "folder"))
-    if args.loops_csv is not None:
-        check_writable_target(args.loops_csv)
+    # before rendering: two outputs on one path, or an unwritable target (read-only, /proc, a file in
+    # the way) fail now. The folder format's own loop_pairs.csv is part of the folder, not a second output.
+    outputs = {"OUT": args.out}
+    if args.loops_csv is not None or fmt != "folder":
+        outputs["--loops-csv"] = args.loops_csv if args.loops_csv is not None else loops_path_for(Path(args.out))
+    if args.layout == "euroc":
+        outputs["the Kalibr camchain beside OUT"] = camchain_path_for(Path(args.out))
+    check_outputs(outputs, {}, folders=("OUT",) if fmt in ("rosbag2", "folder") else ())
     with write_guard(args.out):
         info = make_demo_log(args.out, fmt=fmt, frames=args.frames, seed=args.seed, stereo=args.stereo,
                              depth=args.depth, compressed=args.compressed, color=args.color, kind=args.trajectory,

@@ -179,4 +179,6 @@ def _print_result(res) -> int:
             print(line)
     print(f"outputs in {res.out_dir}/ ({', '.join(res.outputs)})"
           + (" -- a partial set, see PARTIAL.txt" if res.interrupted else ""))
-    return 130 if res.interrupted else 0
+    from ..interrupts import exit_status
+
+    return exit_status() if res.interrupted else 0  # 130 Ctrl-C, 143 SIGTERM, 129 SIGHUP

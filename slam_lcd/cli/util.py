@@ -73,25 +73,31 @@ def describe(spec: str, fmt: str | None, n: int) -> str:
     return f"{spec} ({fmt or 'auto'}, {n} poses)"
 
 
-def check_output_path(out: str | None, *inputs) -> None:
-    """Refuse outputs that are folders or inputs, before any work is done."""
-    from pathlib import Path
-
-    from ..atomic import check_writable_target, guard_not_input
-    from ..errors import InputError
-
-    if out is None:
-        return
-    if Path(out).is_dir():
-        raise InputError("output path is a folder; give a file name", out)
+def _input_path(spec):
+    """The file an input names: ``LOG:TOPIC`` names its log."""
     from ..sensors.trajectories import split_log_topic
 
-    paths = []
-    for inp in inputs:  # LOG:TOPIC names the log as the input
-        lt = split_log_topic(str(inp)) if inp is not None else None
-        paths.append(lt[0] if lt else inp)
-    guard_not_input(out, *paths)
-    check_writable_target(out)
+    if spec is None:
+        return None
+    lt = split_log_topic(str(spec))
+    return lt[0] if lt else spec
+
+
+def check_outputs(outputs: dict, inputs: dict, *, folders=()) -> None:
+    """The command line's rule for what a command writes, before any work is done.
+
+    ``outputs`` and ``inputs`` map a flag (``'OUT'``, ``'--times-out'``, ``'TRAJ'`` ...) to a
+    path (None: not given; ``LOG:TOPIC`` inputs name their log). No output may land on or inside
+    an input, hold an input, or share its path with another output
+    (:func:`slam_lcd.atomic.check_no_clash`); then each output must be writable
+    (:func:`slam_lcd.atomic.check_writable_target`; ``folders``: the flags whose output is a folder).
+    """
+    from ..atomic import check_no_clash, check_writable_target
+
+    outs = {w: o for w, o in outputs.items() if o is not None}
+    check_no_clash(outs, {w: _input_path(p) for w, p in inputs.items()})
+    for w, o in outs.items():
+        check_writable_target(o, folder=w in folders)
 
 
 def write_guard(out):

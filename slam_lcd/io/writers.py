@@ -24,6 +24,7 @@ import numpy as np
 
 from .. import __version__
 from ..atomic import guard_not_input
+from ..interrupts import defer_sigint, finish
 from ..errors import InputError, InvalidPoseError, UnsupportedFormatError
 from ..types import Trajectory
 from . import messages as M
@@ -250,23 +251,27 @@ def open_writer(path: str | Path, fmt: str | None = None, *, conf: IOConfig | No
         raise InputError("output exists and is a folder that is not a rosbag2 bag; refusing to replace it", path)
     conf = conf or IOConfig()
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmpdir = Path(tempfile.mkdtemp(prefix=f".{path.name}.", dir=path.parent))
-    tmp = tmpdir / path.name
+    made: list[Path] = []
     writer = None
-    try:
+    try:  # a signal held while the temporary folder is made is raised inside this try
+        with defer_sigint():
+            made.append(Path(tempfile.mkdtemp(prefix=f".{path.name}.", dir=path.parent)))
+        tmp = made[0] / path.name
         writer = _WRITERS[fmt](tmp, conf)
         yield writer
         writer.close()
         writer.path = path
-        if path.exists():
-            shutil.rmtree(path) if path.is_dir() else path.unlink()
-        os.replace(tmp, path)
+        with defer_sigint():  # the old log goes and the new one comes together
+            if path.exists():
+                shutil.rmtree(path) if path.is_dir() else path.unlink()
+            os.replace(tmp, path)
     except BaseException:
         if writer is not None:
             writer.abort()
         raise
     finally:
-        shutil.rmtree(tmpdir, ignore_errors=True)
+        if made:
+            finish(shutil.rmtree, made[0], True)
 
 
 def copy_topics(reader, writer: LogWriter, topics: Iterable[str] | None = None) -> dict[str, int]:

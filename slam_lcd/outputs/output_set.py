@@ -20,21 +20,87 @@ earlier run's folder exactly as it was. Publishing holds Ctrl-C back until it is
 
 Names starting with ``.`` in the staging folder are the run's working files (the keyframe
 album of the loop pictures): never published, removed before the set is moved.
+
+A staging folder's name carries the host and process that own it
+(``.slam-lcd-staging.<host>.<pid>.<random>``). A process killed outright (SIGKILL, a power
+cut) cannot remove its own; :meth:`OutputSet.check` removes, in the output folder and the
+folder it is created in, the staging folders of this host whose process is gone (and ones
+without an owner in their name, older than an hour). Nothing else is touched: another
+host's, a live process's, and every name that is not ours stay.
 """
 from __future__ import annotations
 
 import os
 import shutil
+import socket
 import tempfile
+import time
 from pathlib import Path
 from typing import Iterable, Mapping
 
 from ..atomic import check_no_clash, check_writable_target
 from ..errors import InputError
-from ..interrupts import defer_sigint
+from ..interrupts import defer_sigint, finish
 
 PARTIAL_MARKER = "PARTIAL.txt"
 STAGING_PREFIX = ".slam-lcd-staging."
+LEGACY_STALE_S = 3600.0  # a staging folder without an owner in its name is stale after this long
+
+
+def _host() -> str:
+    return (socket.gethostname() or "host").replace(".", "_")
+
+
+def staging_prefix() -> str:
+    """The name prefix of this process's staging folders: ``.slam-lcd-staging.<host>.<pid>.``."""
+    return f"{STAGING_PREFIX}{_host()}.{os.getpid()}."
+
+
+def _process_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OSError):
+        return True
+    try:  # a zombie (dead, not yet reaped by its parent) holds nothing
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+        return state not in ("Z", "X")
+    except (OSError, IndexError):
+        return True
+
+
+def is_stale_staging(path: Path) -> bool:
+    """Is ``path`` a staging folder of ours whose process is gone (see the module docstring)?"""
+    name = path.name
+    if not name.startswith(STAGING_PREFIX) or not path.is_dir() or path.is_symlink():
+        return False
+    parts = name[len(STAGING_PREFIX):].rsplit(".", 2)
+    if len(parts) == 3 and parts[1].isdigit():
+        host, pid = parts[0], int(parts[1])
+        return host == _host() and pid != os.getpid() and not _process_alive(pid)
+    try:
+        return time.time() - path.stat().st_mtime > LEGACY_STALE_S
+    except OSError:
+        return False
+
+
+def remove_stale_staging(*folders: str | Path) -> list[Path]:
+    """Remove the stale staging folders of ours found directly in ``folders``; the ones removed."""
+    removed = []
+    for folder in folders:
+        folder = Path(folder)
+        if not folder.is_dir():
+            continue
+        try:
+            entries = [p for p in folder.iterdir() if p.name.startswith(STAGING_PREFIX)]
+        except OSError:
+            continue
+        for p in entries:
+            if is_stale_staging(p):
+                shutil.rmtree(p, ignore_errors=True)
+                removed.append(p)
+    return removed
 
 
 class OutputSet:
@@ -48,8 +114,12 @@ class OutputSet:
     # ------------------------------------------------------------------ before any work
     def check(self, inputs: Mapping[str, str | Path | None]) -> None:
         """Refuse clashes with inputs and unwritable targets, writing nothing."""
+        # clashes first: the writability probe must not touch an input folder either
+        check_no_clash({"the output folder": self.target, **{n: self.target / n for n in self.names}}, inputs,
+                       merged=[self.target])
         check_writable_target(self.target, folder=True)
-        check_no_clash([self.target, *(self.target / n for n in self.names)], inputs)
+        # what a killed run left (its staging folder) goes before this run starts
+        remove_stale_staging(self.target, self.target.parent)
 
     # ------------------------------------------------------------------ writing
     @property
@@ -60,7 +130,7 @@ class OutputSet:
             try:
                 where.mkdir(parents=True, exist_ok=True)
                 with defer_sigint():
-                    self._staging = Path(tempfile.mkdtemp(prefix=STAGING_PREFIX, dir=where))
+                    self._staging = Path(tempfile.mkdtemp(prefix=staging_prefix(), dir=where))
             except OSError as e:
                 raise InputError(f"cannot write the outputs ({e.strerror or e})", self.target) from None
         return self._staging
@@ -77,8 +147,7 @@ class OutputSet:
 
     def discard(self) -> None:
         if self._staging is not None:
-            with defer_sigint():
-                shutil.rmtree(self._staging, ignore_errors=True)
+            finish(shutil.rmtree, self._staging, True)  # whatever signal arrives meanwhile
             self._staging = None
 
     # ------------------------------------------------------------------ publishing

@@ -36,11 +36,15 @@ def partial_text(result: RunResult, notes=(), *, read_to_end: bool, while_writin
     """What PARTIAL.txt says: why the set is incomplete, and what is missing from it."""
     lines = []
     if not read_to_end:
-        lines += [f"This run was interrupted (Ctrl-C) after {result.n_frames} frames: the files here hold the",
+        from ..interrupts import signal_name
+
+        lines += [f"This run was interrupted ({signal_name()}) after {result.n_frames} frames: the files here hold the",
                   "result up to that point and agree with each other, but the log was not processed to its end."]
     lines += list(notes)
     if while_writing:
-        lines.append(f"This run was interrupted{' again' if lines else ''} while the outputs were written: "
+        from ..interrupts import interrupted_word
+
+        lines.append(f"This run was {interrupted_word()}{' again' if lines else ''} while the outputs were written: "
                      "only the files present here were written.")
     return "\n".join(lines)
 
@@ -72,7 +76,9 @@ def write_set(outputs: OutputSet, pipe, result: RunResult, gt, mcap_source, copy
         except OSError as e:
             outputs.discard()
             raise _write_error(e, outputs) from None
-        log.warning("interrupted while writing the outputs: %s holds a partial set (see %s)",
+        from ..interrupts import interrupted_word
+
+        log.warning(f"{interrupted_word()} while writing the outputs: %s holds a partial set (see %s)",
                     outputs.target, PARTIAL_MARKER)
         return
     except OSError as e:
