@@ -269,6 +269,21 @@ class LoopDetector:
         self._store.put(kf.id, desc)
         self._entries[kf.id] = entry
 
+    def verify_pair(self, query_id: int, match_id: int) -> LoopClosure | None:
+        """Verify two kept keyframes directly (no BoW query), with the loop chain; the closure or None.
+
+        Why: a map links consecutive keyframes of a session by their visual relative pose
+        (metric, from the 3-D points), which is far less biased than wheel odometry over a
+        session (``slam_lcd.map``). Not recorded in :attr:`records`.
+        """
+        from ..types import LoopCandidate
+
+        q = self._entries[int(query_id)]
+        rec = self._verify_with(self.conf, q, self._store.get(q.id), LoopCandidate(q.id, int(match_id), 1.0), 0)
+        if not rec.accepted or rec.pose is None or not rec.pose.ok:
+            return None
+        return self._closure(rec)
+
     def stored(self, kf_id: int):
         """What the detector keeps of keyframe ``kf_id``: (light keyframe, compact descriptors, 3-D points, source)."""
         e = self._entries[int(kf_id)]

@@ -12,6 +12,10 @@ class MapConfig:
     # SuperPoint descriptors in the map: int8 (one scale per descriptor, 256 B each) or float16
     # (512 B); ORB's binary descriptors are stored as they are
     descriptor_form: Literal["int8", "float16"] = "int8"
+    # link consecutive keyframes of a session by their visual relative pose (the loop chain run on
+    # the pair: metric from the 3-D points) beside the odometry: the map's shape then rests on
+    # unbiased visual steps, not on the odometry's scale and heading biases
+    visual_links: bool = True
     # two sessions are joined only by this many pairwise-consistent loops between them (PCM):
     # one loop between two unconnected sessions cannot be checked against anything
     min_join_loops: int = 3

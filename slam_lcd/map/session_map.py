@@ -240,6 +240,8 @@ class Map:
             if c is not None and rec.verdict == "accepted":
                 loops.append(JointLoop(int(c.query_id), int(c.match_id), np.asarray(c.T_match_query, float),
                                        np.asarray(c.information, float), False, True, "ok"))
+        if self.conf.visual_links:
+            loops += visual_links(pipeline.detector, [k.id for k in kfs])
         for c in getattr(pipeline, "map_closures", []):
             loops.append(JointLoop(int(c.query_id), int(c.match_id), np.asarray(c.T_match_query, float),
                                    np.asarray(c.information, float), True, False, ""))
@@ -384,6 +386,20 @@ class Map:
             scales=np.concatenate(scales).astype(np.float32) if scales else np.zeros(0, np.float32),
             points3d=np.concatenate(p3s) if p3s else np.zeros((0, 3), np.float32),
             points_source=np.array(srcs, dtype="<U10"))
+
+
+LINK = "link"  # the reason of a visual link between consecutive keyframes (not a loop)
+
+
+def visual_links(detector, kf_ids: list[int]) -> list[JointLoop]:
+    """Visual relative poses of consecutive keyframes (``map.visual_links``); pairs that do not verify get none."""
+    out = []
+    for a, b in zip(kf_ids[:-1], kf_ids[1:]):
+        c = detector.verify_pair(b, a)
+        if c is not None and np.all(np.isfinite(c.T_match_query)):
+            out.append(JointLoop(int(b), int(a), np.asarray(c.T_match_query, float), np.asarray(c.information, float),
+                                 False, True, LINK))
+    return out
 
 
 def _sha256_log(path) -> str | None:

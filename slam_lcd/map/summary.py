@@ -63,9 +63,12 @@ def map_summary(m, joined=None, *, current: str | None = None, pipe=None) -> dic
     gt_of = {int(k): s.T_gt[i, :3, 3] for s in m.sessions for i, k in enumerate(s.ids)}
     g = m.graph
     inter = []
-    within = accepted_within = 0
+    within = accepted_within = links = 0
     for q, mt, acc, why in zip(g.loop_query, g.loop_match, g.loop_accepted, g.loop_reason):
         a, b = sess_of.get(int(mt)), sess_of.get(int(q))
+        if str(why) == "link":  # a visual link between consecutive keyframes, not a loop
+            links += bool(acc)
+            continue
         if a == b:
             within += 1
             accepted_within += bool(acc)
@@ -95,7 +98,7 @@ def map_summary(m, joined=None, *, current: str | None = None, pipe=None) -> dic
             pairs[key] = pairs.get(key, 0) + 1
     return {"root": str(m.root), "appended": current is not None, "current_session": current,
             "sessions": sessions, "components": m.components(), "n_keyframes": m.n_keyframes,
-            "loops_within_sessions": accepted_within, "loops_within_sessions_offered": within,
+            "loops_within_sessions": accepted_within, "loops_within_sessions_offered": within, "visual_links": links,
             "inter_session_loops": inter, "inter_session_accepted_by_pair": pairs,
             "inter_session_accepted": sum(1 for r in inter if r["accepted"])}
 
