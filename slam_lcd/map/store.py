@@ -12,9 +12,9 @@ graph file under a fresh name), then replaces ``map.json`` in one ``os.replace``
 the commit. Before it the map is exactly the old one (a reader only opens files the manifest
 names); after it, the whole new session. Files that no manifest names (a failed append's, an
 old graph; a new map's first append that never committed) are removed by the next writer, under
-the lock. Every file is checked against the
-size and sha256 the manifest gives before it is used, and arrays load with
-``allow_pickle=False``: a truncated, tampered or foreign file is one :class:`MapError` naming it.
+the lock. Every file is checked against the size and sha256 the manifest gives before it is
+used, and arrays load with ``allow_pickle=False``: a truncated, tampered or foreign file is one
+:class:`MapError` naming it.
 """
 from __future__ import annotations
 
