@@ -114,6 +114,8 @@ class Map:
             if not store.is_map(root):
                 if not create:
                     raise MapError("no map here (no map.json)" if root.exists() else "no such map folder", root)
+                if write:  # what a first append that never committed left behind (the lock is held)
+                    store.remove_unfinished(root)
                 if root.exists() and any(p.name != store.LOCK for p in root.iterdir()):
                     raise MapError("the folder is not empty and holds no map: give an empty or new folder", root)
                 if features is None:

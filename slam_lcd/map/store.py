@@ -11,9 +11,10 @@ Why this shape: appending a session writes only new files (the session's keyfram
 graph file under a fresh name), then replaces ``map.json`` in one ``os.replace``: that rename is
 the commit. Before it the map is exactly the old one (a reader only opens files the manifest
 names); after it, the whole new session. Files that no manifest names (a failed append's, an
-old graph) are removed by the next writer, under the lock. Every file is checked against the
-size and sha256 the manifest gives before it is used, and arrays load with
-``allow_pickle=False``: a truncated, tampered or foreign file is one :class:`MapError` naming it.
+old graph; a new map's first append that never committed) are removed by the next writer, under
+the lock. Every file is checked against the size and sha256 the manifest gives before it is
+used, and arrays load with ``allow_pickle=False``: a truncated, tampered or foreign file is one
+:class:`MapError` naming it.
 """
 from __future__ import annotations
 
@@ -23,6 +24,7 @@ import fcntl
 import hashlib
 import json
 import os
+import re
 import secrets
 import time
 from dataclasses import dataclass, field
@@ -309,13 +311,50 @@ def remove_unlisted(root: Path, manifest: MapManifest | None) -> None:
                 path.unlink()
 
 
+# the names a commit writes (see commit): nothing else is ever removed as an unfinished map's leftover
+_ROOT_FILE = re.compile(r"(\.?graph-\d{6}-[0-9a-f]{8}\.npz(\.tmp)?|\.map\.json\.tmp)")
+_SESSION_FILE = re.compile(r"\.?\d{4}-[0-9a-f]{8}\.npz(\.tmp)?")
+
+
+def remove_unfinished(root: Path) -> None:
+    """Empty a folder that holds only what an unfinished first commit leaves (no manifest). Under the lock.
+
+    Why: a new map's first append that was killed, interrupted or ran out of disk before its
+    manifest's rename leaves its session file, graph file or just ``sessions/`` behind; the map
+    is then "no map", as it was before, and the folder must take a new one. A folder holding
+    anything else is left alone (the caller refuses it: it is not ours to empty).
+    """
+    if not root.is_dir() or (root / MANIFEST).exists():
+        return
+    sessions = root / "sessions"
+    ours: list[Path] = []
+    for p in root.iterdir():
+        if p.name == LOCK:
+            continue
+        if p == sessions and p.is_dir() and not p.is_symlink():
+            inner = list(p.iterdir())
+            if not all(q.is_file() and _SESSION_FILE.fullmatch(q.name) for q in inner):
+                return
+            ours += inner
+        elif p.is_file() and not p.is_symlink() and _ROOT_FILE.fullmatch(p.name):
+            ours.append(p)
+        else:
+            return
+    for p in ours:
+        with contextlib.suppress(OSError):
+            p.unlink()
+    with contextlib.suppress(OSError):
+        sessions.rmdir()
+
+
 def commit(root: Path, manifest: MapManifest, new_sessions: list[tuple[dict, SessionKeyframes]], graph: MapGraph,
            sessions_table: list[dict]) -> MapManifest:
     """Write new sessions' files and a new graph file, then the manifest (the commit). Hold the lock.
 
     ``manifest``: the one on disk (or an empty one for a new map); ``sessions_table``: every
     session's entry after the commit (new ones last, without their ``file``). A failure before
-    the manifest's rename removes the files it wrote: the folder is as it was.
+    the manifest's rename removes the files it wrote: the folder is as it was (an ``OSError``,
+    such as a full disk, is raised as :class:`MapError` naming the map).
     """
     tag = secrets.token_hex(4)
     files = dict(manifest.files)
@@ -352,6 +391,8 @@ def commit(root: Path, manifest: MapManifest, new_sessions: list[tuple[dict, Ses
             os.replace(tmp, root / MANIFEST)
             written.clear()
             _fsync_dir(root)
+    except OSError as e:  # a full disk, a quota, a read-only folder: one error naming the map
+        raise MapError(f"cannot write the map ({e.strerror or e}); nothing was added to it", root) from e
     finally:
         with defer_sigint():
             for path in written:  # not committed: leave the folder as it was
