@@ -33,6 +33,10 @@ def register(sub) -> None:
     p.add_argument("--rebuild", action="store_true",
                    help="render the demo log again even if cached (default: reuse the cached log in "
                         "$SLAM_LCD_CACHE_DIR/demo or ~/.cache/slam-lcd/demo)")
+    p.add_argument("--sessions", type=int, default=1, choices=[1, 2, 3],
+                   help="1: one log of two laps. 2 or 3: the demo world's sessions (other starts and routes, one "
+                        "under changed lighting, each odometry in its own frame) joined into one map in OUT/map, "
+                        "with each session's ATE before -> after in the map frame (default 1)")
     add_config_args(p)
     p.set_defaults(func=run)
 
@@ -95,6 +99,8 @@ def run(args) -> int:
     cfg, extractor, notice = load_demo_extractor(args)
     if notice:
         print(notice, flush=True)
+    if args.sessions > 1:
+        return _run_sessions(args, cfg, extractor, notice)
     log_path = ensure_demo_log(frames=args.frames, seed=args.seed, rebuild=args.rebuild,
                                progress=not args.no_progress, width=width, height=height)
     print(f"demo log: {log_path}", flush=True)
@@ -109,3 +115,39 @@ def run(args) -> int:
     from ..interrupts import exit_status
 
     return exit_status() if res.interrupted else 0  # 130 Ctrl-C, 143 SIGTERM, 129 SIGHUP
+
+
+def _run_sessions(args, cfg, extractor, notice) -> int:
+    """``demo --sessions N``: the first N session logs of the demo world, appended one by one to OUT/map."""
+    from ..demo import ensure_demo_log
+    from ..interrupts import exit_status
+    from ..map.session_map import Map, extractor_meta
+    from ..map.summary import summary_lines
+    from ..runner import run_log
+
+    width, height = args.size
+    out = Path(args.out)
+    logs = [ensure_demo_log(frames=args.frames, rebuild=args.rebuild, progress=not args.no_progress, width=width,
+                            height=height, session=k) for k in range(1, args.sessions + 1)]
+    for k, path in enumerate(logs, 1):
+        print(f"demo session {k}: {path}", flush=True)
+    m = Map.open(out / "map", features=extractor_meta(extractor, cfg.map.descriptor_form), conf=cfg.map, write=True,
+                 create=True)
+    try:
+        if m.sessions:
+            print(f"{out / 'map'} already holds {len(m.sessions)} sessions: the demo sessions are appended to them")
+        res = None
+        for k, path in enumerate(logs, 1):
+            res = run_log(path, out / f"session{k}", cfg, extractor=extractor, progress=not args.no_progress,
+                          input_paths=config_inputs(args), command_line=getattr(args, "command_line", None),
+                          overrides=list(args.overrides), map=m, session_name=f"session{k}")
+            if res.interrupted:
+                return exit_status()
+    finally:
+        m.close()
+    print("slam-lcd demo summary (multi-session)")
+    print(f"  features: {cfg.features.kind}" + (f" ({notice})" if notice else ""))
+    for line in summary_lines(res.map):
+        print(f"  {line.strip()}")
+    print(f"outputs in {out}/ (map/, session1/ ... : each run's files, map/ in each: every session in the map frame)")
+    return 0

@@ -8,4 +8,17 @@ from __future__ import annotations
 
 from .config import MapConfig
 
-__all__ = ["MapConfig"]
+
+def __getattr__(name):  # the heavy parts (gtsam, the loop detector) load on first use
+    if name in ("Map", "extractor_meta"):
+        from . import session_map
+
+        return getattr(session_map, name)
+    if name in ("MapError", "MapLockedError"):
+        from . import store
+
+        return getattr(store, name)
+    raise AttributeError(name)
+
+
+__all__ = ["Map", "MapConfig", "MapError", "MapLockedError", "extractor_meta"]

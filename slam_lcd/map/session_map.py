@@ -297,6 +297,50 @@ class Map:
         self._generation_read = self.manifest.generation
         self._unsaved = []
 
+    # ------------------------------------------------------------------ for a user's own pipeline / graph
+    def loop_detector(self, lcd_conf=None, vocab_conf=None, extractor=None):
+        """A :class:`~slam_lcd.lcd.LoopDetector` holding every keyframe of the map as a candidate.
+
+        Query it with ``detector.add(keyframe, insert=False)`` (the keyframe's id must not be one
+        of the map's: take ids from :meth:`next_kf_id` on; ``extractor`` extracts the features of a
+        keyframe that comes without them): the verified matches come back as
+        ``LoopClosure`` with ``match_id`` a map keyframe, ``T_match_query`` and ``information``.
+        """
+        from ..lcd import LoopDetector
+
+        det = LoopDetector(lcd_conf, extractor=extractor, vocab_conf=vocab_conf)
+        self.load_into(det)
+        det.begin_session()
+        return det
+
+    def factor_graph(self, key=None):
+        """(``gtsam.NonlinearFactorGraph``, ``gtsam.Values``): the map's joint graph for a user's own optimiser.
+
+        Odometry steps of every session, accepted loops within and between sessions and the
+        visual links, as ``BetweenFactorPose3``; values at the map's poses; ``key(kf_id) -> gtsam
+        key`` (default: the keyframe id). No prior: the user fixes the gauge (e.g. a prior on
+        one keyframe, or their own absolute factors).
+        """
+        import gtsam
+
+        from .joint_graph import _noise, _step_cov
+
+        key = key or (lambda k: int(k))
+        graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+        poses = self.poses()
+        for s in self.sessions:
+            for i, k in enumerate(s.ids):
+                values.insert(key(int(k)), gtsam.Pose3(poses.get(int(k), s.T_odom[i])))
+                if i:
+                    graph.add(gtsam.BetweenFactorPose3(key(int(s.ids[i - 1])), key(int(k)),
+                                                       gtsam.Pose3(inv(s.T_odom[i - 1]) @ s.T_odom[i]),
+                                                       gtsam.noiseModel.Gaussian.Covariance(_step_cov(s.cov[i]))))
+        g = self.graph
+        for q, mt, T, I, acc in zip(g.loop_query, g.loop_match, g.loop_T, g.loop_info, g.loop_accepted):
+            if acc:
+                graph.add(gtsam.BetweenFactorPose3(key(int(mt)), key(int(q)), gtsam.Pose3(T), _noise(I)))
+        return graph, values
+
     # ------------------------------------------------------------------ localisation
     def localise(self, pipeline):
         """Map-frame poses of a finished pipeline's keyframes from its matches to the map (the map is not changed)."""

@@ -1,0 +1,287 @@
+#!/usr/bin/env python
+"""Multi-session map benchmarks: the demo world's sessions joined into one map, localisation, load cost.
+
+Section ``sessions`` (the demo world's session presets, ``make-demo-log --session K``, rendered
+into ``--work`` once): sessions 1-3 (same world, other starts and routes, session 3 under
+changed lighting) appended one by one with ``run --map``, then the same three in one call;
+session 4 (another world) appended to a copy; session 5 localised against the 3-session map.
+Printed: loops between every pair of sessions (true / false by ground truth: keyframes of one
+world within ``run.loop_true_max_distance``; any loop into another world is false), components,
+each session's ATE in the common frame (one SE(3) alignment of the whole map to ground truth)
+against its own odometry ATE, the localised share and errors, whether the map's bytes changed,
+and the wall time per keyframe of each append against a plain ``run`` of the same log, measured
+in the same run (features cached for both: the comparison is of what the map adds).
+
+Section ``load``: a map of ``--keyframes`` keyframes made by repeating the sessions' real
+keyframes (new ids; the files a map of that size would hold), then ``Map.open`` (read + sha256 +
+arrays) and ``Map.open`` + ``load_into`` (the loop detector ready to query: BoW database rebuilt
+from the stored descriptors), median of ``--repeat`` runs each in a fresh process, resident
+memory, bytes per keyframe on disk.
+
+    python tools/bench_map.py sessions --work W --weights W.pth
+    python tools/bench_map.py load --work W [--keyframes 5000]
+"""
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+WORLD_OF = {1: 0, 2: 0, 3: 0, 4: 1000, 5: 0}
+
+
+def machine_line() -> str:
+    cpu = platform.processor() or ""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    try:
+        import torch
+
+        cap = torch.backends.cpu.get_cpu_capability()
+    except Exception:  # noqa: BLE001
+        cap = "?"
+    return f"machine: {cpu}, {os.cpu_count()} cores, torch CPU capability {cap}"
+
+
+def ensure_sessions(work: Path, frames: int | None) -> dict[int, Path]:
+    from slam_lcd.sim import make_demo_log
+
+    logs = {}
+    for k in (1, 2, 3, 4, 5):
+        path = work / (f"s{k}.mcap" if frames is None else f"s{k}-f{frames}.mcap")
+        if not path.exists():
+            make_demo_log(path, "mcap", frames=frames, session=k)
+        logs[k] = path
+    return logs
+
+
+def map_files_digest(root: Path) -> str:
+    h = hashlib.sha256()
+    for p in sorted(root.rglob("*")):
+        if p.is_file() and p.name != ".lock":
+            h.update(p.relative_to(root).as_posix().encode())
+            h.update(p.read_bytes())
+    return h.hexdigest()
+
+
+def judge(m, true_max: float) -> dict:
+    """Loops between sessions by pair, true / false from the keyframes' ground truth (and world)."""
+    from slam_lcd.map.summary import map_summary
+
+    s = map_summary(m)
+    world = {meta["name"]: WORLD_OF.get(int(meta["name"].lstrip("s").split("-")[0] or 0), 0)
+             for meta in m.manifest.sessions}
+    pairs: dict[str, dict] = {}
+    for r in s["inter_session_loops"]:
+        if not r["accepted"]:
+            continue
+        key = " - ".join(sorted((r["query_session"], r["match_session"])))
+        same = world[r["query_session"]] == world[r["match_session"]]
+        true = same and r["gt_distance_m"] is not None and r["gt_distance_m"] <= true_max
+        d = pairs.setdefault(key, {"true": 0, "false": 0})
+        d["true" if true else "false"] += 1
+    return {"summary": s, "pairs": pairs}
+
+
+def run_session(log, out, cfg, extractor, m=None, name=None, mode="append"):
+    from slam_lcd.runner import run_log
+
+    t0 = time.perf_counter()
+    res = run_log(log, out, cfg, extractor=extractor, progress=False, map=m, session_name=name, map_mode=mode)
+    return res, time.perf_counter() - t0
+
+
+def section_sessions(args) -> None:
+    from slam_lcd.config import load_config
+    from slam_lcd.features import load_extractor
+    from slam_lcd.map.session_map import Map, extractor_meta
+
+    work = Path(args.work)
+    work.mkdir(parents=True, exist_ok=True)
+    logs = ensure_sessions(work, args.frames)
+    sets = [f"features.weights={args.weights}"] if args.weights else []
+    if args.features:
+        sets.append(f"features.kind={args.features}")
+    cfg = load_config("default", sets + list(args.set))
+    extractor = load_extractor(cfg.features)
+    meta = extractor_meta(extractor, cfg.map.descriptor_form)
+    print(machine_line())
+    print(f"features: {cfg.features.kind}; logs in {work}")
+    runs = work / "runs"
+    shutil.rmtree(runs, ignore_errors=True)
+    # plain runs (they also fill the feature cache, so every timed run below reads cached features)
+    plain = {}
+    for k in (1, 2, 3):
+        run_session(logs[k], runs / f"warm{k}", cfg, extractor)
+        res, wall = run_session(logs[k], runs / f"plain{k}", cfg, extractor)
+        plain[k] = (res, wall)
+    # appended one by one (each its own Map.open, as three `run --map` commands)
+    root = runs / "map_one_by_one"
+    appended = {}
+    for k in (1, 2, 3):
+        with Map.open(root, features=meta, conf=cfg.map, write=True, create=True) as m:
+            res, wall = run_session(logs[k], runs / f"append{k}", cfg, extractor, m, f"s{k}")
+            appended[k] = (res, wall)
+    # the same three in one call
+    root_one = runs / "map_one_call"
+    with Map.open(root_one, features=meta, conf=cfg.map, write=True, create=True) as m:
+        for k in (1, 2, 3):
+            run_session(logs[k], runs / f"onecall{k}", cfg, extractor, m, f"s{k}")
+    for label, r in (("one by one", root), ("one call", root_one)):
+        m = Map.open(r)
+        j = judge(m, cfg.run.loop_true_max_distance)
+        s = j["summary"]
+        print(f"\n3 sessions appended {label}: {len(s['components'])} component(s) {s['components']}; "
+              f"visual links {s['visual_links']}")
+        for pair, d in sorted(j["pairs"].items()):
+            print(f"  loops {pair}: {d['true']} true, {d['false']} false")
+        for row in s["sessions"]:
+            print(f"  {row['name']}: {row['keyframes']} keyframes, ATE odometry {row.get('ate_odometry', float('nan')):.3f} m"
+                  f" -> map {row.get('ate_map', float('nan')):.4f} m (ratio {100 * (row.get('ratio') or float('nan')):.1f} %)")
+    print("\nappend cost (features cached): wall s per keyframe, append / plain run of the same log")
+    for k in (1, 2, 3):
+        (pr, pw), (ar, aw) = plain[k], appended[k]
+        pk, ak = pw / max(1, pr.n_keyframes), aw / max(1, ar.n_keyframes)
+        print(f"  s{k}: plain {1000 * pk:.1f} ms/kf, append {1000 * ak:.1f} ms/kf, ratio {ak / pk:.2f} "
+              f"(map before: {k - 1} sessions)")
+    # session 4 (another world) into a copy
+    root4 = runs / "map_plus_other_world"
+    shutil.copytree(root, root4)
+    with Map.open(root4, features=meta, conf=cfg.map, write=True) as m:
+        run_session(logs[4], runs / "append4", cfg, extractor, m, "s4")
+    j = judge(Map.open(root4), cfg.run.loop_true_max_distance)
+    s4 = next(r for r in j["summary"]["sessions"] if r["name"] == "s4")
+    false4 = sum(d["false"] for p, d in j["pairs"].items() if "s4" in p)
+    offered4 = sum(1 for r in j["summary"]["inter_session_loops"] if "s4" in (r["query_session"], r["match_session"]))
+    print(f"\nsession 4 (other world): joined {s4['joined']}, component {s4['component']}, loops to it accepted "
+          f"{s4['inter_session_loops']} ({false4} false), offered {offered4}; note: {s4.get('note', '')}")
+    # session 5 localised against the 3-session map
+    before = map_files_digest(root)
+    m = Map.open(root, features=meta, conf=cfg.map)
+    res, wall = run_session(logs[5], runs / "localize5", cfg, extractor, m, mode="localize")
+    rep = res.localization
+    e = rep["errors"] or {}
+    print(f"\nlocalise session 5: {rep['localised']} of {rep['keyframes']} keyframes ({100 * rep['share_localised']:.1f} %)"
+          f", median error {e.get('median_m', float('nan')):.4f} m, max {e.get('max_m', float('nan')):.4f} m, "
+          f"{e.get('over_1m')} over 1 m; map bytes unchanged: {map_files_digest(root) == before}; {wall:.1f} s")
+    size = sum(p.stat().st_size for p in root.rglob('*') if p.is_file())
+    n = Map.open(root).n_keyframes
+    print(f"map on disk: {size / 1e6:.1f} MB, {n} keyframes, {size / n / 1e3:.0f} kB per keyframe")
+
+
+def _replicated(src: Path, dst: Path, keyframes: int) -> None:
+    from slam_lcd.map import store
+    from slam_lcd.map.store import MapGraph, MapManifest, SessionKeyframes
+
+    man = store.read_manifest(src)
+    sess = [store.read_session(src, man, i) for i in range(len(man.sessions))]
+    shutil.rmtree(dst, ignore_errors=True)
+    dst.mkdir(parents=True)
+    new, table, next_id, total, rep = [], [], 0, 0, 0
+    while total < keyframes:
+        for meta, s in zip(man.sessions, sess):
+            n = min(len(s), keyframes - total)
+            if n <= 0:
+                break
+            K = int(s.offsets[n])
+            ids = np.arange(next_id, next_id + n, dtype=np.int64)
+            cut = SessionKeyframes(ids, s.stamps[:n], s.T_odom[:n], s.cov[:n], s.T_gt[:n], s.offsets[:n + 1],
+                                   s.keypoints[:K], s.descriptors[:K], s.scales[:K] if len(s.scales) else s.scales,
+                                   s.points3d[:K], s.points_source[:n])
+            name = f"{meta['name']}-r{rep}"
+            m = dict(meta, name=name, keyframes=n, kf_id_start=int(ids[0]), kf_id_end=int(ids[-1]) + 1,
+                     component=0)
+            m.pop("file", None)
+            new.append((m, cut))
+            table.append(m)
+            next_id += n
+            total += n
+        rep += 1
+    ids = np.concatenate([s.ids for _, s in new])
+    graph = MapGraph(ids, np.concatenate([s.T_odom for _, s in new]), np.zeros(0, np.int64), np.zeros(0, np.int64),
+                     np.zeros((0, 4, 4)), np.zeros((0, 6, 6)), np.zeros(0, bool), np.zeros(0, "<U8"))
+    store.commit(dst, MapManifest(features=man.features), new, graph, table)
+
+
+def _measure_load(root: str, ready: bool) -> dict:
+    import resource
+
+    from slam_lcd.lcd import LoopDetector
+    from slam_lcd.map.session_map import Map
+
+    rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    t0 = time.perf_counter()
+    m = Map.open(root)
+    t1 = time.perf_counter()
+    out = {"open_s": t1 - t0, "keyframes": m.n_keyframes}
+    if ready:
+        det = LoopDetector()
+        m.load_into(det)
+        out["ready_s"] = time.perf_counter() - t0
+    out["rss_growth_mb"] = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - rss0) / 1024
+    return out
+
+
+def section_load(args) -> None:
+    work = Path(args.work)
+    src = Path(args.source) if args.source else work / "runs" / "map_one_by_one"
+    if not (src / "map.json").exists():
+        sys.exit(f"{src}: no map to repeat; run the sessions section first or give --source")
+    big = work / f"map_{args.keyframes}"
+    _replicated(src, big, args.keyframes)
+    size = sum(p.stat().st_size for p in big.rglob("*") if p.is_file())
+    print(machine_line())
+    print(f"map of {args.keyframes} keyframes (the sessions of {src} repeated): {size / 1e6:.0f} MB on disk, "
+          f"{size / args.keyframes / 1e3:.0f} kB per keyframe")
+    for ready in (False, True):
+        runs = []
+        for _ in range(args.repeat):
+            code = (f"import json, sys; sys.path.insert(0, {str(Path(__file__).parent)!r}); import bench_map; "
+                    f"print(json.dumps(bench_map._measure_load({str(big)!r}, {ready})))")
+            out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+            runs.append(json.loads(out.stdout.strip().splitlines()[-1]))
+        key = "ready_s" if ready else "open_s"
+        t = np.median([r[key] for r in runs])
+        mem = np.median([r["rss_growth_mb"] for r in runs])
+        what = "Map.open + load_into (detector ready to query)" if ready else "Map.open (read, sha256, arrays)"
+        print(f"  {what}: median {t:.2f} s over {args.repeat} fresh processes "
+              f"({', '.join(f'{r[key]:.2f}' for r in runs)}), resident memory +{mem:.0f} MB "
+              f"({mem * 1e3 / args.keyframes:.0f} kB per keyframe)")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = ap.add_subparsers(dest="section", required=True)
+    s = sub.add_parser("sessions")
+    s.add_argument("--work", required=True)
+    s.add_argument("--weights", default=None)
+    s.add_argument("--features", choices=["superpoint", "orb"], default=None)
+    s.add_argument("--frames", type=int, default=None, help="frames per session (default: the presets' laps)")
+    s.add_argument("--set", action="append", default=[])
+    s.set_defaults(func=section_sessions)
+    lo = sub.add_parser("load")
+    lo.add_argument("--work", required=True)
+    lo.add_argument("--source", default=None, help="a map to repeat (default: WORK/runs/map_one_by_one)")
+    lo.add_argument("--keyframes", type=int, default=5000)
+    lo.add_argument("--repeat", type=int, default=3)
+    lo.set_defaults(func=section_load)
+    args = ap.parse_args()
+    args.func(args)
+
+
+if __name__ == "__main__":
+    main()
