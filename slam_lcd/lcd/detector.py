@@ -279,7 +279,10 @@ class LoopDetector:
         from ..types import LoopCandidate
 
         q = self._entries[int(query_id)]
-        rec = self._verify_with(self.conf, q, self._store.get(q.id), LoopCandidate(q.id, int(match_id), 1.0), 0)
+        # RANSAC and the metric pose only: two consecutive keyframes are no look-alike-place question, and
+        # the graph check would cost most of the time on their ~1000 matches
+        conf = dataclasses.replace(self.conf, verify="ransac")
+        rec = self._verify_with(conf, q, self._store.get(q.id), LoopCandidate(q.id, int(match_id), 1.0), 0)
         if not rec.accepted or rec.pose is None or not rec.pose.ok:
             return None
         return self._closure(rec)
