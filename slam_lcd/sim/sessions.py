@@ -64,7 +64,8 @@ SESSIONS: dict[int, SessionPreset] = {
     1: SessionPreset(1, "laps", 3.0, 1.3, 1, 0, 0.0, 1.0, "mapping, with a loop of its own"),
     2: SessionPreset(2, "figure8", 55.0, 1.0, 2, 0, 0.0, 1.0, "mapping, figure eight from the corridor north of B"),
     3: SessionPreset(3, "figure8", 26.0, 0.9, 3, 0, 3.0, 0.75, "mapping, figure eight under changed lighting"),
-    4: SessionPreset(4, "laps", 3.0, 1.3, 4, 1000, 0.0, 1.0, "another world (another building, same corridors): shares no place with 1-3"),
+    4: SessionPreset(4, "laps", 3.0, 1.3, 4, 1000, 0.0, 1.0,
+                     "another world, another building on the same corridors: shares no place with 1-3"),
     5: SessionPreset(5, "laps", 24.0, 1.0, 5, 0, 0.0, 1.0, "localisation inside the area of 1-3"),
 }
 

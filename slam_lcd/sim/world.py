@@ -282,7 +282,8 @@ def _other_building(seed: int) -> Building:
 
 
 def building(seed: int = 0) -> Building:
-    """Where things stand in world ``seed``: the demo building below :data:`OTHER_PLACE_SEED`, another one from it on."""
+    """Where things stand in world ``seed``: the demo building below :data:`OTHER_PLACE_SEED`,
+    another building on the same corridors from it on."""
     return _other_building(int(seed)) if int(seed) >= OTHER_PLACE_SEED else _demo_building()
 
 
