@@ -248,18 +248,21 @@ def _other_building(seed: int) -> Building:
     ends = _wall_ends()
     lengths = {w: float(np.hypot(p1[0] - p0[0], p1[1] - p0[1])) for w, (p0, p1) in ends.items()}
     slots: dict = {}
-    for gi in range(3):
-        for w in g.choice(sorted(ends), size=int(g.integers(2, 4)), replace=False):
+    for gi in range(3):  # each group on two or three walls
+        want, placed = int(g.integers(2, 4)), 0
+        for w in g.permutation(sorted(ends)):
+            w = str(w)
             taken = [a for a, _ in slots.get(w, [])]
-            near = [a for a, _ in _DEMO_SLOTS.get(w, [])]
-            lo, hi = 0.4, lengths[w] - _GROUP_W - 0.3
             try:
-                a = _away(g, lo, hi, near, 2.5, tries=50)
-                if any(abs(a - t) < _GROUP_W + 0.4 for t in taken):
-                    continue
+                a = _away(g, 0.4, lengths[w] - _GROUP_W - 0.3, [a for a, _ in _DEMO_SLOTS.get(w, [])], 2.5, tries=50)
             except RuntimeError:
                 continue
-            slots.setdefault(str(w), []).append((round(a, 2), gi))
+            if any(abs(a - t) < _GROUP_W + 0.4 for t in taken):
+                continue
+            slots.setdefault(w, []).append((round(a, 2), gi))
+            placed += 1
+            if placed == want:
+                break
     # pillars: two on each long outer wall, one on each short one, away from the demo's
     pillars = []
     xs_s = [_away(g, 2.2, 11.0, [7.0], 1.5), _away(g, 14.0, 22.8, [18.0], 1.5)]
