@@ -164,3 +164,59 @@ def test_cli_session(tmp_path, capsys):
     assert main(["make-demo-log", str(tmp_path / "y.mcap"), "--exposure", "0"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 2
+
+
+def _grid_corners(tile_m, phase_m, step=None):
+    """Floor / ceiling grid crossings over the 25 x 14 m plan (texture row 0 at y = 14, column 0 at x = 0)."""
+    xs = np.arange(0.0, 25.0 + tile_m, tile_m) - phase_m[0]
+    ys = 14.0 - (np.arange(0.0, 14.0 + tile_m, tile_m) - phase_m[1])
+    X, Y = np.meshgrid(xs, ys)
+    return np.column_stack([X.ravel(), Y.ravel()])
+
+
+def _segment_distance(p, a, b):
+    """Distance of points p (N, 2) from the segment a-b."""
+    d = b - a
+    t = np.clip(((p - a) @ d) / (d @ d), 0.0, 1.0)
+    return np.linalg.norm(p - (a + t[:, None] * d), axis=1)
+
+
+def test_another_world_is_another_place(scenarios):
+    from slam_lcd.sim.world import OTHER_PLACE_SEED, building
+
+    demo, other = building(0), building(SESSIONS[4].world_seed)
+    assert SESSIONS[4].world_seed >= OTHER_PLACE_SEED and not demo.other_place and other.other_place
+    # the demo building is where it always was, for every seed below 1000 (textures change, places do not)
+    assert len(demo.lamps) == 25 and np.allclose(demo.lamps[:, 2], 2.95)  # every 3 m on the corridors' centre lines
+    assert all(x in (1.5, 12.5, 23.5) or y in (1.5, 12.5) for x, y, _ in demo.lamps)
+    assert set(np.round(demo.lamps[:, :2].ravel() % 3.0, 6)) == {0.5, 1.5, 2.5}
+    assert (demo.floor_tile_m, demo.floor_phase_m, demo.ceil_tile_m, demo.ceil_phase_m) == (0.5, (0, 0), 0.6, (0, 0))
+    assert [p[1:3] for p in demo.pillars] == [(7.0, 0.0), (7.0, 14.0), (18.0, 0.0), (18.0, 14.0), (0.0, 7.0),
+                                              (25.0, 7.0)]
+    assert demo.panels == tuple((k, 1.3, 1.3, 2.2) for k in range(4)) and demo.materials["A0"] == "bricks"
+    for seed in (1, 7, 999):
+        b = building(seed)
+        assert np.array_equal(b.lamps, demo.lamps) and (b.materials, b.slots, b.pillars, b.panels) == (
+            demo.materials, demo.slots, demo.pillars, demo.panels)
+    # another world: no lamp, grid crossing, material, decal group, pillar or panel where the demo has one
+    assert np.linalg.norm(other.lamps[:, None, :2] - demo.lamps[None, :, :2], axis=2).min() >= 0.5
+    assert len(other.lamps) >= 20 and other.lamp_half_px != demo.lamp_half_px
+    for tile, phase, d_tile, d_phase in ((other.floor_tile_m, other.floor_phase_m, 0.5, (0, 0)),
+                                         (other.ceil_tile_m, other.ceil_phase_m, 0.6, (0, 0))):
+        assert tile != d_tile
+        a, b = _grid_corners(tile, phase), _grid_corners(d_tile, d_phase)
+        near = np.abs(a[:, None, :] - b[None, :, :]).max(2).min(1) < 0.03
+        assert near.mean() < 0.05, (tile, phase, near.mean())
+    assert all(other.materials[w] != m for w, m in demo.materials.items())
+    sites0, sites1 = build_world(0).alias_sites, build_world(SESSIONS[4].world_seed).alias_sites
+    assert len(sites1) >= 5 and len({s["group"] for s in sites1}) == 3
+    assert min(np.linalg.norm(s["centre"] - t["centre"]) for s in sites1 for t in sites0) > 1.0
+    p0 = np.array([p[1:3] for p in demo.pillars])
+    assert all(np.linalg.norm(p0 - np.array(p[1:3]), axis=1).min() >= 1.0 for p in other.pillars)
+    assert all(max(abs(rx - 1.3), abs(ry - 1.3)) >= 0.25 and abs(h - 2.2) >= 0.2 for _, rx, ry, h in other.panels)
+    # session 4 still drives its route: at least 0.6 m from every wall, pillar and panel of its world
+    world = build_world(SESSIONS[4].world_seed)
+    xy = scenarios[4].gt_odo.positions[:, :2]
+    walls = [p for p in world.planes if abs(p.normal[2]) < 0.5]
+    dist = min(_segment_distance(xy, p.corners[0, :2], p.corners[1, :2]).min() for p in walls)
+    assert dist >= 0.6, dist

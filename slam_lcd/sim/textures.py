@@ -84,10 +84,18 @@ def bricks(rng: np.random.Generator, h: int, w: int, res: float) -> np.ndarray:
     return np.clip(colour, 0, 255).astype(np.uint8)
 
 
-def tiles(rng: np.random.Generator, h: int, w: int, res: float, tile_m: float = 0.5) -> np.ndarray:
-    """Floor tiles with grout lines, per-tile shade and speckle (terrazzo-like) noise."""
+def tiles(rng: np.random.Generator, h: int, w: int, res: float, tile_m: float = 0.5,
+          phase_m: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
+    """Floor tiles with grout lines, per-tile shade and speckle (terrazzo-like) noise.
+
+    ``phase_m``: (along columns, along rows) shift of the grid in metres; the grout lines
+    sit where ``column / res + phase_m[0]`` (and ``row / res + phase_m[1]``) is a multiple of
+    ``tile_m``."""
     t = tile_m * res
     ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
+    if phase_m[0] or phase_m[1]:
+        xs += np.float32(phase_m[0] * res)
+        ys += np.float32(phase_m[1] * res)
     r, c = np.floor(ys / t).astype(np.int32), np.floor(xs / t).astype(np.int32)
     grout = ((ys - r * t) < max(1.0, 0.01 * res)) | ((xs - c * t) < max(1.0, 0.01 * res))
     base = np.asarray(random_color(rng, 90, 200), np.float32)
@@ -188,9 +196,10 @@ def door(rng: np.random.Generator, h: int, w: int, res: float) -> np.ndarray:
     return img
 
 
-def ceiling_panels(rng: np.random.Generator, h: int, w: int, res: float) -> np.ndarray:
-    """Suspended-ceiling grid (60 cm) with mottled panels."""
-    img = tiles(rng, h, w, res, tile_m=0.6)
+def ceiling_panels(rng: np.random.Generator, h: int, w: int, res: float, tile_m: float = 0.6,
+                   phase_m: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
+    """Suspended-ceiling grid (60 cm unless ``tile_m`` says otherwise) with mottled panels."""
+    img = tiles(rng, h, w, res, tile_m=tile_m, phase_m=phase_m)
     gray = to_gray_uint8(img)
     return cv2.cvtColor(cv2.addWeighted(gray, 0.6, np.full_like(gray, 200), 0.4, 0), cv2.COLOR_GRAY2RGB)
 

@@ -22,6 +22,15 @@ Static lighting from ceiling lamps is baked into the textures; each plane also k
 weights over the lamps so that the renderer can dim or brighten lamps between laps.
 Every number comes from ``numpy.random.default_rng(seed)``: the same seed gives the
 same world, bit for bit.
+
+Two kinds of world share these corridors (:func:`building`). Seeds below
+:data:`OTHER_PLACE_SEED` (1000) are the demo building: its lamps, tile and ceiling grids,
+materials per wall, decal-group sites, pillars and corner panels stand where this module's
+constants put them, and the seed only re-draws textures and lamp states. Seeds from 1000
+on are another building on the same footprint: all of those are drawn from the seed too,
+away from where the demo building has them, so nothing but the corridors themselves sits
+at the same 3-D place (session 4 records world 1000: a place a map of world 0 must not
+recognise).
 """
 from __future__ import annotations
 
@@ -42,6 +51,8 @@ FLOOR_RES = 80.0
 CEIL_RES = 40.0
 MAX_SEGMENT = 2.5  # walls are cut into pieces at most this wide (culling, mip choice)
 N_LIGHT_EPOCHS = 12  # lighting states prepared (laps); later epochs repeat the last one
+OTHER_PLACE_SEED = 1000  # world seeds from here on are another building on the same corridors
+MATERIALS = ("plaster", "bricks", "wood", "tiles")
 
 
 @dataclass
@@ -78,6 +89,33 @@ class Plane:
         return self.origin + a * self.u + b * self.v
 
 
+@dataclass(frozen=True)
+class Building:
+    """Where things stand in a world (everything but the textures' contents and lamp states).
+
+    ``lamps`` (L, 3) ceiling lamp positions; ``lamp_half_px`` the lamp panels' half size
+    (along x, along y) in ceiling texels; ``floor_tile_m`` / ``ceil_tile_m`` the floor tile
+    and ceiling panel sizes and ``floor_phase_m`` / ``ceil_phase_m`` their grids' shifts
+    (along x, along y; metres); ``materials`` the base material of every wall by name
+    (``outer0``-``outer3``, ``A0``-``A3``, ``B0``-``B3``); ``slots`` the decal-group sites,
+    wall name -> [(metres along the wall's texture, group)]; ``pillars`` (name, x, y,
+    inward, along) of each pillar; ``panels`` (corner index 0-3 counter-clockwise from
+    (0, 0), metres along the x wall, metres along the y wall, height) of each corner panel.
+    """
+
+    other_place: bool
+    lamps: np.ndarray
+    lamp_half_px: tuple[int, int]
+    floor_tile_m: float
+    floor_phase_m: tuple[float, float]
+    ceil_tile_m: float
+    ceil_phase_m: tuple[float, float]
+    materials: dict
+    slots: dict
+    pillars: tuple
+    panels: tuple
+
+
 @dataclass
 class DemoWorld:
     """All planes of the world plus lamp positions and per-epoch lamp gains."""
@@ -88,6 +126,7 @@ class DemoWorld:
     lamp_gains: np.ndarray  # (N_LIGHT_EPOCHS, L) multiplicative gain per lamp and lighting epoch
     exposure: np.ndarray  # (N_LIGHT_EPOCHS,) global gain per epoch
     alias_sites: list[dict] = field(default_factory=list)  # repeated decal groups: group, wall, centre, normal
+    building: Building | None = None  # where lamps, grids, materials, decals, pillars and panels stand
     # stacked geometry for vectorised culling
     corners: np.ndarray = field(init=False)
     normals: np.ndarray = field(init=False)
@@ -131,6 +170,124 @@ def _lamp_positions() -> np.ndarray:
         pts += [(x, y) for y in np.arange(4.5, 11.0, 3.0)]
     xy = np.unique(np.round(np.array(pts), 3), axis=0)
     return np.column_stack([xy, np.full(len(xy), HEIGHT - 0.05)])
+
+
+# --------------------------------------------------------------------------- where things stand
+
+_DEMO_MATERIALS = {"outer0": "plaster", "outer1": "plaster", "outer2": "plaster", "outer3": "plaster",
+                   "A0": "bricks", "A1": "plaster", "A2": "bricks", "A3": "wood",
+                   "B0": "tiles", "B1": "plaster", "B2": "tiles", "B3": "bricks"}
+# aliasing: each decal group appears on two or three walls at different places
+_DEMO_SLOTS = {"outer0": [(4.0, 0), (15.0, 1)], "outer2": [(2.2, 0), (8.0, 2)], "A1": [(2.5, 1)], "B3": [(3.0, 2)],
+               "outer3": [(1.8, 0)]}
+_GROUP_W = 2.2  # width of a decal group (m)
+
+
+def _wall_ends() -> dict:
+    """Every wall by name: (p0, p1), free space on the left of p0 -> p1."""
+    X0, Y0, X1, Y1 = OUTER
+    # outer walls counter-clockwise seen from above so free space (inside) is on the left
+    outer = [((X0, Y0), (X1, Y0)), ((X1, Y0), (X1, Y1)), ((X1, Y1), (X0, Y1)), ((X0, Y1), (X0, Y0))]
+    ends = {f"outer{k}": e for k, e in enumerate(outer)}
+    for bi, (bx0, by0, bx1, by1) in enumerate(BLOCKS):
+        # block faces clockwise seen from above so free space (outside) is on the left
+        faces = [((bx0, by0), (bx0, by1)), ((bx0, by1), (bx1, by1)), ((bx1, by1), (bx1, by0)), ((bx1, by0), (bx0, by0))]
+        ends.update({f"{'AB'[bi]}{k}": e for k, e in enumerate(faces)})
+    return ends
+
+
+def _demo_building() -> Building:
+    X0, Y0, X1, Y1 = OUTER
+    pillars = []
+    for x in (7.0, 18.0):
+        pillars.append((f"pillarS{x:g}", x, Y0, (0, 1), (1, 0)))
+        pillars.append((f"pillarN{x:g}", x, Y1, (0, -1), (-1, 0)))
+    pillars += [("pillarW", X0, 7.0, (1, 0), (0, -1)), ("pillarE", X1, 7.0, (-1, 0), (0, 1))]
+    return Building(other_place=False, lamps=_lamp_positions(), lamp_half_px=(12, 5), floor_tile_m=0.5,
+                    floor_phase_m=(0.0, 0.0), ceil_tile_m=0.6, ceil_phase_m=(0.0, 0.0),
+                    materials=dict(_DEMO_MATERIALS), slots={k: list(v) for k, v in _DEMO_SLOTS.items()},
+                    pillars=tuple(pillars), panels=tuple((k, 1.3, 1.3, 2.2) for k in range(4)))
+
+
+def _away(g: np.random.Generator, lo: float, hi: float, avoid, gap: float, tries: int = 200) -> float:
+    """A uniform draw in [lo, hi] at least ``gap`` from every value of ``avoid``."""
+    for _ in range(tries):
+        x = float(g.uniform(lo, hi))
+        if all(abs(x - a) >= gap for a in avoid):
+            return x
+    raise RuntimeError("no room left for a draw")  # pragma: no cover - the ranges below leave plenty
+
+
+def _other_building(seed: int) -> Building:
+    """Another building on the demo corridors: everything placed from ``seed``, away from the demo's places."""
+    g = np.random.default_rng(np.random.SeedSequence([seed, 0xB1D6]))
+    X0, Y0, X1, Y1 = OUTER
+    demo = _demo_building()
+    # lamps: another spacing and phase, off the corridors' centre lines (>= 0.55 m from every demo lamp)
+    spacing = float(g.uniform(2.2, 2.7))
+    pts = []
+    for yc in (1.5, 12.5):  # south and north corridors
+        y = yc + float(g.choice([-1.0, 1.0]) * g.uniform(0.55, 0.9))
+        pts += [(x, y) for x in np.arange(g.uniform(0.6, 0.6 + spacing), X1 - 0.5, spacing)]
+    for xc in (1.5, 12.5, 23.5):  # west, middle and east corridors, between the blocks' ends
+        x = xc + float(g.choice([-1.0, 1.0]) * g.uniform(0.55, 0.9))
+        pts += [(x, y) for y in np.arange(g.uniform(3.6, 3.6 + spacing), BLOCKS[0][3] - 0.4, spacing)]
+    xy = np.round(np.array(pts), 3)
+    d = np.linalg.norm(xy[:, None] - demo.lamps[None, :, :2], axis=2).min(1)
+    xy = xy[d >= 0.5]
+    lamps = np.column_stack([xy, np.full(len(xy), HEIGHT - 0.05)])
+    lamp_half = [(5, 12), (8, 8), (16, 4)][int(g.integers(3))]
+    # floor tiles and ceiling panels: other sizes, grids shifted
+    floor_tile = float(g.choice([0.6, 0.75]))
+    floor_phase = tuple(float(g.uniform(0.15, floor_tile - 0.15)) for _ in range(2))
+    ceil_tile = float(g.choice([0.5, 0.75]))
+    ceil_phase = tuple(float(g.uniform(0.1, ceil_tile - 0.1)) for _ in range(2))
+    # every wall another material than the demo's
+    materials = {w: str(g.choice([m for m in MATERIALS if m != mat])) for w, mat in _DEMO_MATERIALS.items()}
+    # decal groups at other walls and places (>= 2.5 m from a demo site of the same wall)
+    ends = _wall_ends()
+    lengths = {w: float(np.hypot(p1[0] - p0[0], p1[1] - p0[1])) for w, (p0, p1) in ends.items()}
+    slots: dict = {}
+    for gi in range(3):  # each group on two or three walls
+        want, placed = int(g.integers(2, 4)), 0
+        for w in g.permutation(sorted(ends)):
+            w = str(w)
+            taken = [a for a, _ in slots.get(w, [])]
+            try:
+                a = _away(g, 0.4, lengths[w] - _GROUP_W - 0.3, [a for a, _ in _DEMO_SLOTS.get(w, [])], 2.5, tries=50)
+            except RuntimeError:
+                continue
+            if any(abs(a - t) < _GROUP_W + 0.4 for t in taken):
+                continue
+            slots.setdefault(w, []).append((round(a, 2), gi))
+            placed += 1
+            if placed == want:
+                break
+    # pillars: two on each long outer wall, one on each short one, away from the demo's
+    pillars = []
+    xs_s = [_away(g, 2.2, 11.0, [7.0], 1.5), _away(g, 14.0, 22.8, [18.0], 1.5)]
+    xs_n = [_away(g, 2.2, 11.0, [7.0], 1.5), _away(g, 14.0, 22.8, [18.0], 1.5)]
+    for x in xs_s:
+        pillars.append((f"pillarS{x:.2f}", x, Y0, (0, 1), (1, 0)))
+    for x in xs_n:
+        pillars.append((f"pillarN{x:.2f}", x, Y1, (0, -1), (-1, 0)))
+    pillars.append(("pillarW", X0, _away(g, 2.2, 11.8, [7.0], 1.5), (1, 0), (0, -1)))
+    pillars.append(("pillarE", X1, _away(g, 2.2, 11.8, [7.0], 1.5), (-1, 0), (0, 1)))
+    # corner panels: other reach along each wall and another height
+
+    def off(c, lo, hi):
+        return c + float(g.choice([-1.0, 1.0]) * g.uniform(lo, hi))
+
+    panels = tuple((k, off(1.3, 0.25, 0.4), off(1.3, 0.25, 0.4), off(2.2, 0.2, 0.4)) for k in range(4))
+    return Building(other_place=True, lamps=lamps, lamp_half_px=lamp_half, floor_tile_m=floor_tile,
+                    floor_phase_m=floor_phase, ceil_tile_m=ceil_tile, ceil_phase_m=ceil_phase, materials=materials,
+                    slots=slots, pillars=tuple(pillars), panels=panels)
+
+
+def building(seed: int = 0) -> Building:
+    """Where things stand in world ``seed``: the demo building below :data:`OTHER_PLACE_SEED`,
+    another building on the same corridors from it on."""
+    return _other_building(int(seed)) if int(seed) >= OTHER_PLACE_SEED else _demo_building()
 
 
 def _irradiance(points: np.ndarray, normal: np.ndarray, lamps: np.ndarray) -> np.ndarray:
@@ -290,37 +447,33 @@ def _pillar_planes(name, x, y, inward, along, tex_front, tex_side, lamps) -> lis
     return planes
 
 
-def _corner_panel(name, corner, dx, dy, tex, lamps) -> list[Plane]:
-    """Free-standing panel across an outer corner, 1.3 m from it along both walls, 2.2 m tall."""
+def _corner_panel(name, corner, dx, dy, tex, lamps, reach_x=1.3, reach_y=1.3, height=2.2) -> list[Plane]:
+    """Free-standing panel across an outer corner, from ``reach_x`` m along the x wall to
+    ``reach_y`` m along the y wall (1.3 m both in the demo building), ``height`` m tall."""
     c = np.asarray(corner, float)
-    p0 = c + np.array([0.0, 1.3 * dy])
-    p1 = c + np.array([1.3 * dx, 0.0])
+    p0 = c + np.array([0.0, reach_y * dy])
+    p1 = c + np.array([reach_x * dx, 0.0])
     # free space must be on the left of p0->p1
     d = p1 - p0
     left = np.array([-d[1], d[0]])
     if np.dot(left, np.array([dx, dy])) < 0:
         p0, p1 = p1, p0
-    return _wall_planes(name, p0, p1, tex, lamps, z_top=2.2)
+    return _wall_planes(name, p0, p1, tex, lamps, z_top=height)
 
 
 @functools.lru_cache(maxsize=4)
 def build_world(seed: int = 0) -> DemoWorld:
-    """Build (and cache) the demo world for ``seed``; ~1 s, ~100 MB of textures."""
+    """Build (and cache) the demo world for ``seed``; ~1 s, ~100 MB of textures.
+
+    Seeds from :data:`OTHER_PLACE_SEED` on build another building on the same corridors
+    (see :func:`building`)."""
     rng = np.random.default_rng(np.random.SeedSequence([seed, 0x5EED]))
-    lamps = _lamp_positions()
+    bld = building(seed)
+    lamps = bld.lamps
     groups = _decal_groups(rng)
     planes: list[Plane] = []
     X0, Y0, X1, Y1 = OUTER
-    # outer walls, counter-clockwise seen from above so free space (inside) is on the left
-    outer = [((X0, Y0), (X1, Y0)), ((X1, Y0), (X1, Y1)), ((X1, Y1), (X0, Y1)), ((X0, Y1), (X0, Y0))]
-    # aliasing: each group appears on two or three walls at different places
-    slots = {
-        "outer0": [(4.0, 0), (15.0, 1)],
-        "outer2": [(2.2, 0), (8.0, 2)],
-        "A1": [(2.5, 1)],
-        "B3": [(3.0, 2)],
-        "outer3": [(1.8, 0)],
-    }
+    slots = bld.slots
     sites: list[dict] = []
 
     def record_sites(name, p0, p1):
@@ -331,50 +484,48 @@ def build_world(seed: int = 0) -> DemoWorld:
             centre = np.array([*(p1 + d * (a + w_m / 2)), h_m / 2])
             sites.append({"group": gi, "wall": name, "centre": centre, "normal": np.array([d[1], -d[0], 0.0])})
 
-    materials = ["plaster", "plaster", "plaster", "plaster"]
-    for k, (p0, p1) in enumerate(outer):
+    # outer walls, then the faces of blocks A and B (names and ends: _wall_ends)
+    for name, (p0, p1) in _wall_ends().items():
         L = float(np.hypot(p1[0] - p0[0], p1[1] - p0[1]))
-        tex = _paint_wall(rng, L, materials[k], groups, slots.get(f"outer{k}", []))
-        planes += _wall_planes(f"outer{k}", p0, p1, tex, lamps)
-        record_sites(f"outer{k}", p0, p1)
-    for bi, (bx0, by0, bx1, by1) in enumerate(BLOCKS):
-        name = "AB"[bi]
-        # block faces clockwise seen from above so free space (outside) is on the left
-        faces = [((bx0, by0), (bx0, by1)), ((bx0, by1), (bx1, by1)), ((bx1, by1), (bx1, by0)), ((bx1, by0), (bx0, by0))]
-        mats = ["bricks", "plaster", "bricks", "wood"] if bi == 0 else ["tiles", "plaster", "tiles", "bricks"]
-        for k, (p0, p1) in enumerate(faces):
-            L = float(np.hypot(p1[0] - p0[0], p1[1] - p0[1]))
-            tex = _paint_wall(rng, L, mats[k], groups, slots.get(f"{name}{k}", []))
-            planes += _wall_planes(f"{name}{k}", p0, p1, tex, lamps)
-            record_sites(f"{name}{k}", p0, p1)
+        tex = _paint_wall(rng, L, bld.materials[name], groups, slots.get(name, []))
+        planes += _wall_planes(name, p0, p1, tex, lamps)
+        record_sites(name, p0, p1)
     # pillars out of the outer walls (identical textures: more aliasing)
     front = tx.plaster(rng, int(HEIGHT * WALL_RES), int(0.4 * WALL_RES), WALL_RES)
     tx.paste(front, tx.poster(rng, int(0.3 * WALL_RES), int(0.3 * WALL_RES), WALL_RES), int(0.05 * WALL_RES), int(0.9 * WALL_RES))
     side = tx.plaster(rng, int(HEIGHT * WALL_RES), int(0.3 * WALL_RES), WALL_RES)
-    for x in (7.0, 18.0):
-        planes += _pillar_planes(f"pillarS{x:g}", x, Y0, (0, 1), (1, 0), front, side, lamps)
-        planes += _pillar_planes(f"pillarN{x:g}", x, Y1, (0, -1), (-1, 0), front, side, lamps)
-    planes += _pillar_planes("pillarW", X0, 7.0, (1, 0), (0, -1), front, side, lamps)
-    planes += _pillar_planes("pillarE", X1, 7.0, (-1, 0), (0, 1), front, side, lamps)
+    for name, x, y, inward, along in bld.pillars:
+        planes += _pillar_planes(name, x, y, inward, along, front, side, lamps)
     # free-standing panels across the outer corners
-    for k, (corner, dx, dy) in enumerate([((X0, Y0), 1, 1), ((X1, Y0), -1, 1), ((X1, Y1), -1, -1), ((X0, Y1), 1, -1)]):
-        ptex = np.empty((int(2.2 * WALL_RES), int(1.84 * WALL_RES), 3), np.uint8)
-        ptex[:] = tx.random_color(rng, 40, 120)
-        tx.paste(ptex, tx.poster(rng, int(1.6 * WALL_RES), int(1.5 * WALL_RES), WALL_RES), int(0.17 * WALL_RES), int(0.15 * WALL_RES))
-        planes += _corner_panel(f"panel{k}", corner, dx, dy, ptex, lamps)
-    # floor and ceiling
+    corners = [((X0, Y0), 1, 1), ((X1, Y0), -1, 1), ((X1, Y1), -1, -1), ((X0, Y1), 1, -1)]
+    for k, reach_x, reach_y, height in bld.panels:
+        corner, dx, dy = corners[k]
+        if bld.other_place:
+            width = float(np.hypot(reach_x, reach_y))
+            ptex = np.empty((int(height * WALL_RES), int(width * WALL_RES), 3), np.uint8)
+            ptex[:] = tx.random_color(rng, 40, 120)
+            tx.paste(ptex, tx.poster(rng, int((height - 0.6) * WALL_RES), int((width - 0.34) * WALL_RES), WALL_RES),
+                     int(0.17 * WALL_RES), int(0.15 * WALL_RES))
+        else:
+            ptex = np.empty((int(2.2 * WALL_RES), int(1.84 * WALL_RES), 3), np.uint8)
+            ptex[:] = tx.random_color(rng, 40, 120)
+            tx.paste(ptex, tx.poster(rng, int(1.6 * WALL_RES), int(1.5 * WALL_RES), WALL_RES), int(0.17 * WALL_RES), int(0.15 * WALL_RES))
+        planes += _corner_panel(f"panel{k}", corner, dx, dy, ptex, lamps, reach_x, reach_y, height)
+    # floor and ceiling (texture row 0 at y = Y1, column 0 at x = X0)
     fh, fw = int(round((Y1 - Y0) * FLOOR_RES)), int(round((X1 - X0) * FLOOR_RES))
-    floor = tx.tiles(rng, fh, fw, FLOOR_RES, tile_m=0.5)
+    fpx, fpy = bld.floor_phase_m
+    floor = tx.tiles(rng, fh, fw, FLOOR_RES, tile_m=bld.floor_tile_m, phase_m=(fpx, fpy))
     for _ in range(60):  # scuffs and markings make the floor less periodic
         c = (int(rng.integers(0, fw)), int(rng.integers(0, fh)))
         cv2.ellipse(floor, c, (int(rng.uniform(3, 25)), int(rng.uniform(2, 8))), float(rng.uniform(0, 180)),
                     0, 360, tx.random_color(rng, 20, 120), -1, cv2.LINE_AA)
     planes += _horizontal_planes("floor", floor, FLOOR_RES, 0.0, lamps, facing_up=True)
     ch, cw = int(round((Y1 - Y0) * CEIL_RES)), int(round((X1 - X0) * CEIL_RES))
-    ceil = tx.ceiling_panels(rng, ch, cw, CEIL_RES)
+    ceil = tx.ceiling_panels(rng, ch, cw, CEIL_RES, tile_m=bld.ceil_tile_m, phase_m=bld.ceil_phase_m)
+    hx, hy = bld.lamp_half_px
     for lx, ly, _ in lamps:  # lamp panels: bright rectangles
         c, r_ = int(lx * CEIL_RES), int((Y1 - ly) * CEIL_RES)
-        cv2.rectangle(ceil, (c - 12, r_ - 5), (c + 12, r_ + 5), (250, 250, 245), -1)
+        cv2.rectangle(ceil, (c - hx, r_ - hy), (c + hx, r_ + hy), (250, 250, 245), -1)
     planes += _horizontal_planes("ceiling", ceil, CEIL_RES, HEIGHT, lamps, facing_up=False)
     # lighting epochs: epoch 0 nominal; later epochs dim/brighten lamps and change exposure
     n_l = len(lamps)
@@ -382,4 +533,5 @@ def build_world(seed: int = 0) -> DemoWorld:
     gains[1:] = rng.uniform(0.7, 1.15, size=(N_LIGHT_EPOCHS - 1, n_l))
     expo = np.ones(N_LIGHT_EPOCHS)
     expo[1:] = rng.uniform(0.88, 1.08, size=N_LIGHT_EPOCHS - 1)
-    return DemoWorld(seed=seed, planes=planes, lamps=lamps, lamp_gains=gains, exposure=expo, alias_sites=sites)
+    return DemoWorld(seed=seed, planes=planes, lamps=lamps, lamp_gains=gains, exposure=expo, alias_sites=sites,
+                     building=bld)
