@@ -206,3 +206,47 @@ def test_map_info_and_export_read_the_map_without_changing_it(example_map, tmp_p
                         str(root / "exported")], capture_output=True, text=True, timeout=300)
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
     assert {p: p.read_bytes() for p in root.rglob("*") if p.is_file()} == before
+
+
+def _noisy(T: np.ndarray, rng, sigma_t: float = 0.005, sigma_r: float = 0.0012) -> np.ndarray:
+    return T @ make_T(so3_exp(rng.normal(0, sigma_r, 3)), rng.normal(0, sigma_t, 3))
+
+
+def test_a_consistent_set_survives_the_gnc_recheck_when_visual_links_bend_the_sessions():
+    """Each session's own estimate (odometry with its biases) is far from what its tight visual links say:
+    the loops of the consistent set must still be inliers of the joint graph."""
+    rng = np.random.default_rng(7)
+    gt_a = _route(120, 3)
+    gt_b = gt_a.copy()
+    a, b = _session("a", gt_a, 0, 1), _session("b", gt_b, 1000, 2)
+    for s in (a, b):  # strongly biased own estimates
+        s.T_init = _drifting(gt_a, 11, scale=1.06)
+    info_link = np.linalg.inv(np.diag([0.0012 ** 2] * 3 + [0.005 ** 2] * 3))
+    links = [JointLoop(s0 + i, s0 + i - 1, _noisy(inv(gt[i - 1]) @ gt[i], rng), info_link, False, True, "link")
+             for s0, gt in ((0, gt_a), (1000, gt_b)) for i in range(1, len(gt))]
+    inter = [JointLoop(1000 + i, i, _noisy(inv(gt_a[i]) @ gt_b[i], rng), info_link, True) for i in range(2, 118, 3)]
+    res = solve([a, b], links + inter)
+    ok = [lp.accepted for lp in inter]
+    assert sum(ok) >= 0.9 * len(inter), [lp.reason for lp in inter if not lp.accepted][:3]
+    assert res.component["b"] == 0
+
+
+def test_batch_appends_its_logs_to_one_map_in_name_order(example_map, tmp_path):
+    work, _ = example_map
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    for name in ("session5", "session1"):  # discovery order must not matter
+        (logs / f"{name}.mcap").symlink_to(work / f"{name}.mcap")
+    r = subprocess.run([sys.executable, "-m", "slam_lcd", "batch", str(logs / "*.mcap"), "--out", str(tmp_path / "res"),
+                        "--map", str(tmp_path / "map"), "--features", "orb", "--workers", "1", "--no-progress",
+                        "--no-mcap", "--set", "run.plots=false", "--set", "run.loop_pictures=false"],
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert r.stdout.index("appended session1") < r.stdout.index("appended session5"), r.stdout
+    from slam_lcd.map import Map
+    from slam_lcd.map.summary import map_summary
+
+    s = map_summary(Map.open(tmp_path / "map"))
+    assert [x["name"] for x in s["sessions"]] == ["session1", "session5"]
+    assert len(s["components"]) == 1 and s["inter_session_accepted"] >= 3, s["inter_session_loops"][:3]
+    assert (tmp_path / "res" / "map_sessions" / "session5" / "map" / "sessions.csv").is_file()

@@ -49,6 +49,11 @@ def register(sub) -> None:
                    help="trained vocabulary (.npz) used by every log, loaded once per worker (default: the online "
                         "vocabulary of each run)")
     p.add_argument("--no-mcap", action="store_true", help="do not write corrected.mcap (default: write it)")
+    p.add_argument("--map", default=None, metavar="DIR",
+                   help="also join the logs into one multi-session map: after the parallel runs (which fill the "
+                        "feature cache), the logs are appended to DIR one at a time in the order of their output "
+                        "names, so the map does not depend on worker timing; each append's outputs go to "
+                        "OUT/map_sessions/<name>/ (default: none)")
     add_config_args(p)
     p.set_defaults(func=run)
 
@@ -63,8 +68,44 @@ def run(args) -> int:
                     progress=not args.no_progress, input_paths=config_inputs(args))
     for line in res.summary_lines():
         print(line)
+    if args.map is not None and not res.interrupted:
+        rc = _append_to_map(args, cfg, res)
+        if rc:
+            return rc
     if res.interrupted:
         from ..interrupts import exit_status
 
         return exit_status()  # 130 Ctrl-C, 143 SIGTERM, 129 SIGHUP
     return 2 if res.failed else 0
+
+
+def _append_to_map(args, cfg, res) -> int:
+    """``batch --map``: the logs that ran (ok or skipped) appended one by one, by output name."""
+    from ..batch.discovery import LogEntry, ground_truth_in
+    from ..features import load_extractor
+    from ..interrupts import exit_status
+    from ..map.session_map import Map, extractor_meta
+    from ..map.summary import summary_lines
+    from ..runner import run_log
+
+    rows = sorted((r for r in res.rows if r["status"] in ("ok", "skipped")), key=lambda r: r["name"])
+    if not rows:
+        print(f"map {args.map}: no log ran, nothing appended")
+        return 0
+    extractor = load_extractor(cfg.features)
+    out = Path(args.out) / "map_sessions"
+    with Map.open(args.map, features=extractor_meta(extractor, cfg.map.descriptor_form), conf=cfg.map, write=True,
+                  create=True) as m:
+        last = None
+        for r in rows:
+            gt = ground_truth_in(Path(args.gt_dir), LogEntry(Path(r["log"]), r["name"])) if args.gt_dir else None
+            last = run_log(r["log"], out / r["name"], cfg, extractor=extractor, progress=not args.no_progress,
+                           gt_topic=args.gt_topic, gt_file=gt, image_topic=args.image_topic,
+                           odom_topic=args.odom_topic, depth_topic=args.depth_topic, write_mcap=not args.no_mcap,
+                           input_paths=config_inputs(args), map=m, session_name=r["name"])
+            print(f"appended {r['name']} to {args.map}" + (" (interrupted: not added)" if last.interrupted else ""))
+            if last.interrupted:
+                return exit_status()
+    for line in summary_lines(last.map):
+        print(line)
+    return 0

@@ -237,8 +237,19 @@ def solve(sessions: list[SessionPoses], loops: list[JointLoop], conf: MapConfig 
         if not lp.inter and lp.accepted:
             known.add(gtsam.BetweenFactorPose3(lp.match, lp.query, gtsam.Pose3(lp.T), _noise(lp.info)))
     inter = [lp for lp in loops if lp.inter and lp.accepted]
+    params = gtsam.LevenbergMarquardtParams()
+    params.setRelativeErrorTol(1e-9)
+    params.setAbsoluteErrorTol(1e-9)
+    params.setMaxIterations(100)
     if inter:
         factors = [gtsam.BetweenFactorPose3(lp.match, lp.query, gtsam.Pose3(lp.T), _noise(lp.info)) for lp in inter]
+        # GNC starts from the optimum with every PCM-consistent loop: the initial values (each session's
+        # own estimate, placed by one loop) can be far from what the visual links say, and TLS started
+        # there turned every loop of a consistent set into an outlier
+        start = gtsam.NonlinearFactorGraph(known)
+        for f in factors:
+            start.add(f)
+        values = gtsam.LevenbergMarquardtOptimizer(start, values, params).optimize()
         res = gnc_loop_weights(known, factors, values, inlier_probability=gnc_inlier_probability)
         for lp, w, c2 in zip(inter, res.weights, res.residual_chi2):
             if w < 0.5:
@@ -249,10 +260,6 @@ def solve(sessions: list[SessionPoses], loops: list[JointLoop], conf: MapConfig 
     for lp in inter:
         if lp.accepted:
             graph.add(gtsam.BetweenFactorPose3(lp.match, lp.query, gtsam.Pose3(lp.T), _noise(lp.info)))
-    params = gtsam.LevenbergMarquardtParams()
-    params.setRelativeErrorTol(1e-9)
-    params.setAbsoluteErrorTol(1e-9)
-    params.setMaxIterations(100)
     values = gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
     poses = {int(k): values.atPose3(int(k)).matrix() for s in sessions for k in s.ids}
     # a component that the solve left isolated keeps its first session's frame
