@@ -79,13 +79,20 @@ def test_reopened_map_queries_like_the_database_that_saved_it(tmp_path, min_word
 
 def test_without_a_snapshot_the_vocabulary_is_replayed(tmp_path):
     det = _save_map(tmp_path / "m", VocabConfig())
-    man = store.read_manifest(tmp_path / "m")
-    man.vocab_file = None  # a map of this schema written before snapshots
     m = Map.open(tmp_path / "m")
-    m.manifest.vocab_file = None
+    m.manifest.vocab_file = None  # as a map of this schema written before snapshots reads
     again = LoopDetector()
     m.load_into(again)
     assert again.db.kf_ids == det.db.kf_ids and again.db.n_words > 0
+    # a snapshot of other keyframes (here: the map lost its last keyframe) is not used either
+    m = Map.open(tmp_path / "m")
+    s = m.sessions[0]
+    m.sessions[0] = store.SessionKeyframes(s.ids[:-1], s.stamps[:-1], s.T_odom[:-1], s.cov[:-1], s.T_gt[:-1],
+                                           s.offsets[:-1], s.keypoints, s.descriptors, s.scales, s.points3d,
+                                           s.points_source[:-1])
+    again = LoopDetector()
+    m.load_into(again)
+    assert again.db.kf_ids == det.db.kf_ids[:-1]
 
 
 def test_tampered_snapshot_is_a_map_error_naming_the_file(tmp_path):
