@@ -183,7 +183,56 @@ def section_sessions(args) -> None:
     print(f"map on disk: {size / 1e6:.1f} MB, {n} keyframes, {size / n / 1e3:.0f} kB per keyframe")
 
 
-def _replicated(src: Path, dst: Path, keyframes: int) -> None:
+def _source_vocab(src: Path) -> dict:
+    """The source map's vocabulary snapshot: its own, or made by replaying it once (not timed)."""
+    from slam_lcd.lcd import LoopDetector
+    from slam_lcd.map.session_map import Map
+    from slam_lcd.vocab.database import snapshot
+
+    m = Map.open(src)
+    det = LoopDetector()
+    m.load_into(det)
+    return snapshot(det.db, "int8")
+
+
+def _replicated_vocab(v: dict, src_ids: np.ndarray, pieces: list[tuple[int, np.ndarray]]) -> dict:
+    """A snapshot for the repeated map: the source's words once per repetition (word ids offset), each
+    keyframe's bag of words from its source keyframe; the word index's graph built over all of them."""
+    from slam_lcd.vocab import VocabConfig
+    from slam_lcd.vocab.word_index import WordIndex
+    import faiss
+
+    W = len(v["lengths"])
+    at = {int(k): i for i, k in enumerate(v["kf_ids"])}
+    off = v["bow_offsets"]
+    reps = max(r for r, _ in pieces) + 1
+    ids, words, counts, lens = [], [], [], []
+    for r, (rep, src_kf) in enumerate(pieces):
+        for k in src_kf:
+            i = at[int(k)]
+            words.append(v["bow_words"][off[i]:off[i + 1]] + rep * W)
+            counts.append(v["bow_counts"][off[i]:off[i + 1]])
+            lens.append(off[i + 1] - off[i])
+    out = dict(v)
+    for k in ("centres_q", "centres_scale", "lengths", "counts", "images"):
+        out[k] = np.concatenate([v[k]] * reps)
+    out["bow_words"], out["bow_counts"] = np.concatenate(words), np.concatenate(counts)
+    out["bow_offsets"] = np.concatenate([[0], np.cumsum(lens)]).astype(np.int64)
+    out["n_images"] = np.array(int(v["n_images"]) * reps)
+    centres = out["centres_q"].astype(np.float32) / out["centres_scale"][:, None]
+    idx = WordIndex.from_config(centres.shape[1], VocabConfig())
+    idx._image_ends.extend([len(centres)] * (idx.fresh_images + 1))
+    t = time.perf_counter()
+    idx._build(centres)
+    print(f"  (word index built over {len(centres)} words for the snapshot: {time.perf_counter() - t:.0f} s, not timed)")
+    out["graph"] = faiss.serialize_index(idx.graph)
+    out["proj"] = idx.proj
+    out["index_state"] = np.array([idx.n_indexed, idx.built_at, idx.n_builds], np.int64)
+    out["image_ends"] = np.array(list(idx._image_ends), np.int64)
+    return out
+
+
+def _replicated(src: Path, dst: Path, keyframes: int, vocab: bool = False) -> None:
     from slam_lcd.map import store
     from slam_lcd.map.store import MapGraph, MapManifest, SessionKeyframes
 
@@ -192,6 +241,7 @@ def _replicated(src: Path, dst: Path, keyframes: int) -> None:
     shutil.rmtree(dst, ignore_errors=True)
     dst.mkdir(parents=True)
     new, table, next_id, total, rep = [], [], 0, 0, 0
+    pieces = []  # (repetition, source keyframe ids) per repeated session
     while total < keyframes:
         for meta, s in zip(man.sessions, sess):
             n = min(len(s), keyframes - total)
@@ -207,6 +257,7 @@ def _replicated(src: Path, dst: Path, keyframes: int) -> None:
                      component=0)
             m.pop("file", None)
             new.append((m, cut))
+            pieces.append((rep, s.ids[:n]))
             table.append(m)
             next_id += n
             total += n
@@ -214,7 +265,12 @@ def _replicated(src: Path, dst: Path, keyframes: int) -> None:
     ids = np.concatenate([s.ids for _, s in new])
     graph = MapGraph(ids, np.concatenate([s.T_odom for _, s in new]), np.zeros(0, np.int64), np.zeros(0, np.int64),
                      np.zeros((0, 4, 4)), np.zeros((0, 6, 6)), np.zeros(0, bool), np.zeros(0, "<U8"))
-    store.commit(dst, MapManifest(features=man.features), new, graph, table)
+    snap = None
+    if vocab:
+        v = _source_vocab(src)
+        snap = _replicated_vocab(v, None, pieces)
+        snap["kf_ids"] = ids
+    store.commit(dst, MapManifest(features=man.features), new, graph, table, snap)
 
 
 def _measure_load(root: str, ready: bool) -> dict:
@@ -236,17 +292,24 @@ def _measure_load(root: str, ready: bool) -> dict:
     return out
 
 
+def store_vocab_bytes(root: Path) -> int:
+    man = json.loads((root / "map.json").read_text())
+    return int(man["files"][man["vocab_file"]]["bytes"]) if man.get("vocab_file") else 0
+
+
 def section_load(args) -> None:
     work = Path(args.work)
     src = Path(args.source) if args.source else work / "runs" / "map_one_by_one"
     if not (src / "map.json").exists():
         sys.exit(f"{src}: no map to repeat; run the sessions section first or give --source")
     big = work / f"map_{args.keyframes}"
-    _replicated(src, big, args.keyframes)
+    _replicated(src, big, args.keyframes, vocab=args.snapshot)
     size = sum(p.stat().st_size for p in big.rglob("*") if p.is_file())
+    vfile = store_vocab_bytes(big)
     print(machine_line())
     print(f"map of {args.keyframes} keyframes (the sessions of {src} repeated): {size / 1e6:.0f} MB on disk, "
-          f"{size / args.keyframes / 1e3:.0f} kB per keyframe")
+          f"{size / args.keyframes / 1e3:.0f} kB per keyframe"
+          + (f" (vocabulary snapshot {vfile / args.keyframes / 1e3:.1f} kB per keyframe)" if vfile else ""))
     for ready in (False, True):
         runs = []
         for _ in range(args.repeat):
@@ -278,6 +341,8 @@ def main() -> None:
     lo.add_argument("--source", default=None, help="a map to repeat (default: WORK/runs/map_one_by_one)")
     lo.add_argument("--keyframes", type=int, default=5000)
     lo.add_argument("--repeat", type=int, default=3)
+    lo.add_argument("--snapshot", action="store_true",
+                    help="give the repeated map a vocabulary snapshot (the source's words repeated; made untimed)")
     lo.set_defaults(func=section_load)
     args = ap.parse_args()
     args.func(args)

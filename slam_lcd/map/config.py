@@ -16,6 +16,9 @@ class MapConfig:
     # the pair: metric from the 3-D points) beside the odometry: the map's shape then rests on
     # unbiased visual steps, not on the odometry's scale and heading biases
     visual_links: bool = True
+    # the online vocabulary's word centres in the map's snapshot (loaded instead of replaying every
+    # keyframe's descriptors): int8 (one scale per word, 260 B a word) or float16 (512 B)
+    vocab_centres: Literal["int8", "float16"] = "int8"
     # two sessions are joined only by this many pairwise-consistent loops between them (PCM):
     # one loop between two unconnected sessions cannot be checked against anything
     min_join_loops: int = 3

@@ -92,6 +92,7 @@ class Map:
         self._unsaved: list[tuple[dict, SessionKeyframes]] = []  # added, not committed yet
         self._generation_read = manifest.generation
         self.last_join: JointResult | None = None
+        self._vocab: dict | None = None  # the vocabulary snapshot to save (add_session), None: none
 
     # ------------------------------------------------------------------ open / close
     @classmethod
@@ -212,11 +213,36 @@ class Map:
             yield meta, items
 
     def load_into(self, detector) -> None:
-        """Give ``detector`` every keyframe of the map as a candidate (each session begins afresh)."""
+        """Give ``detector`` every keyframe of the map as a candidate (each session begins afresh).
+
+        An empty online detector takes the map's vocabulary snapshot (words and bags of words as
+        saved) when it holds exactly the map's keyframes in order; otherwise the stored
+        descriptors are replayed through the vocabulary (a trained vocabulary always: its tree
+        quantises cheaply).
+        """
+        bows = self._restore_vocab(detector)
+        at = 0
         for _, items in self.keyframes_for_detector():
             detector.begin_session()
             for kf, desc, p3, src in items:
-                detector.remember(kf, desc, p3, src)
+                detector.remember(kf, desc, p3, src, bow=bows[at] if bows is not None else None)
+                at += 1
+
+    def _restore_vocab(self, detector):
+        """Bags of words of the snapshot restored into ``detector.db``, or None (replay instead)."""
+        from ..vocab.database import restore_into
+
+        db = detector.db
+        if self.manifest.vocab_file is None or not db.online or len(db) or db.words is not None:
+            return None
+        state = store.read_vocab(self.root, self.manifest)
+        ids = np.concatenate([s.ids for s in self.sessions]) if self.sessions else np.zeros(0, np.int64)
+        if state is None or not np.array_equal(state["kf_ids"], ids):
+            return None
+        try:
+            return restore_into(db, state)
+        except (ValueError, KeyError, TypeError, RuntimeError) as e:
+            raise MapError(f"vocabulary snapshot cannot be used ({e})", self.root / self.manifest.vocab_file) from None
 
     # ------------------------------------------------------------------ appending
     def add_session(self, pipeline, *, name: str | None = None, log_path: str | Path | None = None,
@@ -271,6 +297,7 @@ class Map:
                 "component": 0, **(extra or {})}
         # the in-memory map follows at once (a second session may be added before saving)
         self._apply(meta, sess, graph, result)
+        self._vocab = self._vocab_snapshot(pipeline.detector)
         return result
 
     def _apply(self, meta, sess, graph, result) -> None:
@@ -281,8 +308,19 @@ class Map:
         self.sessions = self.sessions + [sess]
         self.graph = graph
         self._unsaved.append((meta, sess))
-        self.manifest = MapManifest(self.manifest.features, metas, self.manifest.graph_file, self.manifest.files,
-                                    self.manifest.created, self.manifest.updated, self.manifest.generation)
+        self.manifest = MapManifest(self.manifest.features, metas, self.manifest.graph_file, self.manifest.vocab_file,
+                                    self.manifest.files, self.manifest.created, self.manifest.updated,
+                                    self.manifest.generation)
+
+    def _vocab_snapshot(self, detector) -> dict | None:
+        """The detector's online vocabulary and bags of words when its keyframes are exactly the map's, in order."""
+        from ..vocab.database import snapshot
+
+        state = snapshot(detector.db, self.conf.vocab_centres)
+        ids = np.concatenate([s.ids for s in self.sessions])
+        if state is None or not np.array_equal(state["kf_ids"], ids):
+            return None
+        return state
 
     def save(self) -> None:
         """Commit the sessions added since the last save: one atomic step (the manifest's rename)."""
@@ -293,7 +331,8 @@ class Map:
         on_disk = store.read_manifest(self.root) if store.is_map(self.root) else MapManifest(self.manifest.features)
         if on_disk.generation != self._generation_read:
             raise MapError("the map changed on disk since it was opened (another writer?): nothing saved", self.root)
-        self.manifest = store.commit(self.root, on_disk, self._unsaved, self.graph, self.manifest.sessions)
+        self.manifest = store.commit(self.root, on_disk, self._unsaved, self.graph, self.manifest.sessions,
+                                     self._vocab)
         self._generation_read = self.manifest.generation
         self._unsaved = []
 

@@ -5,6 +5,7 @@ Layout (``schema`` 1)::
     DIR/map.json                  manifest: schema, feature kind, sessions table, files with sha256
     DIR/sessions/NNNN-<tag>.npz   one session's keyframes (written once, never rewritten)
     DIR/graph-<tag>.npz           loops of every session and the map-frame keyframe poses
+    DIR/vocab-<tag>.npz           the online vocabulary and every keyframe's bag of words (optional)
     DIR/.lock                     the writers' lock (flock)
 
 Why this shape: appending a session writes only new files (the session's keyframes and a new
@@ -141,6 +142,7 @@ class MapManifest:
     features: dict  # kind, weights_sha256, descriptor_dim, descriptor_form, vocabulary
     sessions: list[dict] = field(default_factory=list)
     graph_file: str | None = None
+    vocab_file: str | None = None  # the online vocabulary's snapshot (absent: replayed when loaded)
     files: dict[str, dict] = field(default_factory=dict)  # relative name -> {"sha256", "bytes"}
     created: str = ""
     updated: str = ""
@@ -149,7 +151,7 @@ class MapManifest:
     def to_json(self) -> dict:
         return {"format": FORMAT_NAME, "schema": SCHEMA, "created": self.created, "updated": self.updated,
                 "generation": self.generation, "features": self.features, "sessions": self.sessions,
-                "graph_file": self.graph_file, "files": self.files}
+                "graph_file": self.graph_file, "vocab_file": self.vocab_file, "files": self.files}
 
     @property
     def n_keyframes(self) -> int:
@@ -193,7 +195,8 @@ def read_manifest(root: str | Path) -> MapManifest:
                        f"({'upgrade slam-lcd' if newer else 'rebuild the map from its logs'})", mpath)
     try:
         m = MapManifest(features=dict(data["features"]), sessions=list(data["sessions"]),
-                        graph_file=data.get("graph_file"), files=dict(data["files"]),
+                        graph_file=data.get("graph_file"), vocab_file=data.get("vocab_file"),
+                        files=dict(data["files"]),
                         created=str(data.get("created", "")), updated=str(data.get("updated", "")),
                         generation=int(data.get("generation", 0)))
         for s in m.sessions:
@@ -240,6 +243,21 @@ def read_session(root: str | Path, manifest: MapManifest, index: int) -> Session
     s = SessionKeyframes(**_load_arrays(path, SessionKeyframes.ARRAYS))
     s.check(path)
     return s
+
+
+# arrays of a vocabulary snapshot (see slam_lcd.vocab.database.BowDatabase.snapshot)
+VOCAB_ARRAYS = ("kf_ids", "desc_kind", "dim", "n_images", "centres_q", "centres_scale", "centres_f16", "lengths",
+                "counts", "images", "bow_offsets", "bow_words", "bow_counts", "proj", "graph", "index_state",
+                "image_ends")
+
+
+def read_vocab(root: str | Path, manifest: MapManifest) -> dict[str, np.ndarray] | None:
+    """The vocabulary snapshot's arrays (checked like every map file), or None when the map has none."""
+    if manifest.vocab_file is None:
+        return None
+    root = Path(root)
+    path = _checked(root, manifest, manifest.vocab_file)
+    return _load_arrays(path, VOCAB_ARRAYS)
 
 
 def read_graph(root: str | Path, manifest: MapManifest) -> MapGraph:
@@ -303,7 +321,7 @@ def write_lock(root: Path, timeout_s: float = 60.0) -> Iterator[None]:
 def remove_unlisted(root: Path, manifest: MapManifest | None) -> None:
     """Remove files of ours that the manifest does not name (a failed append's, an old graph). Under the lock."""
     keep = set(manifest.files) if manifest else set()
-    for path in list(root.glob("graph-*.npz")) + list((root / "sessions").glob("*.npz")) + \
+    for path in list(root.glob("graph-*.npz")) + list(root.glob("vocab-*.npz")) + list((root / "sessions").glob("*.npz")) + \
             list(root.glob(".*.tmp")) + list((root / "sessions").glob(".*.tmp")):
         rel = path.relative_to(root).as_posix()
         if rel not in keep:
@@ -312,7 +330,7 @@ def remove_unlisted(root: Path, manifest: MapManifest | None) -> None:
 
 
 # the names a commit writes (see commit): nothing else is ever removed as an unfinished map's leftover
-_ROOT_FILE = re.compile(r"(\.?graph-\d{6}-[0-9a-f]{8}\.npz(\.tmp)?|\.map\.json\.tmp)")
+_ROOT_FILE = re.compile(r"(\.?(graph|vocab)-\d{6}-[0-9a-f]{8}\.npz(\.tmp)?|\.map\.json\.tmp)")
 _SESSION_FILE = re.compile(r"\.?\d{4}-[0-9a-f]{8}\.npz(\.tmp)?")
 
 
@@ -348,13 +366,15 @@ def remove_unfinished(root: Path) -> None:
 
 
 def commit(root: Path, manifest: MapManifest, new_sessions: list[tuple[dict, SessionKeyframes]], graph: MapGraph,
-           sessions_table: list[dict]) -> MapManifest:
+           sessions_table: list[dict], vocab: dict[str, np.ndarray] | None = None) -> MapManifest:
     """Write new sessions' files and a new graph file, then the manifest (the commit). Hold the lock.
 
     ``manifest``: the one on disk (or an empty one for a new map); ``sessions_table``: every
     session's entry after the commit (new ones last, without their ``file``). A failure before
     the manifest's rename removes the files it wrote: the folder is as it was (an ``OSError``,
-    such as a full disk, is raised as :class:`MapError` naming the map).
+    such as a full disk, is raised as :class:`MapError` naming the map). ``vocab``: the online
+    vocabulary's snapshot after these sessions (``vocab-<gen>-<tag>.npz``); None: the map has
+    none (it is replayed when loaded), and an older one is dropped.
     """
     tag = secrets.token_hex(4)
     files = dict(manifest.files)
@@ -376,8 +396,15 @@ def commit(root: Path, manifest: MapManifest, new_sessions: list[tuple[dict, Ses
             files.pop(manifest.graph_file, None)
         written.append(root / gname)
         files[gname] = _write_npz(root / gname, {k: getattr(graph, k) for k in MapGraph.ARRAYS})
+        if manifest.vocab_file:
+            files.pop(manifest.vocab_file, None)
+        vname = None
+        if vocab is not None:
+            vname = f"vocab-{manifest.generation + 1:06d}-{tag}.npz"
+            written.append(root / vname)
+            files[vname] = _write_npz(root / vname, {k: vocab[k] for k in VOCAB_ARRAYS})
         now = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
-        new = MapManifest(features=manifest.features, sessions=table, graph_file=gname, files=files,
+        new = MapManifest(features=manifest.features, sessions=table, graph_file=gname, vocab_file=vname, files=files,
                           created=manifest.created or now, updated=now, generation=manifest.generation + 1)
         text = json.dumps(new.to_json(), indent=1, default=_json_default)
         tmp = root / f".{MANIFEST}.tmp"
