@@ -173,6 +173,7 @@ def write_html_report(out_dir: Path, facts: dict, summary_lines: list[str], rows
                 + (f"; {n_bad} accepted loop(s) false by ground truth" if n_bad is not None else "")
                 + ". Click a header to sort; a thumbnail opens its picture in <code>loops/</code>.</p>")
     body += _loop_table(rows, out_dir, set(pictures), thumbs)
+    body += _map_section(facts.get("map"), facts.get("localization"))
     body.append("<h2>Time per stage</h2><table id='stages'><tr><th class=t>stage</th><th>seconds</th><th>calls</th></tr>")
     body += [f"<tr><td class=t>{_e(k)}</td><td>{v['seconds']:.2f}</td><td>{v['calls']}</td></tr>"
              for k, v in facts["stages"].items()]
@@ -185,3 +186,39 @@ def write_html_report(out_dir: Path, facts: dict, summary_lines: list[str], rows
             f"<title>slam-lcd report: {_e(Path(inp['log']).name)}</title><style>{_CSS}</style>"
             f"<script>{_JS}</script></head><body>" + "\n".join(body) + "</body></html>\n")
     write_text(out_dir / "report.html", page)
+
+
+def _map_section(summary: dict | None, localization: dict | None) -> list[str]:
+    """The map this run appended to (sessions, ATE per session, loops between sessions) or was localised against."""
+    out: list[str] = []
+    if summary is not None and summary.get("sessions"):
+        out.append(f"<h2>Map</h2><p><code>{_e(summary['root'])}</code>: {len(summary['sessions'])} sessions, "
+                   f"{summary['n_keyframes']} keyframes, {summary['inter_session_accepted']} loops between sessions "
+                   f"accepted of {len(summary['inter_session_loops'])} offered, {len(summary['components'])} "
+                   "component(s).</p>")
+        out.append("<table id='map_sessions'><tr><th class=t>session</th><th>keyframes</th><th>component</th>"
+                   "<th>loops to other sessions</th><th>ATE odometry (m)</th><th>ATE in the map (m)</th>"
+                   "<th class=t>note</th></tr>")
+        for r in summary["sessions"]:
+            a, b = r.get("ate_odometry"), r.get("ate_map")
+            out.append(f"<tr><td class=t>{_e(r['name'])}</td><td>{r['keyframes']}</td><td>{r['component']}</td>"
+                       f"<td>{r['inter_session_loops']}</td><td>{'' if a is None else f'{a:.3f}'}</td>"
+                       f"<td>{'' if b is None else f'{b:.4f}'}</td><td class=t>{_e(r.get('note', ''))}</td></tr>")
+        out.append("</table>")
+        loops = summary["inter_session_loops"]
+        if loops:
+            out.append("<table id='inter_session_loops'><tr><th>query</th><th class=t>session</th><th>match</th>"
+                       "<th class=t>session</th><th class=t>verdict</th><th>GT distance (m)</th></tr>")
+            for r in loops:
+                d = r.get("gt_distance_m")
+                verdict = "accepted" if r["accepted"] else r["reason"]
+                out.append(f"<tr><td>{r['query_id']}</td><td class=t>{_e(r['query_session'])}</td>"
+                           f"<td>{r['match_id']}</td><td class=t>{_e(r['match_session'])}</td>"
+                           f"<td class=t>{_e(verdict)}</td><td>{'' if d is None else f'{d:.2f}'}</td></tr>")
+            out.append("</table>")
+    if localization is not None:
+        from ..map.summary import localisation_lines
+
+        out.append("<h2>Localisation against the map</h2><ul>"
+                   + "".join(f"<li>{_e(line.strip())}</li>" for line in localisation_lines(localization)) + "</ul>")
+    return out
