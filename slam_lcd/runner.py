@@ -195,7 +195,9 @@ def run_log(
         except KeyboardInterrupt:  # Ctrl-C (maybe a second one): skip the back end's final re-check
             log.warning("%s%s: the back end's final re-check is skipped", interrupted_word(),
                         " again" if result.interrupted else "")
-            notes.append("The back end's final re-check (GNC) was interrupted and skipped.")
+            from .interrupts import signal_name
+
+            notes.append(f"The back end's final re-check (GNC) was interrupted ({signal_name()}) and skipped.")
             result.interrupted = True
         if not result.interrupted and not pipe.keyframes:
             raise PipelineError(_no_keyframe_reason(pipe, topics, result.n_frames), log_path)

@@ -183,10 +183,19 @@ def work(end):
         except KeyboardInterrupt:
             counts[1] += 1
 
+# one write of each kind first: the writers' lazy imports happen before any signal (this test is about
+# the writers' temporaries; a signal inside an import is the CLI's one-line case, tested elsewhere)
+with atomic_write(d / "t.bin", "wb") as fh:
+    fh.write(data)
+with open_writer(d / "t.mcap", "mcap") as w:
+    pass
 end = time.monotonic() + float(sys.argv[2])
-print("ready", flush=True)
+ready = False
 while time.monotonic() < end:
     try:
+        if not ready:  # the parent starts signalling once it reads this line: inside the try
+            ready = True
+            print("ready", flush=True)
         work(end)
     except KeyboardInterrupt:
         counts[1] += 1
