@@ -206,7 +206,7 @@ def _replicated_vocab(v: dict, src_ids: np.ndarray, pieces: list[tuple[int, np.n
     at = {int(k): i for i, k in enumerate(v["kf_ids"])}
     off = v["bow_offsets"]
     reps = max(r for r, _ in pieces) + 1
-    ids, words, counts, lens = [], [], [], []
+    words, counts, lens = [], [], []
     for r, (rep, src_kf) in enumerate(pieces):
         for k in src_kf:
             i = at[int(k)]

@@ -61,6 +61,7 @@ def export(args) -> int:
     from ..atomic import atomic_path, check_no_clash
     from ..io.trajectory_files import write_trajectory
     from ..map.store import MANIFEST
+    from ..outputs.map_outputs import session_file_stem
 
     m = _open(args.map_dir)
     out = Path(args.out)
@@ -83,10 +84,11 @@ def export(args) -> int:
     with atomic_path(out, directory=True) as tmp:
         tmp.mkdir(parents=True)
         for i, name in enumerate(names):
-            write_trajectory(tmp / f"{_topic(name)}{suffix}", m.session_trajectory(i), args.to)
+            write_trajectory(tmp / f"{session_file_stem(name)}{suffix}", m.session_trajectory(i), args.to)
     print(f"{out}/: {len(names)} session trajectories ({args.to}) from {Path(args.map_dir) / MANIFEST}")
     return 0
 
 
 def _topic(name: str) -> str:
+    """A session name inside a ROS topic name (letters, digits and _ only)."""
     return "".join(ch if ch.isalnum() or ch == "_" else "_" for ch in name) or "session"

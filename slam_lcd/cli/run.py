@@ -121,7 +121,6 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from ..errors import InputError
-    from ..runner import run_log
 
     extra = ["run.copy_images=true"] if args.copy_images else []
     if args.plot_mode:

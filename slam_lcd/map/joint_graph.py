@@ -29,6 +29,7 @@ import gtsam
 from scipy.stats import chi2 as chi2_dist
 
 from ..backend.gnc import gnc_loop_weights
+from ..backend.loop_factors import valid_information
 from ..geometry import inv
 from .config import MapConfig
 
@@ -71,19 +72,24 @@ class JointResult:
     loops: list[JointLoop] = field(default_factory=list)
 
 
-def _noise(info: np.ndarray):
+def information_noise(info: np.ndarray):
+    """A Gaussian noise model from a (symmetrised) information matrix, GTSAM order."""
     info = 0.5 * (np.asarray(info, float) + np.asarray(info, float).T)
     return gtsam.noiseModel.Gaussian.Information(info)
 
 
-def _step_cov(cov: np.ndarray) -> np.ndarray:
-    if cov is None or not np.all(np.isfinite(cov)):
-        return np.diag(ODOM_SIGMAS ** 2)
-    try:
-        np.linalg.cholesky(cov)
-        return cov
-    except np.linalg.LinAlgError:
-        return np.diag(ODOM_SIGMAS ** 2)
+def odometry_covariance(cov: np.ndarray | None) -> np.ndarray:
+    """An odometry step's covariance as given when it is a valid one, else the default step noise."""
+    return np.asarray(cov, float) if valid_information(cov) else np.diag(ODOM_SIGMAS ** 2)
+
+
+def solve_lm(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values) -> gtsam.Values:
+    """Levenberg-Marquardt to tight tolerances (the map's and a localisation's final solves)."""
+    params = gtsam.LevenbergMarquardtParams()
+    params.setRelativeErrorTol(1e-9)
+    params.setAbsoluteErrorTol(1e-9)
+    params.setMaxIterations(100)
+    return gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
 
 
 class _Chain:
@@ -94,7 +100,7 @@ class _Chain:
         steps = np.zeros((n, 6, 6))
         for i in range(1, n):
             d = float(np.linalg.norm(s.T_odom[i, :3, 3] - s.T_odom[i - 1, :3, 3]))
-            own = _step_cov(s.cov[i]) if np.all(np.isfinite(s.cov[i])) else np.zeros((6, 6))
+            own = odometry_covariance(s.cov[i]) if np.all(np.isfinite(s.cov[i])) else np.zeros((6, 6))
             floor = np.diag(np.r_[[(conf.pcm_sigma_rot_per_m ** 2) * d] * 3, [(conf.pcm_sigma_trans_per_m ** 2) * d] * 3])
             steps[i] = own + floor
         self.prefix = np.cumsum(steps, axis=0)
@@ -225,7 +231,7 @@ def solve(sessions: list[SessionPoses], loops: list[JointLoop], conf: MapConfig 
             if i:
                 step = inv(s.T_odom[i - 1]) @ s.T_odom[i]
                 known.add(gtsam.BetweenFactorPose3(int(s.ids[i - 1]), int(k), gtsam.Pose3(step),
-                                                   gtsam.noiseModel.Gaussian.Covariance(_step_cov(s.cov[i]))))
+                                                   gtsam.noiseModel.Gaussian.Covariance(odometry_covariance(s.cov[i]))))
     roots = {}
     for si in range(len(sessions)):
         roots.setdefault(comp[si], si)
@@ -235,21 +241,17 @@ def solve(sessions: list[SessionPoses], loops: list[JointLoop], conf: MapConfig 
                                          gtsam.noiseModel.Diagonal.Sigmas(np.r_[[1e-6] * 3, [1e-6] * 3])))
     for lp in loops:
         if not lp.inter and lp.accepted:
-            known.add(gtsam.BetweenFactorPose3(lp.match, lp.query, gtsam.Pose3(lp.T), _noise(lp.info)))
+            known.add(gtsam.BetweenFactorPose3(lp.match, lp.query, gtsam.Pose3(lp.T), information_noise(lp.info)))
     inter = [lp for lp in loops if lp.inter and lp.accepted]
-    params = gtsam.LevenbergMarquardtParams()
-    params.setRelativeErrorTol(1e-9)
-    params.setAbsoluteErrorTol(1e-9)
-    params.setMaxIterations(100)
     if inter:
-        factors = [gtsam.BetweenFactorPose3(lp.match, lp.query, gtsam.Pose3(lp.T), _noise(lp.info)) for lp in inter]
+        factors = [gtsam.BetweenFactorPose3(lp.match, lp.query, gtsam.Pose3(lp.T), information_noise(lp.info)) for lp in inter]
         # GNC starts from the optimum with every PCM-consistent loop: the initial values (each session's
         # own estimate, placed by one loop) can be far from what the visual links say, and TLS started
         # there turned every loop of a consistent set into an outlier
         start = gtsam.NonlinearFactorGraph(known)
         for f in factors:
             start.add(f)
-        values = gtsam.LevenbergMarquardtOptimizer(start, values, params).optimize()
+        values = solve_lm(start, values)
         res = gnc_loop_weights(known, factors, values, inlier_probability=gnc_inlier_probability)
         for lp, w, c2 in zip(inter, res.weights, res.residual_chi2):
             if w < 0.5:
@@ -259,8 +261,8 @@ def solve(sessions: list[SessionPoses], loops: list[JointLoop], conf: MapConfig 
     graph = gtsam.NonlinearFactorGraph(known)
     for lp in inter:
         if lp.accepted:
-            graph.add(gtsam.BetweenFactorPose3(lp.match, lp.query, gtsam.Pose3(lp.T), _noise(lp.info)))
-    values = gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
+            graph.add(gtsam.BetweenFactorPose3(lp.match, lp.query, gtsam.Pose3(lp.T), information_noise(lp.info)))
+    values = solve_lm(graph, values)
     poses = {int(k): values.atPose3(int(k)).matrix() for s in sessions for k in s.ids}
     # a component that the solve left isolated keeps its first session's frame
     anchors = {s.name: poses[int(s.ids[0])] @ inv(s.T_odom[0]) for s in sessions}

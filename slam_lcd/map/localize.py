@@ -30,6 +30,7 @@ from ..backend.gnc import gnc_loop_weights
 from ..geometry import inv, rotation_angle_deg
 from ..types import Trajectory
 from .config import MapConfig
+from .joint_graph import information_noise, odometry_covariance, solve_lm
 from .store import MapError
 
 NEIGHBOURS = 10  # keyframes either side whose fixes may confirm a fix
@@ -60,11 +61,6 @@ class Localisation:
     @property
     def share_localised(self) -> float:
         return float(np.mean([k.localised for k in self.keyframes])) if self.keyframes else 0.0
-
-
-def _fix_noise(info: np.ndarray):
-    info = 0.5 * (np.asarray(info, float) + np.asarray(info, float).T)
-    return gtsam.noiseModel.Gaussian.Information(info)
 
 
 def localise(map_poses: dict[int, np.ndarray], session_of: dict[int, str], component_of: dict[int, int],
@@ -123,8 +119,6 @@ def localise(map_poses: dict[int, np.ndarray], session_of: dict[int, str], compo
     # 2. one joint solve: odometry between keyframes, kept fixes as priors (GNC-checked)
     known = gtsam.NonlinearFactorGraph()
     values = gtsam.Values()
-    anchor = min(kept, key=lambda i: i)
-    A = kept[anchor][1] @ inv(T_odom[anchor])
     order = sorted(kept)
     for i in range(n):
         # initial value: carried from the nearest kept fix
@@ -132,17 +126,9 @@ def localise(map_poses: dict[int, np.ndarray], session_of: dict[int, str], compo
         Aj = kept[j][1] @ inv(T_odom[j])
         values.insert(i, gtsam.Pose3(Aj @ T_odom[i]))
         if i:
-            c = cov[i]
-            ok = c is not None and np.all(np.isfinite(c))
-            if ok:
-                try:
-                    np.linalg.cholesky(c)
-                except np.linalg.LinAlgError:
-                    ok = False
-            noise = (gtsam.noiseModel.Gaussian.Covariance(np.asarray(c, float)) if ok else
-                     gtsam.noiseModel.Diagonal.Sigmas(np.r_[[0.01] * 3, [0.05] * 3]))
+            noise = gtsam.noiseModel.Gaussian.Covariance(odometry_covariance(cov[i]))
             known.add(gtsam.BetweenFactorPose3(i - 1, i, gtsam.Pose3(inv(T_odom[i - 1]) @ T_odom[i]), noise))
-    priors = [gtsam.PriorFactorPose3(i, gtsam.Pose3(kept[i][1]), _fix_noise(kept[i][0].information)) for i in order]
+    priors = [gtsam.PriorFactorPose3(i, gtsam.Pose3(kept[i][1]), information_noise(kept[i][0].information)) for i in order]
     if len(priors) >= 2:
         res = gnc_loop_weights(known, priors, values)
         for i, w in zip(order, res.weights):
@@ -152,10 +138,8 @@ def localise(map_poses: dict[int, np.ndarray], session_of: dict[int, str], compo
         values = res.values
     graph = gtsam.NonlinearFactorGraph(known)
     for i in sorted(kept):
-        graph.add(gtsam.PriorFactorPose3(i, gtsam.Pose3(kept[i][1]), _fix_noise(kept[i][0].information)))
-    params = gtsam.LevenbergMarquardtParams()
-    params.setMaxIterations(100)
-    values = gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
+        graph.add(gtsam.PriorFactorPose3(i, gtsam.Pose3(kept[i][1]), information_noise(kept[i][0].information)))
+    values = solve_lm(graph, values)
     poses = np.array([values.atPose3(i).matrix() for i in range(n)]).reshape(-1, 4, 4)
     out = []
     for i in range(n):
@@ -164,5 +148,4 @@ def localise(map_poses: dict[int, np.ndarray], session_of: dict[int, str], compo
                                int(c.match_id) if c is not None else None,
                                session_of.get(int(c.match_id)) if c is not None else None,
                                int(c.evidence.get("inliers", 0) or 0) if c is not None else None, poses[i]))
-    del A
     return Localisation(out, Trajectory(np.asarray(stamps, np.int64), poses), comp)

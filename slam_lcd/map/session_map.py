@@ -362,7 +362,7 @@ class Map:
         """
         import gtsam
 
-        from .joint_graph import _noise, _step_cov
+        from .joint_graph import information_noise, odometry_covariance
 
         key = key or (lambda k: int(k))
         graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
@@ -373,11 +373,11 @@ class Map:
                 if i:
                     graph.add(gtsam.BetweenFactorPose3(key(int(s.ids[i - 1])), key(int(k)),
                                                        gtsam.Pose3(inv(s.T_odom[i - 1]) @ s.T_odom[i]),
-                                                       gtsam.noiseModel.Gaussian.Covariance(_step_cov(s.cov[i]))))
+                                                       gtsam.noiseModel.Gaussian.Covariance(odometry_covariance(s.cov[i]))))
         g = self.graph
         for q, mt, T, I, acc in zip(g.loop_query, g.loop_match, g.loop_T, g.loop_info, g.loop_accepted):
             if acc:
-                graph.add(gtsam.BetweenFactorPose3(key(int(mt)), key(int(q)), gtsam.Pose3(T), _noise(I)))
+                graph.add(gtsam.BetweenFactorPose3(key(int(mt)), key(int(q)), gtsam.Pose3(T), information_noise(I)))
         return graph, values
 
     # ------------------------------------------------------------------ localisation
@@ -488,22 +488,17 @@ def visual_links(detector, kf_ids: list[int]) -> list[JointLoop]:
 
 
 def _sha256_log(path) -> str | None:
+    """sha256 of a log file; of a rosbag2 folder, the sha256 of its files' relative names and sha256s."""
+    from ..features.weights import sha256_of
+
     p = Path(path)
-    h = hashlib.sha256()
-    files = sorted(q for q in p.rglob("*") if q.is_file()) if p.is_dir() else [p]
     try:
-        for f in files:
-            with open(f, "rb") as fh:
-                for block in iter(lambda: fh.read(1 << 20), b""):
-                    h.update(block)
+        if not p.is_dir():
+            return sha256_of(p)
+        return hashlib.sha256("".join(f"{q.relative_to(p).as_posix()} {sha256_of(q)}\n"
+                                      for q in sorted(p.rglob("*")) if q.is_file()).encode()).hexdigest()
     except OSError:
         return None
-    return h.hexdigest()
 
 
-def transform_trajectory(traj: Trajectory, A: np.ndarray) -> Trajectory:
-    return Trajectory(traj.stamps.copy(), np.einsum("ij,njk->nik", A, traj.poses), None, traj.frame_id,
-                      traj.child_frame_id)
-
-
-__all__ = ["Map", "MapError", "extractor_meta", "compact_for_map", "transform_trajectory", "inv"]
+__all__ = ["Map", "MapError", "compact_for_map", "extractor_meta"]

@@ -22,7 +22,6 @@ from __future__ import annotations
 import contextlib
 import errno
 import fcntl
-import hashlib
 import json
 import os
 import re
@@ -35,6 +34,7 @@ from typing import Iterator
 import numpy as np
 
 from ..errors import InputError
+from ..features.weights import sha256_of
 from ..interrupts import defer_sigint
 
 SCHEMA = 1
@@ -162,14 +162,6 @@ class MapManifest:
 
 
 # ----------------------------------------------------------------------------- reading
-def sha256_file(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
 def is_map(path: str | Path) -> bool:
     return (Path(path) / MANIFEST).is_file()
 
@@ -219,7 +211,7 @@ def _checked(root: Path, manifest: MapManifest, name: str) -> Path:
     if size != int(meta.get("bytes", -1)):
         raise MapError(f"map file is {size} bytes, the manifest says {meta.get('bytes')} (truncated or replaced)",
                        path)
-    if sha256_file(path) != meta.get("sha256"):
+    if sha256_of(path) != meta.get("sha256"):
         raise MapError("map file's sha256 differs from the manifest's (modified after it was written)", path)
     return path
 
@@ -292,7 +284,7 @@ def _write_npz(path: Path, arrays: dict[str, np.ndarray]) -> dict:
     finally:
         with defer_sigint():
             tmp.unlink(missing_ok=True)
-    return {"sha256": sha256_file(path), "bytes": path.stat().st_size}
+    return {"sha256": sha256_of(path), "bytes": path.stat().st_size}
 
 
 @contextlib.contextmanager

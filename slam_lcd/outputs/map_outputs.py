@@ -33,7 +33,8 @@ def _csv(rows: list[dict]) -> str:
     return buf.getvalue()
 
 
-def _safe(name: str) -> str:
+def session_file_stem(name: str) -> str:
+    """A session name as a file name: letters, digits, - _ . kept, anything else as _ (`run --map` and `map export`)."""
     return "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in name) or "session"
 
 
@@ -54,14 +55,14 @@ def write_map_outputs(out_dir: Path, pipe, result, the_map) -> list[str]:
     write_text(folder / "inter_session_loops.csv", _csv(summary["inter_session_loops"]) or
                "query_id,match_id,query_session,match_session,accepted,reason\n")
     for i, name in enumerate(the_map.session_names):
-        write_tum(folder / f"{_safe(name)}.tum", the_map.session_trajectory(i))
+        write_tum(folder / f"{session_file_stem(name)}.tum", the_map.session_trajectory(i))
     current = summary.get("current_session")
     if current is not None and pipe.keyframes:
         i = the_map.session_names.index(current)
         kf_map = the_map.session_trajectory(i)
         kf_odom = pipe.keyframe_odometry()
         full = correct_full_rate(pipe.odometry_trajectory(), kf_odom.stamps, kf_odom.poses, kf_map.poses)
-        write_tum(folder / f"{_safe(current)}_full_rate.tum", full)
+        write_tum(folder / f"{session_file_stem(current)}_full_rate.tum", full)
     return [MAP_DIR + "/"]
 
 
