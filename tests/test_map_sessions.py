@@ -250,3 +250,13 @@ def test_batch_appends_its_logs_to_one_map_in_name_order(example_map, tmp_path):
     assert [x["name"] for x in s["sessions"]] == ["session1", "session5"]
     assert len(s["components"]) == 1 and s["inter_session_accepted"] >= 3, s["inter_session_loops"][:3]
     assert (tmp_path / "res" / "map_sessions" / "session5" / "map" / "sessions.csv").is_file()
+    # loops.csv of the second session: its candidates into session 1 carry the joint graph's verdicts
+    import csv
+
+    rows = list(csv.DictReader(open(tmp_path / "res" / "map_sessions" / "session5" / "loops.csv")))
+    inter = [r for r in rows if r["match_session"]]
+    assert inter and {r["match_session"] for r in inter} == {"session1"}
+    accepted = [r for r in inter if r["backend_verdict"] == "accepted"]
+    assert len(accepted) == s["inter_session_accepted"], (accepted[:2], s["inter_session_loops"][:2])
+    assert all(r["backend_reason"] for r in inter if r["verdict"] == "accepted")
+    assert all(r["match_stamp_ns"] and float(r["gt_distance_m"]) < 3.0 for r in accepted)

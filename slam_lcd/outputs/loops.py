@@ -14,6 +14,9 @@ the match keyframe's frame through its *corrected* rotation, turned into the gro
 truth's frame by the Umeyama rotation between corrected and true keyframe positions
 (exact up to the corrected rotation's error, a degree or so: 2 cm at 1 m); ``err_rot_deg``
 is left empty.
+
+With a map (``run --map``), a candidate into an earlier session names that session in
+``match_session`` and carries the verdict of the map's joint graph (:func:`add_map_verdicts`).
 """
 from __future__ import annotations
 
@@ -24,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from ..atomic import write_text
-from ..backend.pose_graph import ACCEPTED
+from ..backend.records import ACCEPTED, REJECTED
 from ..geometry import interpolate_poses, inv, rotation_angle_deg
 from ..types import Trajectory
 
@@ -37,7 +40,8 @@ def loop_columns() -> list[str]:
     from ..lcd.detector import CandidateRecord
 
     return ["query_stamp_ns", "match_stamp_ns", *CandidateRecord(0, 0, 0, 0.0).row().keys(),
-            "verdict", "backend_verdict", "backend_reason", "gt_distance_m", "err_trans_m", "err_rot_deg"]
+            "verdict", "backend_verdict", "backend_reason", "gt_distance_m", "err_trans_m", "err_rot_deg",
+            "match_session"]
 
 
 def _fmt(x):
@@ -93,7 +97,7 @@ def loop_rows(candidate_records, loop_records, keyframes, gt: Trajectory | None,
         row["verdict"] = VERIFIED if rec.accepted else NOT_VERIFIED
         row["backend_verdict"] = b.verdict if b is not None else ""
         row["backend_reason"] = b.reason if b is not None else ""
-        row.update({"gt_distance_m": "", "err_trans_m": "", "err_rot_deg": ""})
+        row.update({"gt_distance_m": "", "err_trans_m": "", "err_rot_deg": "", "match_session": ""})
         if q in gt_pose and mt in gt_pose and position_only:
             d = gt_pose[q][:3, 3] - gt_pose[mt][:3, 3]
             row["gt_distance_m"] = _fmt(float(np.linalg.norm(d)))
@@ -109,6 +113,43 @@ def loop_rows(candidate_records, loop_records, keyframes, gt: Trajectory | None,
                 row["err_rot_deg"] = _fmt(rotation_angle_deg(E))
         rows.append(row)
     return rows
+
+
+def add_map_verdicts(rows: list[dict], candidate_records, the_map, inter_session_loops: list[dict]) -> int:
+    """Fill the rows of candidates into earlier sessions of a map from the map's joint graph; returns how many.
+
+    The session's own back end never sees such a candidate: the joint graph of every session
+    judges it (pairwise consistency with the other loops between the two sessions, then GNC),
+    so ``backend_verdict`` / ``backend_reason`` are the joint graph's. ``match_session`` names
+    the map session of the match; its stamp and ground truth come from the map (the ground
+    truth each session was recorded with, assumed to share one frame, as the map's ATE does).
+    """
+    verdict = {(int(r["query_id"]), int(r["match_id"])): r for r in inter_session_loops}
+    where = {int(k): (si, i) for si, s in enumerate(the_map.sessions) for i, k in enumerate(s.ids)}
+    names = the_map.session_names
+    n = 0
+    for row, rec in zip(rows, candidate_records, strict=True):  # loop_rows keeps the detector's order
+        q, mt = int(row["query_id"]), int(row["match_id"])
+        if mt not in where or q not in where or where[mt][0] == where[q][0]:
+            continue
+        (sm, im), (sq, iq) = where[mt], where[q]
+        row["match_session"] = names[sm]
+        row["match_stamp_ns"] = int(the_map.sessions[sm].stamps[im])
+        v = verdict.get((q, mt))
+        if v is not None:
+            row["backend_verdict"] = ACCEPTED if v["accepted"] else REJECTED
+            row["backend_reason"] = v["reason"]
+        G_q, G_m = the_map.sessions[sq].T_gt[iq], the_map.sessions[sm].T_gt[im]
+        if np.all(np.isfinite(G_q)) and np.all(np.isfinite(G_m)):
+            T_gt = inv(G_m) @ G_q
+            row["gt_distance_m"] = _fmt(float(np.linalg.norm(T_gt[:3, 3])))
+            row["err_trans_m"] = row["err_rot_deg"] = ""
+            if rec.pose is not None and rec.pose.ok:
+                E = inv(T_gt) @ np.asarray(rec.pose.T_match_query)
+                row["err_trans_m"] = _fmt(float(np.linalg.norm(E[:3, 3])))
+                row["err_rot_deg"] = _fmt(rotation_angle_deg(E))
+        n += 1
+    return n
 
 
 def count_false_accepted(rows: list[dict], true_max_distance: float) -> int:

@@ -18,7 +18,7 @@ from ..interrupts import defer_sigint
 from ..types import Trajectory
 from .loop_pictures import LOOPS_DIR
 from .map_outputs import LOCALIZATION_FILES, MAP_DIR
-from .loops import VERIFIED, count_false_accepted, loop_rows, write_loops_csv
+from .loops import VERIFIED, add_map_verdicts, count_false_accepted, loop_rows, write_loops_csv
 from .output_set import PARTIAL_MARKER, OutputSet
 from .figures import write_plots
 from .report import report_facts, write_report
@@ -134,6 +134,8 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
 
     rows = loop_rows(pipe.candidate_records, pipe.loop_records, pipe.keyframes, gt,
                      position_only=result.gt_position_only, keyframe_poses=kf_corr)
+    if result.map is not None and result.map.get("appended") and getattr(pipe, "map", None) is not None:
+        add_map_verdicts(rows, pipe.candidate_records, pipe.map, result.map["inter_session_loops"])
     write_loops_csv(out_dir / "loops.csv", rows)
     outputs.append("loops.csv")
 
