@@ -239,7 +239,7 @@ def test_batch_appends_its_logs_to_one_map_in_name_order(example_map, tmp_path):
         (logs / f"{name}.mcap").symlink_to(work / f"{name}.mcap")
     r = subprocess.run([sys.executable, "-m", "slam_lcd", "batch", str(logs / "*.mcap"), "--out", str(tmp_path / "res"),
                         "--map", str(tmp_path / "map"), "--features", "orb", "--workers", "1", "--no-progress",
-                        "--no-mcap", "--set", "run.plots=false", "--set", "run.loop_pictures=false"],
+                        "--set", "run.plots=false", "--set", "run.loop_pictures=false"],
                        capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-2000:]
     assert r.stdout.index("appended session1") < r.stdout.index("appended session5"), r.stdout
@@ -260,3 +260,20 @@ def test_batch_appends_its_logs_to_one_map_in_name_order(example_map, tmp_path):
     assert len(accepted) == s["inter_session_accepted"], (accepted[:2], s["inter_session_loops"][:2])
     assert all(r["backend_reason"] for r in inter if r["verdict"] == "accepted")
     assert all(r["match_stamp_ns"] and float(r["gt_distance_m"]) < 3.0 for r in accepted)
+    # corrected.mcap: one TF tree with a frame per session, the log in the map frame, the loops between sessions
+    from rosbags.highlevel import AnyReader
+
+    from slam_lcd.io.trajectory_files import read_tum
+
+    res = tmp_path / "res" / "map_sessions" / "session5"
+    seen: dict = {}
+    with AnyReader([res / "corrected.mcap"]) as reader:
+        for conn, _, raw in reader.messages():
+            seen.setdefault(conn.topic, []).append(reader.deserialize(raw, conn.msgtype))
+    statics = {t.child_frame_id: t.header.frame_id for m in seen["/tf_static"] for t in m.transforms}
+    assert statics["session_session1"] == statics["session_session5"] == "map", statics
+    assert [len(m.poses) for m in seen["/slam_lcd/map/session1/path"]] == [s["sessions"][0]["keyframes"]]
+    assert len(seen["/slam_lcd/map/loops"][0].markers[0].points) == 2 * s["inter_session_accepted"]
+    full = read_tum(res / "map" / "session5_full_rate.tum")
+    shown = np.array([[p.pose.position.x, p.pose.position.y, p.pose.position.z] for p in seen["/slam_lcd/corrected"]])
+    np.testing.assert_allclose(shown, full.poses[:, :3, 3], atol=1e-6)

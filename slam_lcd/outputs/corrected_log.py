@@ -24,6 +24,20 @@ of the log (fixed frame = the odometry's ``frame_id``, body = its ``child_frame_
   loop, at the loop's query stamp, between the corrected keyframe positions).
 
 Poses are the final estimate (the whole log's optimum), shown as time goes on.
+
+A run that appends to a map (``run --map``) writes the log in the map's frame and adds every
+session of the map (:class:`SessionLayer`), so that one TF tree holds them all:
+
+- the corrected trajectory is this session's in the map frame (the map's joint solution at
+  every stamp), so ``map -> odom`` places the log among the earlier sessions;
+- every session has a frame ``session_<name>``, a child of ``map`` on ``/tf_static``: the
+  identity for sessions joined to this one (their keyframes are in the map frame already); a
+  session of another component was never tied to this one, its frame is put at the map's
+  origin and the log says so (INFO) -- toggle it in the viewer, do not read its position;
+- ``/slam_lcd/map/<name>/path`` (nav_msgs/Path of each session's keyframes, in its frame) and
+  ``/slam_lcd/map/loops`` (one LINE_LIST of the accepted loops between sessions, in ``map``),
+  each once, at the log's first stamp;
+- the ground-truth link uses the map's alignment (one SE(3) of the whole component).
 """
 from __future__ import annotations
 
@@ -45,6 +59,23 @@ PATH_TOPIC = "/slam_lcd/corrected/path"
 LOOPS_TOPIC = "/slam_lcd/loops"
 GT_TOPIC = "/slam_lcd/ground_truth"  # ground truth given as a file (--gt), in frame GT_FILE_FRAME
 GT_FILE_FRAME = "ground_truth"
+MAP_TOPIC_PREFIX = "/slam_lcd/map"
+SESSION_FRAME_PREFIX = "session_"
+
+
+@dataclass
+class SessionLayer:
+    """A map's sessions as corrected.mcap draws them (arrays only; built by the map outputs).
+
+    ``names``: file-safe session names; ``paths``: each session's keyframes in its component's
+    frame; ``joined``: in this log's component; ``loops``: ``(p_match, p_query)`` map-frame
+    positions of the accepted loops between sessions of this log's component.
+    """
+
+    names: list[str]
+    paths: list[Trajectory]
+    joined: list[bool]
+    loops: list[tuple[np.ndarray, np.ndarray]]
 
 
 @dataclass
@@ -65,7 +96,8 @@ class TfPlan:
 
 def copied_topics(copy_topics) -> list[str]:
     """The input topics copied as they are (the file's own topics are written anew)."""
-    return [t for t in copy_topics if t not in (POSE_TOPIC, PATH_TOPIC, LOOPS_TOPIC, GT_TOPIC)]
+    return [t for t in copy_topics if t not in (POSE_TOPIC, PATH_TOPIC, LOOPS_TOPIC, GT_TOPIC)
+            and not t.startswith(MAP_TOPIC_PREFIX + "/")]
 
 
 def log_tf_parents(reader, topics, spooled=None) -> dict[str, str]:
@@ -141,16 +173,38 @@ def _keyframe_paths(kf: Trajectory, frame: str):
     return [(int(kf.stamps[e - 1]), msg) for e, msg in zip(ends, M.growing_path_msgs(kf, ends, frame))]
 
 
+def _add_sessions(add, layer: SessionLayer, plan: TfPlan, s0: int) -> None:
+    """Every session's frame (static, under the map frame), its keyframe path and the loops between sessions."""
+    from ..io import messages as M
+
+    statics = []
+    for name, path, joined in zip(layer.names, layer.paths, layer.joined, strict=True):
+        frame = SESSION_FRAME_PREFIX + name
+        statics.append((np.eye(4), s0, plan.corrected_frame, frame))  # where this log's corrected poses live
+        if not joined:
+            note = (f"session {name!r} is not joined to this log's sessions: frame {frame!r} is put at the origin "
+                    f"of {plan.corrected_frame!r}, not aligned to it")
+            plan.notes.append(note)
+            log.info("corrected.mcap: %s", note)
+        add(s0, f"{MAP_TOPIC_PREFIX}/{name}/path", M.path_msg(path, frame))
+    if statics:
+        add(s0, "/tf_static", M.tf_message(statics))
+    if layer.loops:
+        add(s0, MAP_TOPIC_PREFIX + "/loops", M.marker_array([M.line_marker(layer.loops, s0, plan.corrected_frame,
+                                                                            "sessions", 0, rgba=(0.9, 0.4, 0.1, 1.0))]))
+
+
 def write_corrected_log(path: Path, *, odom: Trajectory, corrected: Trajectory, kf_ids: list[int],
                         kf_corrected: Trajectory, loops: list[tuple[int, int, int]], log_frames: dict, run_conf,
                         copy_from: Path, copy_topics: list[str], gt_alignment=None, gt_poses: Trajectory | None = None,
-                        io_conf=None, spooled=None) -> TfPlan:
+                        io_conf=None, spooled=None, sessions: SessionLayer | None = None) -> TfPlan:
     """Write ``path`` (see the module docstring). ``loops``: ``(query_id, match_id, stamp_ns)`` of accepted loops.
 
     ``gt_poses``: a ground truth read from a file (it is not in the log), written on
     :data:`GT_TOPIC` in frame ``log_frames['gt']`` and tied to the tree like a log's.
     ``spooled``: a complete :class:`~slam_lcd.io.raw_spool.RawSpool` of the copied topics (the run's
-    pass kept them): read instead of decompressing the log again."""
+    pass kept them): read instead of decompressing the log again. ``sessions``: a map's sessions
+    (``corrected`` and ``kf_corrected`` are then in the map frame, ``gt_alignment`` the map's)."""
     from ..io import messages as M
     from ..io.reader import open_log
     from ..io.writers import open_writer
@@ -197,6 +251,8 @@ def write_corrected_log(path: Path, *, odom: Trajectory, corrected: Trajectory, 
             for s, msg in zip(gt_poses.stamps.tolist(), M.pose_stamped_msgs(gt_poses.poses, gt_poses.stamps,
                                                                             plan.gt_frame) if len(gt_poses) else []):
                 add(s, GT_TOPIC, msg)
+        if sessions is not None:
+            _add_sessions(add, sessions, plan, s0)
         for s, msg in _keyframe_paths(kf_corrected, plan.corrected_frame):
             add(s, PATH_TOPIC, msg)
         pos = {k: kf_corrected.poses[i][:3, 3] for i, k in enumerate(kf_ids) if i < len(kf_corrected)}

@@ -58,12 +58,42 @@ def write_map_outputs(out_dir: Path, pipe, result, the_map) -> list[str]:
         write_tum(folder / f"{session_file_stem(name)}.tum", the_map.session_trajectory(i))
     current = summary.get("current_session")
     if current is not None and pipe.keyframes:
-        i = the_map.session_names.index(current)
-        kf_map = the_map.session_trajectory(i)
-        kf_odom = pipe.keyframe_odometry()
-        full = correct_full_rate(pipe.odometry_trajectory(), kf_odom.stamps, kf_odom.poses, kf_map.poses)
+        full, _ = current_in_map_frame(pipe, the_map, current)
         write_tum(folder / f"{session_file_stem(current)}_full_rate.tum", full)
     return [MAP_DIR + "/"]
+
+
+def current_in_map_frame(pipe, the_map, current: str) -> tuple[Trajectory, Trajectory]:
+    """This run's session in its component's frame: (every odometry stamp, keyframes)."""
+    kf_map = the_map.session_trajectory(the_map.session_names.index(current))
+    kf_odom = pipe.keyframe_odometry()
+    full = correct_full_rate(pipe.odometry_trajectory(), kf_odom.stamps, kf_odom.poses, kf_map.poses)
+    return full, kf_map
+
+
+def session_layer(the_map, current: str, inter_session_loops: list[dict]):
+    """Every session of the map for corrected.mcap, and the map's ground-truth alignment of this component.
+
+    Returns ``(SessionLayer, alignment)``; ``alignment`` has ``R``, ``t`` (map frame to the ground
+    truth's) or is None without ground truth in the map."""
+    from types import SimpleNamespace
+
+    from .corrected_log import SessionLayer
+
+    comp = {m["name"]: int(m["component"]) for m in the_map.manifest.sessions}
+    mine = comp[current]
+    poses = the_map.poses()
+    names, paths, joined = [], [], []
+    for i, name in enumerate(the_map.session_names):
+        names.append(session_file_stem(name))
+        paths.append(the_map.session_trajectory(i))
+        joined.append(comp[name] == mine)
+    loops = [(poses[int(r["match_id"])][:3, 3], poses[int(r["query_id"])][:3, 3]) for r in inter_session_loops
+             if r["accepted"] and comp[r["query_session"]] == mine and comp[r["match_session"]] == mine
+             and int(r["match_id"]) in poses and int(r["query_id"]) in poses]
+    al = the_map.gt_alignment(mine)
+    return (SessionLayer(names, paths, joined, loops),
+            SimpleNamespace(R=al[0], t=al[1]) if al is not None else None)
 
 
 def write_localization_outputs(out_dir: Path, pipe, result) -> list[str]:

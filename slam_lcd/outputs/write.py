@@ -134,7 +134,7 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
 
     rows = loop_rows(pipe.candidate_records, pipe.loop_records, pipe.keyframes, gt,
                      position_only=result.gt_position_only, keyframe_poses=kf_corr)
-    if result.map is not None and result.map.get("appended") and getattr(pipe, "map", None) is not None:
+    if _appended_to_map(pipe, result):
         add_map_verdicts(rows, pipe.candidate_records, pipe.map, result.map["inter_session_loops"])
     write_loops_csv(out_dir / "loops.csv", rows)
     outputs.append("loops.csv")
@@ -184,7 +184,7 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
     if result.loop_pictures:  # listed where it always was: after corrected.mcap (or loops.csv), before the plots
         after = "corrected.mcap" if "corrected.mcap" in outputs else "loops.csv"
         outputs.insert(outputs.index(after) + 1, LOOPS_DIR + "/")
-    if result.map is not None and result.map.get("appended") and getattr(pipe, "map", None) is not None:
+    if _appended_to_map(pipe, result):
         from .map_outputs import write_map_outputs
 
         outputs += write_map_outputs(out_dir, pipe, result, pipe.map)
@@ -248,6 +248,12 @@ class _PictureThread:
         return [] if self.stop.is_set() else self.names
 
 
+def _appended_to_map(pipe, result) -> bool:
+    """The run appended its log to a map as a new session (``run --map``, not ``localize``)."""
+    return (result.map is not None and bool(result.map.get("appended")) and result.map.get("current_session") is not None
+            and getattr(pipe, "map", None) is not None)
+
+
 def _write_mcap_and_plots(pipe, out_dir, result, gt, mcap_source, copy_topics, skipped, outputs, odom, corrected,
                           kf_corr, ate_before, ate_after, spool=None) -> None:
     cfg = pipe.config
@@ -263,11 +269,19 @@ def _write_mcap_and_plots(pipe, out_dir, result, gt, mcap_source, copy_topics, s
         kf_stamp = {k.id: int(k.stamp) for k in pipe.keyframes}
         accepted = [(r.query_id, r.match_id, kf_stamp[r.query_id]) for r in pipe.loop_records
                     if r.verdict == ACCEPTED and r.query_id in kf_stamp]
-        write_corrected_log(out_dir / "corrected.mcap", odom=odom, corrected=corrected,
-                            kf_ids=[k.id for k in pipe.keyframes], kf_corrected=kf_corr, loops=accepted,
+        alignment = ate_after.alignment if ate_after is not None else None
+        shown, kf_shown, layer = corrected, kf_corr, None
+        if _appended_to_map(pipe, result):  # the log among the map's sessions, in the map frame
+            from .map_outputs import current_in_map_frame, session_layer
+
+            current = result.map["current_session"]
+            shown, kf_shown = current_in_map_frame(pipe, pipe.map, current)
+            layer, alignment = session_layer(pipe.map, current, result.map["inter_session_loops"])
+        write_corrected_log(out_dir / "corrected.mcap", odom=odom, corrected=shown,
+                            kf_ids=[k.id for k in pipe.keyframes], kf_corrected=kf_shown, loops=accepted,
                             log_frames=frames, run_conf=cfg.run, copy_from=mcap_source,
                             copy_topics=copy_topics or [], io_conf=cfg.io, gt_poses=gt_file,
-                            gt_alignment=ate_after.alignment if ate_after is not None else None, spooled=spool)
+                            gt_alignment=alignment, spooled=spool, sessions=layer)
         outputs.append("corrected.mcap")
 
     # ---- plots
