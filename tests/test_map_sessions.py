@@ -277,3 +277,30 @@ def test_batch_appends_its_logs_to_one_map_in_name_order(example_map, tmp_path):
     full = read_tum(res / "map" / "session5_full_rate.tum")
     shown = np.array([[p.pose.position.x, p.pose.position.y, p.pose.position.z] for p in seen["/slam_lcd/corrected"]])
     np.testing.assert_allclose(shown, full.poses[:, :3, 3], atol=1e-6)
+
+
+def test_int4_descriptors_keep_the_matches_of_the_full_rows():
+    """The map's int4 form: half the bytes of int8, the rows restored to unit length, the same mutual matches."""
+    from slam_lcd.features.matching import mutual_nn_match_symmetric
+    from slam_lcd.map.session_map import compact_for_map
+    from slam_lcd.map.store import SessionKeyframes
+
+    rng = np.random.default_rng(3)
+    a = rng.normal(size=(300, 256)).astype(np.float32)
+    a /= np.linalg.norm(a, axis=1, keepdims=True)
+    b = a + rng.normal(scale=0.03, size=a.shape).astype(np.float32)  # the same points seen again
+    b /= np.linalg.norm(b, axis=1, keepdims=True)
+    q, scales = compact_for_map(b, "int4")
+    assert q.dtype == np.uint8 and q.shape == (300, 128) and scales.shape == (300,)
+    s = SessionKeyframes(np.array([0]), np.array([0]), np.eye(4)[None], np.full((1, 6, 6), np.nan),
+                         np.full((1, 4, 4), np.nan), np.array([0, 300]), np.zeros((300, 2), np.float32), q, scales,
+                         np.zeros((300, 3), np.float32), np.array(["none"]))
+    back = s.descriptors_of(0)
+    np.testing.assert_allclose(np.linalg.norm(back, axis=1), 1.0, atol=1e-5)
+    assert np.min(np.sum(back * b, axis=1)) > 0.97  # cosine to the full row
+    full, _, _ = mutual_nn_match_symmetric(a, b, max_distance=0.8)
+    small, _, _ = mutual_nn_match_symmetric(a, back, max_distance=0.8)
+    assert len({tuple(m) for m in full} & {tuple(m) for m in small}) >= 0.98 * len(full)
+    odd = np.ones((2, 3), np.float32)
+    with pytest.raises(ValueError, match="even"):
+        compact_for_map(odd, "int4")

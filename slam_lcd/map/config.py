@@ -9,9 +9,9 @@ from typing import Literal
 class MapConfig:
     """Section `map` (``slam-lcd run --map``, ``slam-lcd localize``; docs/multisession.md)."""
 
-    # SuperPoint descriptors in the map: int8 (one scale per descriptor, 256 B each) or float16
-    # (512 B); ORB's binary descriptors are stored as they are
-    descriptor_form: Literal["int8", "float16"] = "int8"
+    # SuperPoint descriptors in the map: int4 (two values a byte and one scale per descriptor:
+    # 132 B), int8 (260 B) or float16 (512 B); ORB's binary descriptors are stored as they are
+    descriptor_form: Literal["int4", "int8", "float16"] = "int4"
     # link consecutive keyframes of a session by their visual relative pose (the loop chain run on
     # the pair: metric from the 3-D points) beside the odometry: the map's shape then rests on
     # unbiased visual steps, not on the odometry's scale and heading biases

@@ -56,14 +56,31 @@ def _camera_from_json(d: dict | None) -> CameraModel | None:
                        d.get("baseline"))
 
 
+INT4_CLIP_SIGMAS = 2.5  # int4: values beyond 2.5 standard deviations of the row are clipped
+
+
 def compact_for_map(desc: np.ndarray, form: str) -> tuple[np.ndarray, np.ndarray]:
-    """(stored descriptors, scales): SuperPoint rows as int8 with one scale each, or float16; ORB as is."""
+    """(stored descriptors, scales) of one keyframe's descriptors in the map's ``descriptor_form``.
+
+    SuperPoint rows: ``int4`` (two values a byte, 128 B, one scale per row: value = q / scale,
+    the scale putting 2.5 standard deviations at the last level), ``int8`` (256 B, the scale
+    putting the row's peak at 127) or ``float16``. ORB's binary rows as they are (no scales).
+    Restored rows are renormalised to unit length (SuperPoint's are), so the scale only has to
+    be right up to a factor.
+    """
     desc = np.asarray(desc)
     if desc.dtype == np.uint8:
         return np.ascontiguousarray(desc), np.zeros(0, np.float32)
     d = desc.astype(np.float32)
     if form == "float16":
         return d.astype(np.float16), np.zeros(0, np.float32)
+    if form == "int4":
+        if d.shape[1] % 2:
+            raise ValueError(f"int4 descriptors need an even dimension, not {d.shape[1]}")
+        spread = INT4_CLIP_SIGMAS * d.std(axis=1) if len(d) else np.zeros(0, np.float32)
+        scale = np.where(spread > 0, 7.0 / np.maximum(spread, 1e-12), 1.0).astype(np.float32)
+        q = (np.clip(np.rint(d * scale[:, None]), -7, 7).astype(np.int16) + 8).astype(np.uint8)  # 1..15
+        return (q[:, 0::2] << 4) | q[:, 1::2], scale
     peak = np.abs(d).max(axis=1) if len(d) else np.zeros(0, np.float32)
     scale = np.where(peak > 0, 127.0 / np.maximum(peak, 1e-12), 1.0).astype(np.float32)
     return np.clip(np.rint(d * scale[:, None]), -127, 127).astype(np.int8), scale

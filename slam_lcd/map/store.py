@@ -57,7 +57,8 @@ class SessionKeyframes:
     """One session's keyframes as the map keeps them (arrays; keypoint rows concatenated).
 
     ``offsets[i]:offsets[i+1]`` are keyframe i's rows of ``keypoints``, ``descriptors``,
-    ``scales`` (int8 descriptors: value = int8 / scale; empty otherwise) and ``points3d``
+    ``scales`` (int8 descriptors: value = int8 / scale; int4: two values a byte, high nibble
+    first, value = (nibble - 8) / scale; empty for float16 and ORB's bytes) and ``points3d``
     (camera frame, NaN where unknown). Poses: ``T_odom`` in the session's own odometry frame,
     ``T_gt`` ground truth at the keyframe stamps where the run had it (NaN otherwise; only for
     evaluation), ``cov`` the odometry covariance since the previous keyframe (NaN: none).
@@ -70,8 +71,8 @@ class SessionKeyframes:
     T_gt: np.ndarray  # (n, 4, 4)
     offsets: np.ndarray  # (n + 1,) int64
     keypoints: np.ndarray  # (K, 2) float32
-    descriptors: np.ndarray  # (K, D) int8 / float16 / uint8 (ORB)
-    scales: np.ndarray  # (K,) float32 for int8, else (0,)
+    descriptors: np.ndarray  # (K, D) int8 / float16 / uint8 (ORB), or (K, D/2) uint8 with scales (int4)
+    scales: np.ndarray  # (K,) float32 for int8 and int4, else (0,)
     points3d: np.ndarray  # (K, 3) float32
     points_source: np.ndarray  # (n,) str: rgbd | stereo | landmarks | none
 
@@ -91,6 +92,12 @@ class SessionKeyframes:
             return d.astype(np.float32) / self.scales[self.rows(i), None]
         if d.dtype == np.float16:
             return d.astype(np.float32)
+        if len(self.scales):  # int4: bytes with a scale per row (ORB's bytes have none)
+            q = np.empty((len(d), 2 * d.shape[1]), np.float32)
+            q[:, 0::2], q[:, 1::2] = d >> 4, d & 15
+            q -= 8.0
+            n = np.linalg.norm(q, axis=1, keepdims=True)
+            return q / np.where(n > 0, n, 1.0)
         return d
 
     def check(self, where: Path) -> None:
