@@ -600,3 +600,16 @@ def test_localize_leaves_every_byte_of_the_map(world, tmp_path, capfd):
     assert (tmp_path / "out" / "report.json").is_file()
     assert files(d) == before
     assert sorted(p.relative_to(d).as_posix() for p in d.rglob("*")) == paths  # no lock, no new file
+
+
+def test_a_log_already_in_the_map_is_not_appended_again(world, mapdir, tmp_path):
+    """Rerunning ``run a b --map`` after an interruption resumes it: a log already in the map (same
+    sha256) is skipped with one line, the rest is appended."""
+    p = slam(["run", world.logs[1], world.logs[2], "--map", mapdir, "--out", tmp_path / "o", *world.orb], world.env)
+    out, err = p.communicate(timeout=300)
+    assert p.returncode == 0, err
+    assert f"{world.logs[1]}: already in the map {mapdir} as session 's1' (same sha256)" in out, out
+    assert not (tmp_path / "o" / "s1").exists()
+    from slam_lcd.map.session_map import Map
+
+    assert Map.open(mapdir).session_names == ["s1", "s2"]

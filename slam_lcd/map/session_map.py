@@ -191,6 +191,16 @@ class Map:
     def session_names(self) -> list[str]:
         return [s["name"] for s in self.manifest.sessions]
 
+    def session_of_log(self, log_path: str | Path) -> str | None:
+        """The name of the session recorded from this very log (same sha256), or None.
+
+        ``run --map`` skips such a log: a log appended twice would only loop onto itself (an
+        interrupted ``run a b c --map`` is resumed by running it again)."""
+        known = {s.get("log_sha256"): s["name"] for s in self.manifest.sessions if s.get("log_sha256")}
+        if not known:
+            return None
+        return known.get(_sha256_log(log_path))
+
     def next_kf_id(self) -> int:
         return self.manifest.next_kf_id()
 
