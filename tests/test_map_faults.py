@@ -613,3 +613,43 @@ def test_a_log_already_in_the_map_is_not_appended_again(world, mapdir, tmp_path)
     from slam_lcd.map.session_map import Map
 
     assert Map.open(mapdir).session_names == ["s1", "s2"]
+
+
+def test_a_reader_racing_a_writers_commit_reads_a_whole_map(world, mapdir, monkeypatch):
+    """A reader takes no lock. A commit between its manifest and its files (which removes the files
+    the reader's manifest named) makes it read the new map; a commit after it opened leaves it the
+    vocabulary snapshot of the map it opened."""
+    from slam_lcd.config import load_config
+    from slam_lcd.lcd.detector import LoopDetector
+    from slam_lcd.map import store
+    from slam_lcd.map.session_map import Map
+
+    def commit():
+        p = subprocess.run([sys.executable, "-c", COMMIT, mapdir, world.after], env=world.env, capture_output=True,
+                           text=True, timeout=120)
+        assert p.returncode == 0, p.stderr
+
+    before = store.read_manifest(mapdir)
+    m = Map.open(mapdir)  # opened before the commit: keeps its generation's snapshot
+    commit()
+    assert not (mapdir / before.graph_file).exists() and not (mapdir / before.vocab_file).exists()
+    cfg = load_config("orb")
+    det = LoopDetector(cfg.lcd, vocab_conf=cfg.vocab)
+    m.load_into(det)
+    assert len(det.db) == m.n_keyframes == len(m.sessions[0].ids) and len(m.sessions) == 1
+    m.close()
+
+    shutil.rmtree(mapdir)
+    shutil.copytree(world.base, mapdir)
+    read_graph = store.read_graph
+    calls = []
+
+    def racing(root, manifest):  # the writer commits between the reader's manifest and its graph file
+        if not calls:
+            commit()
+        calls.append(manifest.generation)
+        return read_graph(root, manifest)
+
+    monkeypatch.setattr(store, "read_graph", racing)
+    m2 = Map.open(mapdir)
+    assert m2.session_names == ["s1", "s2"] and len(calls) == 2, calls

@@ -31,6 +31,9 @@ from .store import MapError, MapGraph, MapManifest, SessionKeyframes
 log = logging.getLogger(__name__)
 
 
+READ_ATTEMPTS = 3  # a reader racing writers' commits reads the newest manifest again, this many times at most
+
+
 def extractor_meta(extractor, descriptor_form: str = "int8") -> dict:
     """What a map records of the features it holds: kind, weights' sha256, descriptor size and form."""
     ident = extractor.identity() if hasattr(extractor, "identity") else {"kind": extractor.kind}
@@ -110,6 +113,7 @@ class Map:
         self._generation_read = manifest.generation
         self.last_join: JointResult | None = None
         self._vocab: dict | None = None  # the vocabulary snapshot to save (add_session), None: none
+        self._vocab_fh = None  # a reader's snapshot file, opened with the manifest that names it
 
     # ------------------------------------------------------------------ open / close
     @classmethod
@@ -142,12 +146,7 @@ class Map:
                                                                                                conf.descriptor_form)))
                 m = cls(root, manifest, [], MapGraph.empty(), conf, lock)
             else:
-                manifest = store.read_manifest(root)
-                sessions = [store.read_session(root, manifest, i) for i in range(len(manifest.sessions))]
-                graph = store.read_graph(root, manifest)
-                m = cls(root, manifest, sessions, graph, conf, lock)
-                if write:
-                    store.remove_unlisted(root, manifest)  # a failed append's files
+                m = cls._read(root, conf, lock, write)
             if features is not None:
                 m.check_features(features)
             return m
@@ -156,7 +155,36 @@ class Map:
                 lock.__exit__(None, None, None)
             raise
 
+    @classmethod
+    def _read(cls, root: Path, conf: MapConfig, lock, write: bool) -> "Map":
+        """The map as its manifest names it. A reader holds no lock: when a writer commits (and
+        removes the generation the reader's manifest named) while it reads, it reads again."""
+        for attempt in range(READ_ATTEMPTS):
+            manifest = store.read_manifest(root)
+            vocab_fh = None
+            try:
+                if not write and manifest.vocab_file is not None:
+                    vocab_fh = store.open_listed(root, manifest, manifest.vocab_file)
+                sessions = [store.read_session(root, manifest, i) for i in range(len(manifest.sessions))]
+                graph = store.read_graph(root, manifest)
+            except MapError as e:
+                if vocab_fh is not None:
+                    vocab_fh.close()
+                if write or e.problem != store.MISSING or attempt == READ_ATTEMPTS - 1 \
+                        or store.read_manifest(root).generation == manifest.generation:
+                    raise
+                continue
+            m = cls(root, manifest, sessions, graph, conf, lock)
+            m._vocab_fh = vocab_fh
+            if write:
+                store.remove_unlisted(root, manifest)  # a failed append's files
+            return m
+        raise AssertionError("unreachable")
+
     def close(self) -> None:
+        if self._vocab_fh is not None:
+            self._vocab_fh.close()
+            self._vocab_fh = None
         if self._lock is not None:
             self._lock.__exit__(None, None, None)
             self._lock = None
@@ -262,7 +290,7 @@ class Map:
         db = detector.db
         if self.manifest.vocab_file is None or not db.online or len(db) or db.words is not None:
             return None
-        state = store.read_vocab(self.root, self.manifest)
+        state = store.read_vocab(self.root, self.manifest, self._vocab_fh)
         ids = np.concatenate([s.ids for s in self.sessions]) if self.sessions else np.zeros(0, np.int64)
         if state is None or not np.array_equal(state["kf_ids"], ids):
             return None

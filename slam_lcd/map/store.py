@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import hashlib
 import fcntl
 import json
 import os
@@ -29,7 +30,7 @@ import secrets
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterator
+from typing import BinaryIO, Iterator
 
 import numpy as np
 
@@ -45,6 +46,9 @@ FORMAT_NAME = "slam-lcd map"
 
 class MapError(InputError):
     """A map folder that cannot be used: missing, damaged, of another schema or another feature kind."""
+
+
+MISSING = "map file missing"
 
 
 class MapLockedError(MapError):
@@ -207,25 +211,47 @@ def read_manifest(root: str | Path) -> MapManifest:
     return m
 
 
-def _checked(root: Path, manifest: MapManifest, name: str) -> Path:
+def _checked(root: Path, manifest: MapManifest, name: str, fh: BinaryIO | None = None) -> Path:
+    """``root/name`` after its size and sha256 match the manifest's (``fh``: the file opened already)."""
     path = root / name
     meta = manifest.files.get(name)
     if meta is None:
         raise MapError(f"the manifest does not list {name}", root / MANIFEST)
-    if not path.is_file():
-        raise MapError("map file missing", path)
-    size = path.stat().st_size
+    if fh is None and not path.is_file():
+        raise MapError(MISSING, path)
+    size = os.fstat(fh.fileno()).st_size if fh is not None else path.stat().st_size
     if size != int(meta.get("bytes", -1)):
         raise MapError(f"map file is {size} bytes, the manifest says {meta.get('bytes')} (truncated or replaced)",
                        path)
-    if sha256_of(path) != meta.get("sha256"):
+    if (_sha256_of_file(fh) if fh is not None else sha256_of(path)) != meta.get("sha256"):
         raise MapError("map file's sha256 differs from the manifest's (modified after it was written)", path)
     return path
 
 
-def _load_arrays(path: Path, names: tuple[str, ...]) -> dict[str, np.ndarray]:
+def _sha256_of_file(fh: BinaryIO, chunk: int = 1 << 20) -> str:
+    h = hashlib.sha256()
+    fh.seek(0)
+    while block := fh.read(chunk):
+        h.update(block)
+    fh.seek(0)
+    return h.hexdigest()
+
+
+def open_listed(root: str | Path, manifest: MapManifest, name: str) -> BinaryIO:
+    """Open a file the manifest lists, for reading later: a writer that replaces it meanwhile
+    (and removes the old generation) cannot take it from under an open file."""
+    path = Path(root) / name
     try:
-        with np.load(path, allow_pickle=False) as z:
+        return open(path, "rb")
+    except FileNotFoundError:
+        raise MapError(MISSING, path) from None
+    except OSError as e:
+        raise MapError(f"cannot be opened ({e.strerror})", path) from None
+
+
+def _load_arrays(path: Path, names: tuple[str, ...], fh: BinaryIO | None = None) -> dict[str, np.ndarray]:
+    try:
+        with np.load(fh if fh is not None else path, allow_pickle=False) as z:
             missing = [n for n in names if n not in z.files]
             if missing:
                 raise MapError(f"map file lacks arrays {missing}", path)
@@ -250,13 +276,16 @@ VOCAB_ARRAYS = ("kf_ids", "desc_kind", "dim", "n_images", "centres_q", "centres_
                 "image_ends")
 
 
-def read_vocab(root: str | Path, manifest: MapManifest) -> dict[str, np.ndarray] | None:
-    """The vocabulary snapshot's arrays (checked like every map file), or None when the map has none."""
+def read_vocab(root: str | Path, manifest: MapManifest, fh: BinaryIO | None = None) -> dict[str, np.ndarray] | None:
+    """The vocabulary snapshot's arrays (checked like every map file), or None when the map has none.
+
+    ``fh``: the snapshot opened when the map was opened (:func:`open_listed`), so that a reader
+    gets the generation its manifest names even after a writer has committed a newer one."""
     if manifest.vocab_file is None:
         return None
     root = Path(root)
-    path = _checked(root, manifest, manifest.vocab_file)
-    return _load_arrays(path, VOCAB_ARRAYS)
+    path = _checked(root, manifest, manifest.vocab_file, fh)
+    return _load_arrays(path, VOCAB_ARRAYS, fh)
 
 
 def read_graph(root: str | Path, manifest: MapManifest) -> MapGraph:
