@@ -133,6 +133,8 @@ def section_sessions(args) -> None:
     root = runs / "map_one_by_one"
     appended = {}
     for k in (1, 2, 3):
+        if root.exists():  # the map as the append of session k found it (the cost pairs below start from it)
+            shutil.copytree(root, runs / f"map_before{k}")
         with Map.open(root, features=meta, conf=cfg.map, write=True, create=True) as m:
             res, wall = run_session(logs[k], runs / f"append{k}", cfg, extractor, m, f"s{k}")
             appended[k] = (res, wall)
@@ -152,12 +154,26 @@ def section_sessions(args) -> None:
         for row in s["sessions"]:
             print(f"  {row['name']}: {row['keyframes']} keyframes, ATE odometry {row.get('ate_odometry', float('nan')):.3f} m"
                   f" -> map {row.get('ate_map', float('nan')):.4f} m (ratio {100 * (row.get('ratio') or float('nan')):.1f} %)")
-    print("\nappend cost (features cached): wall s per keyframe, append / plain run of the same log")
+    # cost: interleaved pairs (plain run, then the same log appended to a copy of the map it met),
+    # repeated, medians: a busy neighbour then slows both sides of a pair alike
+    times = {k: {"plain": [plain[k][1]], "append": [appended[k][1]]} for k in (1, 2, 3)}
+    for r in range(args.cost_repeats - 1):
+        for k in (1, 2, 3):
+            times[k]["plain"].append(run_session(logs[k], runs / "cost_plain", cfg, extractor)[1])
+            dst = runs / "cost_map"
+            shutil.rmtree(dst, ignore_errors=True)
+            if k > 1:
+                shutil.copytree(runs / f"map_before{k}", dst)
+            with Map.open(dst, features=meta, conf=cfg.map, write=True, create=True) as m:
+                times[k]["append"].append(run_session(logs[k], runs / "cost_append", cfg, extractor, m, f"s{k}")[1])
+    print(f"\nappend cost (features cached): wall per keyframe, append / plain run of the same log, median of "
+          f"{args.cost_repeats} interleaved pairs")
     for k in (1, 2, 3):
-        (pr, pw), (ar, aw) = plain[k], appended[k]
-        pk, ak = pw / max(1, pr.n_keyframes), aw / max(1, ar.n_keyframes)
+        n = max(1, plain[k][0].n_keyframes)
+        pk, ak = np.median(times[k]["plain"]) / n, np.median(times[k]["append"]) / n
+        ratios = [a / p for a, p in zip(times[k]["append"], times[k]["plain"], strict=True)]
         print(f"  s{k}: plain {1000 * pk:.1f} ms/kf, append {1000 * ak:.1f} ms/kf, ratio {ak / pk:.2f} "
-              f"(map before: {k - 1} sessions)")
+              f"(pairs {', '.join(f'{x:.2f}' for x in ratios)}; map before: {k - 1} sessions)")
     # session 4 (another world) into a copy
     root4 = runs / "map_plus_other_world"
     shutil.copytree(root, root4)
@@ -335,6 +351,7 @@ def main() -> None:
     s.add_argument("--features", choices=["superpoint", "orb"], default=None)
     s.add_argument("--frames", type=int, default=None, help="frames per session (default: the presets' laps)")
     s.add_argument("--set", action="append", default=[])
+    s.add_argument("--cost-repeats", type=int, default=3, help="interleaved plain/append pairs per session")
     s.set_defaults(func=section_sessions)
     lo = sub.add_parser("load")
     lo.add_argument("--work", required=True)
