@@ -289,13 +289,19 @@ def _replicated(src: Path, dst: Path, keyframes: int, vocab: bool = False) -> No
     store.commit(dst, MapManifest(features=man.features), new, graph, table, snap)
 
 
-def _measure_load(root: str, ready: bool) -> dict:
-    import resource
+def _rss_mb() -> float:
+    """Resident memory now (VmRSS), MB."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    return float("nan")
 
+
+def _measure_load(root: str, ready: bool) -> dict:
     from slam_lcd.lcd import LoopDetector
     from slam_lcd.map.session_map import Map
 
-    rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    rss0 = _rss_mb()  # after the imports: what the map itself adds
     t0 = time.perf_counter()
     m = Map.open(root)
     t1 = time.perf_counter()
@@ -304,7 +310,7 @@ def _measure_load(root: str, ready: bool) -> dict:
         det = LoopDetector()
         m.load_into(det)
         out["ready_s"] = time.perf_counter() - t0
-    out["rss_growth_mb"] = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - rss0) / 1024
+    out["rss_growth_mb"] = _rss_mb() - rss0
     return out
 
 

@@ -28,7 +28,7 @@ from .graph import GraphVerdict
 from .islands import IslandMember, group_islands
 from .odometry_check import odometry_drift_reason
 from .pair import check_pair
-from .store import DESCRIPTOR_DTYPES, DescriptorStore, compact_descriptors
+from .store import DESCRIPTOR_DTYPES, DescriptorSource, DescriptorStore, compact_descriptors
 from .temporal import TemporalConsistency
 from .user_keyframe import check_user_keyframe
 
@@ -242,7 +242,9 @@ class LoopDetector:
         """Insert a keyframe of an earlier session as a candidate, without querying (loading a map).
 
         ``kf`` carries its keypoints (``kf.features``), camera, mounting and odometry pose;
-        ``descriptors`` are its stored (compact) descriptors; ``points3d`` its camera-frame points
+        ``descriptors`` are its stored (compact) descriptors, or a
+        :class:`~slam_lcd.lcd.store.DescriptorSource` that reads them when the keyframe is a
+        candidate (with ``bow`` given: nothing is copied at load); ``points3d`` its camera-frame points
         per keypoint (NaN where unknown) from ``points_source``. The bag of words is made from
         the descriptors as :meth:`add` would, unless ``bow`` gives it (a
         :class:`~slam_lcd.vocab.BowVector` of this database's words: a map's vocabulary snapshot,
@@ -255,7 +257,12 @@ class LoopDetector:
             self._kind = feats.kind
         elif feats.kind != self._kind:
             raise InputError(f"keyframe {kf.id} has {feats.kind} features but the detector holds {self._kind}")
-        desc = compact_descriptors(descriptors, self.conf.descriptor_dtype)
+        source = descriptors if isinstance(descriptors, DescriptorSource) else None
+        if source is not None and bow is None:  # the vocabulary needs them now
+            descriptors, source = source.load(), None
+        dtype = self.conf.descriptor_dtype
+        desc = (np.zeros((0, source.dim), np.dtype(dtype)) if source is not None
+                else compact_descriptors(descriptors, dtype))
         kept = Features(keypoints=np.asarray(feats.keypoints, np.float32), scores=np.zeros(0, np.float32),
                         descriptors=np.zeros((0,) + desc.shape[1:], desc.dtype), image_size=feats.image_size,
                         kind=feats.kind)
@@ -270,7 +277,10 @@ class LoopDetector:
             self.db.add(kf.id, int(kf.stamp), desc if desc.dtype == np.uint8 else np.asarray(desc, np.float32))
         else:
             self.db.add_bow(kf.id, int(kf.stamp), bow)
-        self._store.put(kf.id, desc)
+        if source is not None:
+            self._store.put_source(kf.id, lambda load=source.load: compact_descriptors(load(), dtype))
+        else:
+            self._store.put(kf.id, desc)
         self._entries[kf.id] = entry
 
     def verify_pair(self, query_id: int, match_id: int) -> LoopClosure | None:

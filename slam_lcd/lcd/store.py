@@ -12,11 +12,17 @@ only ever needs the descriptors of the few candidates of each query, so they can
   then its keypoints and 3-D points only. Same float16 values as ``memory``.
 
 ORB descriptors (uint8, 32 bytes) are kept as they are.
+
+A keyframe remembered from a map keeps its descriptors where the map holds them
+(:class:`DescriptorSource`): they are read and converted only when the keyframe is a
+candidate, so loading a map copies none of them.
 """
 from __future__ import annotations
 
 import os
 import tempfile
+from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -34,6 +40,14 @@ def compact_descriptors(desc: np.ndarray, dtype: str) -> np.ndarray:
     return np.ascontiguousarray(desc, dtype=np.dtype(dtype))
 
 
+@dataclass(frozen=True)
+class DescriptorSource:
+    """Float descriptors held elsewhere (a map's session arrays): ``load()`` gives them (N, dim)."""
+
+    load: Callable[[], np.ndarray]
+    dim: int
+
+
 class DescriptorStore:
     """Descriptors by keyframe id, in memory or in a temporary file (see the module note)."""
 
@@ -46,9 +60,14 @@ class DescriptorStore:
         self._slots: dict[int, tuple[int, tuple[int, ...], np.dtype]] = {}
         self._file = None
         self._end = 0
+        self._sources: dict[int, Callable[[], np.ndarray]] = {}
 
     def __len__(self) -> int:
-        return len(self._arrays) + len(self._slots)
+        return len(self._arrays) + len(self._slots) + len(self._sources)
+
+    def put_source(self, key: int, load: Callable[[], np.ndarray]) -> None:
+        """Keep only how to read ``key``'s descriptors (already in their stored precision when read)."""
+        self._sources[key] = load
 
     def put(self, key: int, desc: np.ndarray) -> None:
         if self.mode == "memory":
@@ -73,6 +92,9 @@ class DescriptorStore:
         self.close()
 
     def get(self, key: int) -> np.ndarray:
+        load = self._sources.get(key)
+        if load is not None:
+            return load()
         if self.mode == "memory":
             return self._arrays[key]
         offset, shape, dtype = self._slots[key]

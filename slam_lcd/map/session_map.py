@@ -17,6 +17,7 @@ from __future__ import annotations
 import hashlib
 import logging
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -250,7 +251,13 @@ class Map:
         return [comps[k] for k in sorted(comps)]
 
     def keyframes_for_detector(self):
-        """Per session: (meta, [(light Keyframe with keypoints, descriptors, points3d, source), ...])."""
+        """Per session: (meta, [(light Keyframe with keypoints, descriptors, points3d, source), ...]).
+
+        Float descriptors come as a :class:`~slam_lcd.lcd.store.DescriptorSource` (read from the
+        map's arrays when a keyframe is a candidate), ORB's bytes as they are."""
+        from ..lcd.store import DescriptorSource
+
+        dim = int(self.manifest.features.get("descriptor_dim", 0))
         for meta, s in zip(self.manifest.sessions, self.sessions):
             camera = _camera_from_json(meta.get("camera"))
             T_bc = np.asarray(meta.get("T_body_camera", np.eye(4).tolist()), float)
@@ -264,7 +271,9 @@ class Map:
                               T_body_camera=T_bc, features=feats)
                 p3 = s.points3d[r]
                 src = str(s.points_source[i])
-                items.append((kf, s.descriptors_of(i), p3 if src != "none" else None, src))
+                desc = (s.descriptors_of(i) if s.descriptors.dtype == np.uint8 and not len(s.scales)  # ORB: as is
+                        else DescriptorSource(partial(s.descriptors_of, i), dim))
+                items.append((kf, desc, p3 if src != "none" else None, src))
             yield meta, items
 
     def load_into(self, detector) -> None:

@@ -609,11 +609,15 @@ def restore_words(state: dict[str, np.ndarray], conf: VocabConfig | None = None)
     if not (q.shape in ((n, dim), (0, dim)) and f16.shape in ((n, dim), (0, dim)) and len(state["lengths"]) == n
             and len(state["counts"]) == n and len(state["images"]) == n):
         raise ValueError("the word arrays do not fit together")
-    centres = (q.astype(np.float32) / state["centres_scale"][:, None]) if len(q) else f16.astype(np.float32)
     w = IncrementalWords(dim, conf.match_ratio, conf.match_max_distance, kind, radius=conf.online_word_radius,
                          index=WordIndex.from_config(dim, conf), product=conf.match_product)
     w._grow(n)
-    w._centres[:n] = centres
+    for a in range(0, n, 65536):  # straight into the words' array, a block at a time (no full-size temporaries)
+        b = min(n, a + 65536)
+        if len(q):
+            np.divide(q[a:b], state["centres_scale"][a:b, None], out=w._centres[a:b], casting="unsafe")
+        else:
+            w._centres[a:b] = f16[a:b]
     w._lengths[:n] = state["lengths"]
     w._counts[:n] = state["counts"]
     w._images[:n] = state["images"]
