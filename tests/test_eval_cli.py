@@ -1,4 +1,4 @@
-"""`slam-lcd ate` and `slam-lcd export` on the real trajectories (issue #9 items 3-4)."""
+"""`slam-lcd ate` and `slam-lcd export` on the real trajectories."""
 from __future__ import annotations
 
 import copy

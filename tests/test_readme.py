@@ -1,4 +1,4 @@
-"""Issue #14: the README's code blocks run as written, so they cannot rot.
+"""The README's code blocks run as written, so they cannot rot.
 
 Every ```bash and ```python block of README.md runs, in order, in one fresh folder (later
 blocks use what earlier ones wrote: the demo log, the run's outputs). ``slam-lcd`` is this

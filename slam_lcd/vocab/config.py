@@ -53,7 +53,7 @@ class VocabConfig:
     # --- online mode (no pre-trained vocabulary) ---
     # an unmatched feature closer than this to an existing word joins it instead of founding a new word
     online_word_radius: float = 0.7
-    # --- online nearest-word search (issue #13; docs/vocab.md "Nearest word at scale") ---
+    # --- online nearest-word search (docs/vocab_online.md "The nearest word at scale") ---
     # below this many words the nearest word is found exhaustively (one matrix product); from
     # here on a graph index (faiss HNSW) over projected centres proposes candidates that are
     # re-ranked exactly (a huge value keeps exhaustive search; the corridor's ~4k words stay exact)

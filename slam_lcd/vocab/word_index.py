@@ -1,4 +1,4 @@
-"""Nearest word among a growing set of moving word centres (online vocabulary, issue #13).
+"""Nearest word among a growing set of moving word centres (online vocabulary, docs/vocab_online.md).
 
 Quantising a keyframe against every word costs O(words): at 400k words one keyframe's 1000
 descriptors take over a second and a 1.5 GB product. :class:`WordIndex` keeps that exact
