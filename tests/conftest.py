@@ -129,7 +129,7 @@ def offline_demo(tmp_path_factory):
     return proc, Path(r["out"]), (Path(r["log"]) if r["log"] else None), r["env"]
 
 
-# --------------------------------------------------------------------------- plugin (issue #17)
+# --------------------------------------------------------------------------- plugin
 @pytest.fixture(scope="session")
 def superpoint_cpu(superpoint_weights):
     """One SuperPoint extractor on the CPU for the plugin tests (feature cache on)."""
@@ -171,7 +171,7 @@ def demo_log_mcap(tmp_path_factory) -> Path:
     return Path(once_per_run(tmp_path_factory, "demo_log", build))
 
 
-# --------------------------------------------------------------------------- a run's outputs (issue 19)
+# --------------------------------------------------------------------------- a run's outputs
 @pytest.fixture(scope="session")
 def report_run(tmp_path_factory, demo_log_mcap):
     """`slam-lcd run` (ORB, in-process through the CLI) on the short demo log: (exit status, out dir, log).

@@ -1,4 +1,4 @@
-"""Issue #14: `slam-lcd ate` takes evo's flags with evo's meanings and gives evo's numbers.
+"""`slam-lcd ate` takes evo's flags with evo's meanings and gives evo's numbers.
 
 Every flag (`-r` with each pose relation, `-a`, `-s`, `-as`, `--n_to_align`, `--align_origin`,
 `--t_max_diff`, `--t_offset`, and with `--rpe`: `--delta`, `--delta_unit` f/m/d/r,

@@ -1,4 +1,4 @@
-"""The standalone loop gate and loop factors (issue #17 items 1-3), on numpy arrays and small GTSAM graphs."""
+"""The standalone loop gate and loop factors, on numpy arrays and small GTSAM graphs."""
 from __future__ import annotations
 
 import numpy as np

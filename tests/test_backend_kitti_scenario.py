@@ -1,4 +1,4 @@
-"""KITTI-00 scenario: drifting odometry, true loops, 20 % / 50 % false loops (issue #7 acceptance).
+"""KITTI-00 scenario: drifting odometry, true loops, 20 % / 50 % false loops (acceptance).
 
 The third false-loop case pairs places only 8-30 m apart (harder than random pairs).
 

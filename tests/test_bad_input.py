@@ -1,4 +1,4 @@
-"""Bad input and faults end in one line and exit 2 (130 for Ctrl-C), and nothing is lost (issue #12).
+"""Bad input and faults end in one line and exit 2 (130 for Ctrl-C), and nothing is lost.
 
 Every case runs the command line, on broken files built in a temporary folder from the real
 files in ../shared/data and from a short demo log (tests/bad_input_files.py), and checks:

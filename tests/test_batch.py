@@ -1,4 +1,4 @@
-"""`slam-lcd batch` (issue #20): many logs on a local process pool and on a local Ray.
+"""`slam-lcd batch`: many logs on a local process pool and on a local Ray.
 
 Three short demo logs (different seeds; MCAP, ROS1 bag, rosbag2) and one corrupt log (a
 truncated copy of the ROS1 bag), made once per session. Every figure in the summary is

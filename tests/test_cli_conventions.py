@@ -1,4 +1,4 @@
-"""Issue #14 item 4-5: the habits users bring to a CLI.
+"""The habits users bring to a CLI.
 
 Global flags before or after the subcommand; one name per concept (old spellings kept as
 hidden aliases); every flag's help states its default; near-miss suggestions for mistyped

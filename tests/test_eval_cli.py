@@ -1,4 +1,4 @@
-"""`slam-lcd ate` and `slam-lcd export` on the real trajectories (issue #9 items 3-4)."""
+"""`slam-lcd ate` and `slam-lcd export` on the real trajectories."""
 from __future__ import annotations
 
 import copy
@@ -79,7 +79,7 @@ def test_ate_cli_fr2_desk_sim3_equals_evo(tdir, tmp_path, capsys):
     assert report["ape"]["n_matched"] == ref_e.num_poses
     assert report["ape"]["alignment"]["mode"] == "sim3" and "Sim(3)" in out
     assert out_png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out_png.stat().st_size > 10_000
-    # the old RPE spelling (--rpe-unit) still works, now beside --rpe
+    # the RPE spelling --rpe-unit works beside --rpe
     rc, out, err = _run(["ate", str(ref_p), str(est_p), "--rpe", "-d", "1", "--rpe-unit", "m", "--json", str(out_json)],
                         capsys)
     assert rc == 0, err

@@ -1,4 +1,4 @@
-"""slam_lcd.eval against evo on the real trajectories (issue #9 item 3)."""
+"""slam_lcd.eval against evo on the real trajectories."""
 from __future__ import annotations
 
 import copy

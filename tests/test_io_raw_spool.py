@@ -1,4 +1,4 @@
-"""One pass over a log serves both the run and corrected.mcap's copy (issue 13): the undecoded
+"""One pass over a log serves both the run and corrected.mcap's copy: the undecoded
 messages handed to a raw sink are exactly what ``raw_messages`` reads, the decoded stream is
 unchanged, and a RawSpool gives them back as they came."""
 from __future__ import annotations

@@ -135,7 +135,7 @@ def test_auto_stops_early_only_for_chains_with_two_checks(corridor, superpoint_w
     assert closures["auto"] == closures["all"] > 30
 
 
-# R@100P of each chain before issue #18's last step (consistent loops, docs/lcd.md): none may fall
+# R@100P of each chain without consistent loops (docs/lcd_pose.md): none may fall
 BEFORE = {"superpoint": {"ransac": 0.932, "graph": 0.932, "graph+ransac": 0.932},
           "orb": {"ransac": 0.955, "graph": 0.909, "graph+ransac": 0.886}}
 

@@ -112,7 +112,7 @@ def test_aliased_corridor_pair_rejected(corridor_features, q, m):
         if i < q - 20:  # frames outside the excluded recent window
             db.add(i, k, feats[i].descriptors)
     cands = db.query(feats[q].descriptors, top_k=3, query_id=q)
-    # in the full 84-frame run these are BoW's top candidates of their query (docs/lcd.md)
+    # in the full 84-frame run these are BoW's top candidates of their query (docs/lcd_results.md)
     assert m in [c.match_id for c in cands] and cands[0].bow_score > 0.1
     matches, v = _verdict(feats, q, m)
     assert len(matches) >= 12  # many look-alike features match one-to-one
@@ -125,7 +125,7 @@ def test_aliased_pair_rejected_by_structure_with_looser_matching(corridor_featur
     """With a looser descriptor bound (0.9) the aliased pairs have >= 20 matches; pruning by Delaunay
     neighbours (``graph_knn=0``) rejects them. The default k-nearest-neighbour test keeps their
     layout (the look-alike decal groups are pasted unchanged, so it *is* consistent): at the
-    default bound (0.8) they have fewer than 20 matches (test above; docs/lcd.md)."""
+    default bound (0.8) they have fewer than 20 matches (test above; docs/lcd_graph.md)."""
     conf = LcdConfig(match_max_distance_sp=0.9, graph_knn=0, match_ratio=0.9)  # the rule this was measured with
     matches, v = _verdict(corridor_features, q, m, conf=conf)
     assert len(matches) >= conf.graph_min_matches

@@ -52,7 +52,7 @@ def test_neighbour_outside_the_top_k_joins_its_island():
 def test_corridor_islands_verify_neighbours_within_the_budget(shared_data, superpoint_weights, capsys):
     """Islands on the corridor: at most top_k x island_tries verifications per query, neighbours beyond
     the top-K verified. (Measured: 40 loops, 1 false, 78->26, against 41 / 0 without islands, so
-    islands stay off by default: docs/lcd.md.)"""
+    islands stay off by default: docs/lcd_pose.md.)"""
     from slam_lcd.lcd.evaluation import load_loop_matrix
 
     folder = shared_data / "rtabmap_corridor"

@@ -9,7 +9,7 @@ from slam_lcd.features.matching import mutual_nn_match, mutual_nn_match_bf
 
 
 def _bf_reference(d1, d2, ratio=None, max_distance=None, *, ratio_floor=1e-12, max_inclusive=False):
-    """The earlier version: cv2.BFMatcher knnMatch + match and a Python loop over the DMatch objects."""
+    """The reference: cv2.BFMatcher knnMatch + match and a Python loop over the DMatch objects."""
     if len(d1) == 0 or len(d2) == 0:
         return np.zeros((0, 2), np.int64)
     binary = d1.dtype == np.uint8

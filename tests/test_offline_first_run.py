@@ -1,4 +1,4 @@
-"""Issue #14: a first run with no SuperPoint weights anywhere and no network.
+"""A first run with no SuperPoint weights anywhere and no network.
 
 `slam-lcd demo` still runs the whole job with the ORB baseline, says so at the start and in
 its summary, and still corrects the trajectory (ATE after <= 25% of odometry, no false loop);

@@ -1,4 +1,4 @@
-"""corrected.mcap ready for Foxglove (issue 19), read back with rosbags: one TF tree joins the
+"""corrected.mcap ready for Foxglove, read back with rosbags: one TF tree joins the
 corrected body frame, the odometry frame and the ground-truth frame; the Path grows once per
 keyframe; one loop marker per accepted loop. Both ways of adding the correction are checked:
 ``map -> odom`` (REP 105) when the log leaves the odometry frame without a parent, and a

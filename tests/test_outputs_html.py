@@ -1,4 +1,4 @@
-"""report.html (issue 19): self-contained (no network, every image embedded), the facts of
+"""report.html: self-contained (no network, every image embedded), the facts of
 report.json, one table row per loop candidate with thumbnails; rendered by headless
 Chromium, it loads without script errors and shows the loop table."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Loop pictures (issue 19): a JPEG per accepted loop under loops/ (the two keyframe images side
+"""Loop pictures: a JPEG per accepted loop under loops/ (the two keyframe images side
 by side, surviving matches and graph edges), the back end's rejections and the closest
 detector rejections with their reason, a contact sheet; the keyframe album is gone after
 the run; a second run replaces the folder as a whole."""

@@ -1,4 +1,4 @@
-"""Figures of a run and trajectory export (issue 19): trajectory.png in a chosen plane or in
+"""Figures of a run and trajectory export: trajectory.png in a chosen plane or in
 3-D, the corrected trajectory coloured by its error, accepted and rejected loops drawn
 differently, short legends; `slam-lcd export` to a ROS1 bag and a rosbag2 folder."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""What a run says about itself (issue 19): report.json versioned and read back through its
+"""What a run says about itself: report.json versioned and read back through its
 schema, loops.csv with one header whatever the candidate count, no ratio against a ~0
 odometry error, no warning for a camera that is the body frame."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""End to end on a short rendered demo log (issue #9): the same corrected trajectory from
+"""End to end on a short rendered demo log: the same corrected trajectory from
 MCAP, rosbag2 and ROS1 bag copies of the log; loops close; no false loop is accepted; every
 output file is written; the plugin API gives the same answer as the runner."""
 from __future__ import annotations

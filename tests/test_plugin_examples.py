@@ -1,4 +1,4 @@
-"""The plugin on demo-world keyframes (issue #17): the examples run, loop information is honest (NEES)."""
+"""The plugin on demo-world keyframes: the examples run, loop information is honest (NEES)."""
 from __future__ import annotations
 
 import importlib.util

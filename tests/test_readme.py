@@ -1,10 +1,10 @@
-"""Issue #14: the README's code blocks run as written, so they cannot rot.
+"""The README's code blocks run as written, so they cannot rot.
 
 Every ```bash and ```python block of README.md runs, in order, in one fresh folder (later
 blocks use what earlier ones wrote: the demo log, the run's outputs). ``slam-lcd`` is this
 checkout's CLI. A block that is not meant to run here is marked in the README by an HTML
 comment on the line before it, ``<!-- readme-test: skip (reason) -->``; that list is
-asserted to stay small (today: the two set-up commands, which create a virtual environment
+asserted to stay small (the two set-up commands, which create a virtual environment
 and install; .ci/run runs exactly those).
 """
 from __future__ import annotations

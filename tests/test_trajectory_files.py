@@ -1,4 +1,4 @@
-"""Trajectory files (issue #2 item 5): real TUM / KITTI / EuRoC files, round trips, errors."""
+"""Trajectory files: real TUM / KITTI / EuRoC files, round trips, errors."""
 from __future__ import annotations
 
 from decimal import Decimal

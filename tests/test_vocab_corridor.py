@@ -1,4 +1,4 @@
-"""Acceptance of issue #5 on the real RTAB-Map corridor frames (84 images, GT loop matrix).
+"""Acceptance of the vocabulary on the real RTAB-Map corridor frames (84 images, GT loop matrix).
 
 Protocol: keyframes are the 84 frames in order; before frame i is added, frames with a GT
 loop (44 of them, all after frame 40) query the database of frames 1..i-1, top-5, the 20

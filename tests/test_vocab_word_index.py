@@ -1,4 +1,4 @@
-"""Nearest-word search of the online vocabulary at scale (issue #13): index vs exhaustive search.
+"""Nearest-word search of the online vocabulary at scale: index vs exhaustive search.
 
 The inverted file only switches on above ``ann_min_words`` (20k by default, beyond the
 corridor's few thousand words); these tests force a low threshold so that the index decides

@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Benchmark of ``slam-lcd batch``: N demo logs on a local pool of W workers vs one after the other.
 
-Both arms run the same logs with the same configuration in the same session (the feature
+Both arms run the same logs with the same configuration in the same process (the feature
 cache is off, so each arm does the whole work): the sequential arm is ``--workers 1`` (in
 this process, what N ``slam-lcd run`` calls in a row do, without N interpreter starts),
 the parallel arm a local process pool of W workers, its process start-up included.

@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""Inverted index of the BoW database (issue #13): query + insert per keyframe, former store vs current.
+"""Inverted index of the BoW database: query + insert per keyframe, per-word lists (the baseline) vs the arena.
 
 The bags of words come once from ``bench_scaling``'s place stream through a vocabulary trained
 beforehand on another place stream (as ``bench_scaling.py database --trained K``), or with

@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""Benchmark of the demo-world renderer (issue #3: >= 20 frames/s at 640x480 on one core).
+"""Benchmark of the demo-world renderer (target: >= 20 frames/s at 640x480 on one core).
 
 Renders frames along the default demo trajectory on ONE OpenCV thread and prints frames/s
 from process CPU time (what one core delivers, robust to other load on the machine) and

@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""Scaling benchmarks of issue #13: per-keyframe cost and memory as a run grows.
+"""Scaling benchmarks: per-keyframe cost and memory as a run grows.
 
 Section ``database``: an online-mode :class:`slam_lcd.vocab.BowDatabase` (no trained
 vocabulary, database idf) grown to 10,000 keyframes of 1000 descriptors (D=256), in the loop

@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Speed of vocabulary quantisation and database queries, each next to a brute-force baseline.
 
-Targets (issue #5): quantising 1000 descriptors into ~100k words < 10 ms on CPU; a query
+Targets: quantising 1000 descriptors into ~100k words < 10 ms on CPU; a query
 against a database of 10,000 keyframes < 10 ms. The 100k-word vocabularies are synthetic
 (the descent cost depends on the tree's shape, not on how it was trained): a DBoW2-shaped
 tree (k=10, L=5) and a DP-shaped one (branching drawn from 4..32 per node, as the DP tree's

@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""Write a PNG mosaic of what the demo camera sees (issue #3), so a person can check the world.
+"""Write a PNG mosaic of what the demo camera sees, so a person can check the world.
 
 Top rows: frames along the default trajectory (first lap, and the same places on the second
 lap, with the lighting change); bottom row: depth (colour-mapped) of some of them, the

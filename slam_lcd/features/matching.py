@@ -126,8 +126,8 @@ def mutual_nn_match_bf(
     ``max_inclusive``). The front end's tracker uses ``ratio_floor=0, max_inclusive=True``.
     With ``return_distances`` also the (M,) distances of the kept matches (float64).
 
-    The rule and the comparisons (float64, strict) are those of the earlier version that went
-    through ``cv2.BFMatcher.knnMatch``/``match`` and a Python loop over their results.
+    The rule and the comparisons (float64, strict) are those of ``cv2.BFMatcher.knnMatch``/``match``
+    and a Python loop over their results (the reference in ``tests/test_matching_bf.py``).
     """
     empty = np.zeros((0, 2), np.int64)
     n1, n2 = len(d1), len(d2)

@@ -18,7 +18,7 @@ class LcdConfig:
     # islands (DBoW2 / iBoW-LCD): the top-K and their temporal neighbours among the best
     # ``island_pool`` BoW candidates, grouped by keyframe position (members <= ``island_gap`` apart),
     # ranked by the sum of their members' scores and verified island by island: the best member,
-    # then the next best when it fails, at most ``island_tries`` per island (docs/lcd.md)
+    # then the next best when it fails, at most ``island_tries`` per island (docs/lcd_pose.md)
     islands: bool = False
     island_gap: int = 2  # keyframe positions between neighbouring members of one island
     island_pool: int = 20  # BoW candidates grouped into islands (the top-K among them seed the islands)
@@ -26,7 +26,7 @@ class LcdConfig:
 
     # --- matching ---
     # one-to-one (mutual nearest neighbour) matches; the ratio test is symmetric (distinct in both images)
-    match_ratio: float | None = None  # ratio test for the RANSAC-only chain (None: off; 0.9 measured lower: docs/lcd.md)
+    match_ratio: float | None = None  # ratio test for the RANSAC-only chain (None: off; 0.9 measured lower: docs/lcd_pose.md)
     graph_match_ratio: float | None = None  # ratio test for the graph chains: off, the graph rejects the outliers (paper III-E)
     match_max_distance_sp: float | None = 0.8  # max L2 distance between SuperPoint descriptors (None: off)
     match_max_distance_orb: float | None = 64.0  # max Hamming distance between ORB descriptors (None: off)
@@ -72,7 +72,7 @@ class LcdConfig:
     # fewer PnP inliers than pnp_min_inliers are accepted down to this many when the pose is tight:
     # the inliers are at least pnp_tight_min_share of the matched 3-D points and the pose's 1-sigma
     # (from its information matrix: sqrt of the trace of each covariance block) is within both bounds
-    # (0: off; measured on every demo-world candidate pair: docs/lcd.md)
+    # (0: off; measured on every demo-world candidate pair: docs/lcd_pose.md)
     pnp_min_inliers_tight: int = 15  # with the odometry check below (without it, two false loops on the 10-lap log)
     pnp_tight_min_share: float = 0.8
     pnp_tight_max_sigma_m: float = 0.04
@@ -93,7 +93,7 @@ class LcdConfig:
     # keyframe's loop (one accepted at the full thresholds) and that fails only on a count
     # (too few matches, nodes or RANSAC inliers) is verified again with graph_min_matches,
     # graph_min_nodes and ransac_min_inliers lowered to consistent_min_matches (0: off; the
-    # ratios, the structural score and the pose step keep their thresholds; docs/lcd.md)
+    # ratios, the structural score and the pose step keep their thresholds; docs/lcd_pose.md)
     consistent_min_matches: int = 12
     consistent_window: int = 2
 

@@ -70,7 +70,7 @@ def verify_epipolar(
     if E is None:
         return EpipolarVerdict(False, 0, n, "ransac_failed", np.zeros(n, bool))
     # cheirality: inliers clearly behind a camera go, points too far to tell stay (cv2.recoverPose
-    # drops every point beyond 50 baselines, which emptied small-baseline revisits: docs/lcd.md)
+    # drops every point beyond 50 baselines, which emptied small-baseline revisits: docs/lcd_pose.md)
     R, t, _ = choose_decomposition(E, xm[mask], xq[mask])
     good = cheirality_mask(R, t, xm[mask], xq[mask])
     inl = np.flatnonzero(mask)

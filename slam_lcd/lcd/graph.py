@@ -8,7 +8,7 @@ Where the matches come from look-alike objects scattered over a different place,
 arrangement is broken.
 
 Algorithm (the paper's text stops after "build a graph on the matched points"; the rest
-is our design, see docs/lcd.md):
+is our design, see docs/lcd_graph.md):
 
 1. Start from one-to-one (mutual nearest-neighbour) matches; merge near-duplicate points.
 2. On the matched points of each image build a planar triangular graph: a Delaunay

@@ -54,7 +54,7 @@ _DIRECT_MAX_OPEN = 48  # at most this many unsettled segments: test them against
 _PAIR_CHUNK = 1 << 20  # candidate pairs tested per block (bounds the temporaries)
 _ALL_PAIRS_MAX = 256  # up to this many segments crosses_any tests every pair (step 1 of the module note)
 # step 0 (the sweep) runs when it forms at most this many pairs per segment: the break-even with
-# steps 1-4, measured on the 2-lap demo's 2,038 drawings and scrambled ones (eighth session)
+# steps 1-4, measured on the 2-lap demo's 2,038 drawings and scrambled ones
 _SWEEP_MAX_PAIRS = 64
 _PAIRS: tuple[np.ndarray, np.ndarray] | None = None  # every pair (i < j < _ALL_PAIRS_MAX), ordered by j
 

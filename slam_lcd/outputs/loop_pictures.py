@@ -1,7 +1,7 @@
 """Per-loop pictures under ``loops/`` (the paper's Fig. 1) and a contact sheet of the accepted loops.
 
 Why this way: at output time the run has dropped every image, and the loop detector's
-records keep figures, not per-match arrays (memory per keyframe stays small, issue 13).
+records keep figures, not per-match arrays (memory per keyframe stays small).
 The cheapest honest source is a :class:`KeyframeAlbum` filled while the run goes: each
 keyframe's image (JPEG), keypoints and descriptors (in the detector's stored precision)
 go to a working folder on disk as the keyframe leaves loop detection, so memory stays

@@ -1,7 +1,7 @@
 """Growing numpy arrays in place (the online vocabulary's words and the database's postings arena).
 
 Why in place: memory touched for the first time costs page faults, and on the 2-core benchmark
-machine those cost ~3-10 ms per MB (issue #13). Doubling an array into a fresh copy touches
+machine those cost ~3-10 ms per MB. Doubling an array into a fresh copy touches
 the whole new array at once: one keyframe paused for up to ~1 s. ``ndarray.resize`` reallocs,
 which remaps the pages in use instead of copying them, and only zeroes the new tail, so with
 small growth steps each pause stays short. Where the array cannot be resized (someone holds a

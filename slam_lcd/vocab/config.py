@@ -14,7 +14,7 @@ class VocabConfig:
     # 1.0 for binary ones, which is Hamming 64 of 256 bits)
     match_max_distance: float | None = None
     # similarity product of that match: "float32"; "bfloat16" or "int8" (candidates from a rounded
-    # product, every decision on float32 values: the same matches, docs/vocab.md); "auto": int8 where
+    # product, every decision on float32 values: the same matches, docs/vocab_online.md); "auto": int8 where
     # the CPU multiplies it in hardware (VNNI, AMX) and torch has the product, else bfloat16 where the
     # CPU multiplies that (AMX, AVX512-BF16), when torch is loaded (SuperPoint runs; an ORB run stays
     # free of torch); float32 elsewhere
@@ -53,7 +53,7 @@ class VocabConfig:
     # --- online mode (no pre-trained vocabulary) ---
     # an unmatched feature closer than this to an existing word joins it instead of founding a new word
     online_word_radius: float = 0.7
-    # --- online nearest-word search (issue #13; docs/vocab.md "Nearest word at scale") ---
+    # --- online nearest-word search (docs/vocab_online.md "The nearest word at scale") ---
     # below this many words the nearest word is found exhaustively (one matrix product); from
     # here on a graph index (faiss HNSW) over projected centres proposes candidates that are
     # re-ranked exactly (a huge value keeps exhaustive search; the corridor's ~4k words stay exact)

@@ -1,4 +1,4 @@
-"""Nearest word among a growing set of moving word centres (online vocabulary, issue #13).
+"""Nearest word among a growing set of moving word centres (online vocabulary, docs/vocab_online.md).
 
 Quantising a keyframe against every word costs O(words): at 400k words one keyframe's 1000
 descriptors take over a second and a 1.5 GB product. :class:`WordIndex` keeps that exact
@@ -15,10 +15,10 @@ proposes a few candidate words per descriptor and the winner is chosen exactly a
   ``ann_ef_search``; cost per query ~log(words). The graph keeps each projected word as 8-bit
   codes (``ann_storage: sq8``; ``flat`` keeps float32): a search waits on memory more than it
   computes, and a quarter of the bytes searched ~15% faster for the same candidates, 0.001 less
-  agreement with exhaustive search on real SuperPoint words (docs/vocab.md). Graph search suits SuperPoint descriptors,
+  agreement with exhaustive search on real SuperPoint words (docs/vocab_online.md). Graph search suits SuperPoint descriptors,
   whose words lie on a low-dimensional set (intrinsic dimension ~11 measured on real words):
   on real words it beat an inverted file (faiss ``IndexIVFFlat``) of the same cost by 4-5
-  points of recall (docs/vocab.md).
+  points of recall (docs/vocab_online.md).
 - **Exact re-ranking.** The ``ann_candidates`` best words by projected similarity are scored
   by the full dot product with the current centres; ties go to the lowest word id, as the
   exhaustive ``argmax`` does.
@@ -30,20 +30,20 @@ proposes a few candidate words per descriptor and the winner is chosen exactly a
   word's links date from its insertion. That costs nothing in correctness (the re-ranking is
   exact) and little in recall because settled words move little; on real descriptors it beat
   re-inserting drifted words as extra nodes (duplicates crowd the search beam) and leaving
-  them where they were inserted (docs/vocab.md).
+  them where they were inserted (docs/vocab_online.md).
 - **Tracked features** (``hints``): a feature matched to one of the previous image's features
   is decided among that feature's best candidates and its word (they were the nearest words a
   descriptor ~0.35 away had), plus the fresh words, without a graph search; every
   ``ann_hint_images`` images a track searches the graph again. A feature that matches nothing in
   the previous image but one of the image before's that the previous image missed (a landmark
   lost for one image, ``ann_hint_gap``) is decided the same way: a match between those two small
-  sets replaces ~30% of the graph searches on the synthetic stream (docs/vocab.md).
+  sets replaces ~30% of the graph searches on the synthetic stream (docs/vocab_online.md).
 - **Revisited places** (``pool``, :meth:`WordIndex.pool_candidates`): the database hands the
   words of the keyframes around the previous keyframe's best query result; a row still to search
   whose best of those words (scored like the graph scores, by brute force over the pool, then
   exactly) lies within the word radius is decided among them instead of a graph search. On a
   revisit the rows left to search are mostly landmarks entering the view again, whose words the
-  old keyframes hold: ~60% fewer graph searches on the synthetic stream (docs/vocab.md).
+  old keyframes hold: ~60% fewer graph searches on the synthetic stream (docs/vocab_online.md).
 - **Insertion beside the next image** (``ann_background_insert``): the words that settle after an
   image are inserted into the graph on a worker thread (faiss releases the GIL) while the caller
   goes on with what needs no graph: the keyframe's query and insertion into the database, the next

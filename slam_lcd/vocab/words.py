@@ -227,7 +227,7 @@ class IncrementalWords:
         ``ann_hint_images``, matched closer than ``ann_hint_max_distance``): it takes its track's word,
         the word :meth:`add_image` gives it. Why: the index decides such a row among its track's few
         candidate words anyway, and that re-ranking (~800 of ~1,000 rows of a keyframe) was the
-        largest part of a revisit's word search (docs/vocab.md); the row's own word is known.
+        largest part of a revisit's word search (docs/vocab_online.md); the row's own word is known.
         Without the index every row gets its exact nearest word.
         """
         if self.radius is None:
@@ -304,7 +304,7 @@ class IncrementalWords:
         a few images); their words were seen in the keyframes around the place just retrieved. On a
         revisit of the synthetic stream 136 of ~200 graph searches per keyframe are replaced this way
         (58 % of all searches over 3,000 keyframes), and for ~1 of those 136 the exhaustive nearest word
-        is another word (a near-duplicate of the same landmark) than the pool's (docs/vocab.md).
+        is another word (a near-duplicate of the same landmark) than the pool's (docs/vocab_online.md).
 
         On a new route the previous query's best keyframe is no revisit: its words decided ~3.5 of ~200
         rows per keyframe, for ~1.5 ms of scoring. A pool that decides fewer than ``_POOL_MIN_YIELD`` of
