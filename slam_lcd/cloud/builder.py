@@ -4,7 +4,8 @@
 (the pipeline hands it over before they are dropped), keeps its points (merged per voxel in the
 body frame) in a :class:`~.store.KeyframeCloudStore`, and :meth:`MapCloudBuilder.cloud` merges
 them into a :class:`~.voxel_grid.VoxelGrid` with the poses given (odometry or corrected).
-:func:`build_cloud` is the one-pass form for poses known in advance (``export-map``).
+``export-map`` goes the same way, so that it gives the run's ``map.ply`` point for point when its
+settings are the run's.
 
 Keyframes it cannot use are skipped and counted by reason; each reason is said once (a log
 warning naming the source), never an error: the map is a view of the run, not part of it.
@@ -13,8 +14,6 @@ from __future__ import annotations
 
 import logging
 import time
-from typing import Iterable
-
 import numpy as np
 
 from ..errors import InputError
@@ -124,20 +123,3 @@ class MapCloudBuilder:
 
     def close(self) -> None:
         self.store.close()
-
-
-def build_cloud(frames: Iterable[tuple[Keyframe, np.ndarray]], conf: MapCloudConfig | None = None,
-                source: str = "") -> tuple[Cloud, dict[str, int], int]:
-    """One pass: each ``(keyframe with its images, T_world_body)`` merged at once; ``(cloud, skipped, keyframes used)``."""
-    conf = conf or MapCloudConfig()
-    grid = VoxelGrid(conf.voxel_m)
-    skips = Skips(source)
-    used = 0
-    for kf, T in frames:
-        sp = skips.points_of(kf, conf)
-        if sp is None:
-            continue
-        T_wc = np.asarray(T, np.float64) @ np.asarray(kf.T_body_camera, np.float64)
-        grid.add(sp.points.astype(np.float64) @ T_wc[:3, :3].T + T_wc[:3, 3], sp.colours)
-        used += 1
-    return grid.cloud(), skips.counts, used

@@ -220,7 +220,7 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
         from .html_report import write_html_report
 
         write_html_report(out_dir, facts, result.summary_lines(), rows,
-                          [f for f in outputs if f.endswith(".png")], result.loop_pictures,
+                          [f for f in outputs if f.endswith(".png") and f not in MAP_CLOUD_FILES], result.loop_pictures,
                           (out_dir / "config.yaml").read_text(encoding="utf-8"),
                           pictures.thumbs if pictures is not None else None)
     except OSError:
