@@ -102,8 +102,9 @@ def run_log(
     the log is appended to it as session ``session_name`` (committed before the outputs are
     written; an interrupted run leaves the map as it was). ``map_mode='localize'``: the map (opened
     read-only) is not changed; each keyframe is localised against it (``result.localization``).
-    ``surfaces``: ``(name, Rectangles)``, the true surfaces of the world the log was rendered in (the
-    demo world: :func:`slam_lcd.sim.world_surfaces`): the map cloud's points are measured against them.
+    ``surfaces``: ``(name, {ground-truth frame: Rectangles})``, the true surfaces of the world the log was
+    rendered in (the demo world: :func:`slam_lcd.sim.demo_surfaces`): the map cloud's points are measured
+    against those in the ground truth's frame.
     """
     cfg = validate_config(config or Config())
     log_path = Path(log_path)

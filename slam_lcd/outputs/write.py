@@ -56,7 +56,8 @@ def write_set(outputs: OutputSet, pipe, result: RunResult, gt, mcap_source, copy
     """Write every output into the staging folder, then publish the set (partial when interrupted).
 
     ``spool``: the run's :class:`~slam_lcd.io.raw_spool.RawSpool` of the copied topics (removed here).
-    ``surfaces``: ``(name, Rectangles)``, the true surfaces of a simulated world (the map cloud's check)."""
+    ``surfaces``: ``(name, {frame: Rectangles})``, the true surfaces of a simulated world in the frames its
+    ground truth may be given in (the map cloud's check)."""
     notes = list(notes or [])
     partial = result.interrupted
     try:
@@ -173,7 +174,8 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
     if getattr(pipe, "map_cloud", None) is not None:
         from .map_cloud import write_map_clouds
 
-        name, rects = surfaces if surfaces is not None else ("", None)
+        name, by_frame = surfaces if surfaces is not None else ("", {})
+        rects = by_frame.get(result.frames.get("gt") or "world")  # the surfaces in the ground truth's frame
         try:
             result.map_cloud, cloud = write_map_clouds(out_dir, pipe, cfg.map_cloud, ate_before, ate_after, rects,
                                                        name, result.map_cloud_sensor)

@@ -20,6 +20,16 @@ def world_surfaces(seed: int = 0) -> Rectangles:
                       heights=np.array([p.height for p in planes], float))
 
 
-def demo_surfaces(seed: int = 0) -> tuple[str, Rectangles]:
-    """``(name, surfaces)`` as ``run_log(surfaces=...)`` takes them."""
-    return f"demo world {int(seed)}", world_surfaces(seed)
+def moved(r: Rectangles, T: np.ndarray) -> Rectangles:
+    """The rectangles seen from another frame: ``T`` maps their frame's points into it."""
+    R, t = T[:3, :3], T[:3, 3]
+    return Rectangles(r.origins @ R.T + t, r.u @ R.T, r.v @ R.T, r.widths.copy(), r.heights.copy())
+
+
+def demo_surfaces(seed: int = 0) -> tuple[str, dict[str, Rectangles]]:
+    """``(name, {ground-truth frame: surfaces in it})`` as ``run_log(surfaces=...)`` takes them: the demo
+    logs' ground truth is in ``world``, the EuRoC layout's in a shifted, turned ``leica`` frame."""
+    from .layouts import T_LEICA_WORLD
+
+    r = world_surfaces(seed)
+    return f"demo world {int(seed)}", {"world": r, "leica": moved(r, T_LEICA_WORLD)}
