@@ -26,6 +26,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 _LOG_2PIE = float(np.log(2 * np.pi * np.e))
+_CHUNK = 2000  # centres per neighbour query
 
 
 def sample_indices(n: int, n_eval: int, seed: int = 0) -> np.ndarray:
@@ -47,6 +48,9 @@ def local_covariances(points: np.ndarray, centres: np.ndarray, radius: float,
     if q == 0 or len(pts) == 0:
         return np.zeros((q, 3, 3)), np.zeros(q, np.int64)
     tree = tree if tree is not None else cKDTree(pts)
+    if q > _CHUNK:  # pairs of a chunk of centres at a time: memory ~ chunk x neighbours, not all pairs at once
+        parts = [local_covariances(pts, cen[s:s + _CHUNK], radius, tree) for s in range(0, q, _CHUNK)]
+        return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
     pairs = cKDTree(cen).sparse_distance_matrix(tree, radius, output_type="ndarray")
     owner, flat = pairs["i"].astype(np.int64), pairs["j"].astype(np.int64)
     counts = np.bincount(owner, minlength=q)
