@@ -21,6 +21,7 @@ import yaml
 from .atomic import write_text
 from .backend.config import BackendConfig
 from .batch.config import BatchConfig
+from .cloud.config import MapCloudConfig
 from .errors import ConfigError, FileMissingError
 from .eval.config import EvalConfig
 from .features.config import FeaturesConfig
@@ -119,6 +120,7 @@ class Config:
     run: RunConfig = field(default_factory=RunConfig)
     batch: BatchConfig = field(default_factory=BatchConfig)
     map: MapConfig = field(default_factory=MapConfig)
+    map_cloud: MapCloudConfig = field(default_factory=MapCloudConfig)
 
 
 def _coerce(value: Any, tp: Any, where: str) -> Any:

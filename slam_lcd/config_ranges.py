@@ -182,6 +182,16 @@ RANGES: dict[str, str] = {
     "map.localize_max_disagreement_deg": "(0, 180]",
     "map.lock_timeout_s": "[0, inf)",
     "run.loop_pictures_rejected": "[0, inf)",
+    # map_cloud (the map as a point cloud)
+    "map_cloud.voxel_m": "[0.001, inf)",
+    "map_cloud.min_depth_m": "[0, inf)",
+    "map_cloud.max_depth_m": "(0, inf)",
+    "map_cloud.pixel_step": "[1, 64]",
+    "map_cloud.metric_radius_m": "(0, inf)",
+    "map_cloud.metric_points": "[1, inf)",
+    "map_cloud.metric_min_neighbours": "[4, inf)",
+    "map_cloud.metric_min_std_voxels": "[0, 10]",
+    "map_cloud.top_view_px": "[100, 8000]",
 }
 
 # (smaller, larger): the first must be below the second
@@ -189,6 +199,7 @@ ORDERED = [
     ("frontend.vo_min_depth", "frontend.vo_max_depth"),
     ("frontend.stereo_min_disparity_px", "frontend.stereo_max_disparity_px"),
     ("lcd.min_depth_m", "lcd.max_depth_m"),
+    ("map_cloud.min_depth_m", "map_cloud.max_depth_m"),
 ]
 
 

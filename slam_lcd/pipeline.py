@@ -51,6 +51,7 @@ class _Frame:
     image: np.ndarray
     depth: np.ndarray | None = None
     right_image: np.ndarray | None = None
+    colour: np.ndarray | None = None
 
 
 class Pipeline:
@@ -65,6 +66,8 @@ class Pipeline:
     for every loop the detector hands on, with the matches its graph verified (before they are dropped);
     ``feature_source(stamp, image) -> Features`` replaces the extractor's own call (e.g. an
     on-disk cache keyed by log, topic and stamp); ``expect_depth``: see :meth:`_release`.
+    ``map_cloud`` (a :class:`slam_lcd.cloud.MapCloudBuilder`) takes each keyframe the graph took,
+    with its depth or stereo images, before they are dropped (the map's point cloud).
     """
 
     def __init__(
@@ -82,6 +85,7 @@ class Pipeline:
         loop_sink: Callable[[object], None] | None = None,
         map=None,
         map_mode: str = "append",
+        map_cloud=None,
     ):
         self.config = config or Config()
         self.camera = camera
@@ -100,6 +104,7 @@ class Pipeline:
         self.feature_source = feature_source
         # sees each keyframe (image and features) once, after loop detection, before they are dropped
         self.keyframe_sink = keyframe_sink
+        self.map_cloud = map_cloud
         self.timer = StageTimer()
         self.keyframes: list[Keyframe] = []
         self.closures: list[LoopClosure] = []
@@ -157,11 +162,14 @@ class Pipeline:
         return self._release(final=False)
 
     def add_image(self, stamp_ns: int, image: np.ndarray, *, depth: np.ndarray | None = None,
-                  right_image: np.ndarray | None = None) -> list[LoopClosure]:
-        """One camera frame (grayscale or RGB); processed once odometry reaches its stamp."""
+                  right_image: np.ndarray | None = None, colour: np.ndarray | None = None) -> list[LoopClosure]:
+        """One camera frame (grayscale or RGB); processed once odometry reaches its stamp.
+
+        ``colour``: the same frame in colour (RGB uint8) when ``image`` is its grey version; only the
+        map cloud uses it (the features see ``image``)."""
         if depth is None:
             depth = self._early_depth.pop(int(stamp_ns), None)
-        self._pending.append(_Frame(int(stamp_ns), image, depth, right_image))
+        self._pending.append(_Frame(int(stamp_ns), image, depth, right_image, colour))
         return self._release(final=False)
 
     def add_depth(self, stamp_ns: int, depth: np.ndarray) -> list[LoopClosure]:
@@ -273,10 +281,13 @@ class Pipeline:
         finally:
             if self.keyframe_sink is not None and kf.features is not None:
                 self._sink(kf)
+            if self.map_cloud is not None and self.keyframes and self.keyframes[-1] is kf:
+                self._cloud(kf)
             # memory stays bounded: the detector keeps what it needs of past keyframes (compactly), this list poses only
             kf.image = None
             kf.right_image = None
             kf.depth = None
+            kf.colour = None
             kf.features = None
         self.keyframe_seconds.append({"loop_detection": t2 - t1, "backend": (t1 - t0) + (time.perf_counter() - t2),
                                       "rss_kb": resident_kb(), **self.detector.last_part_seconds})
@@ -289,6 +300,14 @@ class Pipeline:
         except Exception as e:  # pictures are a nicety: never cost the run (said once)
             log.warning("keyframe %d not kept for the loop pictures (%s); no more are kept", kf.id, e)
             self.keyframe_sink = None
+
+    def _cloud(self, kf: Keyframe) -> None:
+        try:
+            with self.timer("map_cloud"):
+                self.map_cloud.add_keyframe(kf)
+        except Exception as e:  # the map is a view of the run: never cost the run (said once)
+            log.warning("keyframe %d not added to the map cloud (%s); no more are added", kf.id, e)
+            self.map_cloud = None
 
     def _detect_loops(self, kf: Keyframe) -> list[LoopClosure]:
         """Loop detection for a keyframe already in the graph; an interrupt inside it drops its candidates."""
@@ -369,7 +388,8 @@ class Pipeline:
             self._segment_from = None
         with self.timer("keyframe_selection"):
             made = self.selector.push(f.stamp, T, cov, image=f.image, features=features,
-                                      depth=f.depth, right_image=f.right_image, segment_start=brk)
+                                      depth=f.depth, right_image=f.right_image, segment_start=brk,
+                                      colour=f.colour)
         if not made:
             return []
         # one new keyframe, two on an odometry break (the frame before it is promoted), and one an

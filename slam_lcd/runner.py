@@ -32,13 +32,14 @@ from .outputs.output_set import OutputSet
 from .outputs.result import RunResult
 from .outputs.write import RUN_OUTPUTS, write_set
 from .progress import progress_bar
-from .sensors.messages import (at_message, check_first_messages, check_image_sizes, decode_camera_of, decode_depth,
-                               decode_gray, decode_pose_of)
+from .sensors.messages import (at_message, check_first_messages, check_image_sizes, decode_any_image,
+                               decode_camera_of, decode_depth, decode_gray, decode_pose_of)
 from .sensors.mounting import body_frame_of, calibrated_mounting, mounting_from_camera_info, static_transforms
 from .sensors.ground_truth import (POSITION_ONLY_NOTE, decode_ground_truth, ground_truth_from_messages,
                                    ground_truth_from_tf)
 from .sensors.topics import Topics, choose_right_topic, choose_topics, configured_topics, copyable_topics, static_tf_topics
 from .types import Trajectory
+from .vision.gray import image_to_gray
 
 log = logging.getLogger(__name__)
 
@@ -80,6 +81,7 @@ def run_log(
     map=None,
     session_name: str | None = None,
     map_mode: str = "append",
+    surfaces=None,
 ) -> RunResult:
     """Correct the trajectory of ``log_path`` with loop closures; write outputs into ``out_dir``.
 
@@ -100,6 +102,9 @@ def run_log(
     the log is appended to it as session ``session_name`` (committed before the outputs are
     written; an interrupted run leaves the map as it was). ``map_mode='localize'``: the map (opened
     read-only) is not changed; each keyframe is localised against it (``result.localization``).
+    ``surfaces``: ``(name, {ground-truth frame: Rectangles})``, the true surfaces of the world the log was
+    rendered in (the demo world: :func:`slam_lcd.sim.demo_surfaces`): the map cloud's points are measured
+    against those in the ground truth's frame.
     """
     cfg = validate_config(config or Config())
     log_path = Path(log_path)
@@ -165,9 +170,10 @@ def run_log(
                 album = KeyframeAlbum(outputs.staging / ".loop_keyframes", cfg.lcd.descriptor_dtype)
             if copy_topics:  # the topics corrected.mcap copies, kept undecoded from the one pass over the log
                 spool = RawSpool(outputs.staging / ".corrected_mcap_spool", copied_topics(copy_topics))
+            map_cloud = _map_cloud_builder(cfg, topics, stereo, outputs, result, log_path)
             pipe = _make_pipeline(cfg, extractor, vocab, log_path, topics, album,
                                   rectified=stereo is not None and stereo.rectifier is not None, map=map,
-                                  map_mode=map_mode)
+                                  map_mode=map_mode, map_cloud=map_cloud)
             if calibrated is not None:  # the calibration file's camera (CameraInfo is not read then)
                 T_bc = (vo_odometry.T_body_camera if vo_odometry is not None else
                         calibrated_mounting(cfg.frontend, calibrated, tf, body_frame_of(first.get(topics.odom))))
@@ -185,6 +191,8 @@ def run_log(
             gt_traj_from_log = _drive(reader, topics, pipe, result, cfg, tf, body_frame_of(first.get(topics.odom)),
                                       vo_odometry, log_path, progress, stereo, spool)
             result.log_duration_s = reader.duration_ns * 1e-9
+            if map_cloud is not None:
+                result.map_cloud_sensor = _cloud_sensor(pipe, topics, stereo, calibration)
             if gt_from_tf is not None:
                 gt_traj_from_log = gt_from_tf
 
@@ -218,8 +226,34 @@ def run_log(
         outputs.discard()  # a run that fails before its outputs leaves no staging folder behind
         raise
     write_set(outputs, pipe, result, gt_traj, log_path if mcap_wanted else None, copy_topics, notes, read_to_end,
-              album=album, spool=spool)
+              album=album, spool=spool, surfaces=surfaces)
     return result
+
+
+def _map_cloud_builder(cfg, topics: Topics, stereo, outputs: OutputSet, result: RunResult, log_path):
+    """The map cloud's builder (its store inside the staging folder), or None with the reason in ``result``."""
+    if not cfg.map_cloud.enabled:
+        return None
+    if topics.depth is None and stereo is None:
+        reason = "the log has no depth image and no stereo pair with a baseline"
+        log.warning("%s: no map cloud (map.ply): %s", log_path, reason)
+        result.map_cloud = {"built": False, "reason": reason}
+        return None
+    from .cloud import MapCloudBuilder
+
+    source = topics.depth if topics.depth is not None else f"{topics.image} + {topics.right}"
+    return MapCloudBuilder(cfg.map_cloud, source=f"{log_path}: {source}", folder=outputs.staging)
+
+
+def _cloud_sensor(pipe, topics: Topics, stereo, calibration) -> dict:
+    """Where the cloud's points came from: ``export-map`` reads the same topics with the same camera."""
+    from .outputs.map_cloud import camera_facts
+
+    return {"kind": "depth" if topics.depth is not None else "stereo", "image_topic": topics.image,
+            "depth_topic": topics.depth, "right_topic": topics.right if topics.depth is None else None,
+            "rectified": bool(stereo is not None and stereo.rectifier is not None),
+            "calibration": [str(p) for p in calibration.sources] if calibration is not None else None,
+            "camera": camera_facts(pipe.camera, pipe.T_body_camera)}
 
 
 def _import_in_background(module: str) -> None:
@@ -300,7 +334,7 @@ def _append_to_map(map, pipe, result: RunResult, log_path: Path, name: str | Non
 
 
 def _make_pipeline(cfg, extractor, vocab, log_path, topics: Topics, keyframe_sink=None, rectified: bool = False,
-                   map=None, map_mode: str = "append"):
+                   map=None, map_mode: str = "append", map_cloud=None):
     """The pipeline with its collaborators: the extractor, the vocabulary (None: online), the feature
     cache of this log (``rectified``: the images are the rectified pair's, cached apart from the raw
     ones), whether frames wait for depth, the loop pictures' keyframe album."""
@@ -321,7 +355,8 @@ def _make_pipeline(cfg, extractor, vocab, log_path, topics: Topics, keyframe_sin
 
     return Pipeline(cfg, extractor=extractor, vocab=vocab, feature_source=feature_source,
                     expect_depth=topics.depth is not None, keyframe_sink=keyframe_sink,
-                    loop_sink=getattr(keyframe_sink, "keep_loop", None), map=map, map_mode=map_mode)
+                    loop_sink=getattr(keyframe_sink, "keep_loop", None), map=map, map_mode=map_mode,
+                    map_cloud=map_cloud)
 
 
 def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame, vo_odometry, log_path,
@@ -374,13 +409,16 @@ def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame,
             elif m.topic == topics.image:
                 try:
                     with pipe.timer("decode"), at_message(m, log_path):
-                        gray = decode_gray(m)
+                        img = decode_any_image(m)
+                        gray = image_to_gray(img)  # decode_gray's, so the features are those of a grey decode
                 except DamagedImageError as e:  # a damaged frame is skipped, not fatal
                     damaged.append(e)
                     continue
+                # the colour image goes to the map cloud only (keyframes keep it until it took their points)
+                colour = img if img.ndim == 3 and pipe.map_cloud is not None else None
                 with at_message(m, log_path, decoding=False):
                     if stereo is None:
-                        pipe.add_image(m.stamp, gray)
+                        pipe.add_image(m.stamp, gray, colour=colour)
                     else:
                         for stamp, left, right in stereo.add_left(m.stamp, gray):
                             pipe.add_image(stamp, left, right_image=right)

@@ -100,6 +100,7 @@ class Keyframe:
     covariance_since_last: np.ndarray | None = None  # 6x6 odometry covariance since previous keyframe
     features: Features | None = None
     landmarks: np.ndarray | None = None  # (N, 3) camera-frame points per keypoint (NaN where unknown)
+    colour: np.ndarray | None = None  # the colour image (RGB uint8) when the camera has colour: the map cloud's colours
 
 
 @dataclass
@@ -132,3 +133,21 @@ class LoopClosure:
         from .backend.loop_factors import between_factor
 
         return between_factor(self, key_match, key_query, kernel=kernel, kernel_width=kernel_width)
+
+
+@dataclass
+class Rectangles:
+    """Flat rectangles ``origin + a*u + b*v``, ``a`` in ``[0, width]``, ``b`` in ``[0, height]`` (unit ``u``, ``v``).
+
+    The true surfaces of a simulated world (:func:`slam_lcd.sim.world_surfaces`), against which
+    a map's points are measured (:func:`slam_lcd.cloud.surface_distances`): (R, 3) arrays and (R,) sizes.
+    """
+
+    origins: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+    widths: np.ndarray
+    heights: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.origins)

@@ -185,7 +185,7 @@ def report_run(tmp_path_factory, demo_log_mcap):
     def build(folder: Path) -> list:
         out = folder / "out"
         rc = main(["run", str(log), "--out", str(out), "--features", "orb", "--no-feature-cache", "--no-progress",
-                   "--set", "eval.rpe_delta=2.0"])
+                   "--set", "eval.rpe_delta=2.0", "--truth-world", str(DEMO_LOG["seed"])])
         return [rc, str(out)]
 
     rc, out = once_per_run(tmp_path_factory, "report_run", build)

@@ -104,9 +104,12 @@ def run(args) -> int:
     log_path = ensure_demo_log(frames=args.frames, seed=args.seed, rebuild=args.rebuild,
                                progress=not args.no_progress, width=width, height=height)
     print(f"demo log: {log_path}", flush=True)
+    from ..sim import demo_surfaces
+
     res = run_log(log_path, Path(args.out), cfg, extractor=extractor, progress=not args.no_progress,
                   input_paths=config_inputs(args),
-                  command_line=getattr(args, "command_line", None), overrides=list(args.overrides))
+                  command_line=getattr(args, "command_line", None), overrides=list(args.overrides),
+                  surfaces=demo_surfaces(args.seed))
     print("slam-lcd demo summary")
     print(f"  features: {cfg.features.kind}" + (f" ({notice})" if notice else ""))
     for line in res.summary_lines():

@@ -33,6 +33,7 @@ COMMAND_MODULES = [
     "demo",
     "ate",
     "export",
+    "export_map",
     "weights",
 ]
 

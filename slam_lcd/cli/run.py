@@ -115,6 +115,9 @@ def register(sub) -> None:
     p.add_argument("--copy-images", action="store_true",
                    help="copy the log's image topics into corrected.mcap too (large; default: every topic but "
                         "images, run.copy_images)")
+    p.add_argument("--truth-world", type=int, default=None, metavar="SEED",
+                   help="the log was rendered from the demo world of this seed (make-demo-log --seed / --world-seed):"
+                        " map.ply's points are measured against its true surfaces too (default: none)")
     add_config_args(p)
     p.set_defaults(func=run)
 
@@ -169,7 +172,16 @@ def _run_one(args, cfg, log_path: Path, out: Path, m, extractor=None):
                    progress=not args.no_progress, write_mcap=not args.no_mcap, input_paths=inputs,
                    command_line=getattr(args, "command_line", None), overrides=list(args.overrides),
                    calib=args.calib, right_topic=args.right_topic, map=m, extractor=extractor,
-                   session_name=args.session_name)
+                   session_name=args.session_name, surfaces=_truth(args))
+
+
+def _truth(args):
+    """The true surfaces of ``--truth-world`` (the demo world of that seed), or None."""
+    if args.truth_world is None:
+        return None
+    from ..sim import demo_surfaces
+
+    return demo_surfaces(args.truth_world)
 
 
 def _print_result(res) -> int:

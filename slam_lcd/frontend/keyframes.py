@@ -31,6 +31,7 @@ class _Pending:
     depth: np.ndarray | None
     right_image: np.ndarray | None
     is_keyframe: bool
+    colour: np.ndarray | None = None
 
 
 def motion_model_covariance(T_rel: np.ndarray, conf: FrontendConfig) -> np.ndarray:
@@ -118,7 +119,8 @@ class KeyframeSelector:
     def _make_keyframe(self, p: _Pending, cov_since: np.ndarray | None, reason: str) -> Keyframe:
         kf = Keyframe(id=len(self.keyframes), stamp=int(p.stamp), T_world_body=p.T.copy(), image=p.image,
                       camera=self.camera, T_body_camera=self.T_body_camera.copy(), depth=p.depth,
-                      right_image=p.right_image, covariance_since_last=cov_since, features=p.features)
+                      right_image=p.right_image, covariance_since_last=cov_since, features=p.features,
+                      colour=p.colour)
         if self.keep_images:
             self.keyframes.append(kf)
         else:  # only the newest keyframe is compared with: older ones need no features
@@ -134,13 +136,15 @@ class KeyframeSelector:
     def push(self, stamp_ns: int, T_world_body: np.ndarray, cov: np.ndarray | None = None,
              image: np.ndarray | None = None, features: Features | None = None, *,
              depth: np.ndarray | None = None, right_image: np.ndarray | None = None,
-             segment_start: bool = False, segment_cov: np.ndarray | None = None) -> list[Keyframe]:
+             segment_start: bool = False, segment_cov: np.ndarray | None = None,
+             colour: np.ndarray | None = None) -> list[Keyframe]:
         """Offer one frame; the keyframes it made (empty when it made none).
 
         ``segment_start=True`` marks a break in the odometry (visual tracking lost): the
         previous frame is promoted to a keyframe if it was not one, and this frame becomes a
         keyframe whose ``covariance_since_last`` is ``segment_cov`` (a large-noise link)
-        instead of the accumulated odometry covariance.
+        instead of the accumulated odometry covariance. ``colour``: the frame's colour image,
+        carried to the keyframe for the map cloud only.
         """
         conf = self.conf
         stamp_ns = int(stamp_ns)
@@ -152,7 +156,7 @@ class KeyframeSelector:
 
         prev = self._last
         if prev is None:
-            p = _Pending(stamp_ns, T, np.zeros((6, 6)), image, features, depth, right_image, False)
+            p = _Pending(stamp_ns, T, np.zeros((6, 6)), image, features, depth, right_image, False, colour)
             self._last = p
             self._kf_abs_cov = given if conf.odom_covariance == "absolute" else None
             made = [self._make_keyframe(p, None, "first")]
@@ -175,7 +179,7 @@ class KeyframeSelector:
         else:
             cov_since = self._model_since_kf + np.diag(floor)
 
-        cur = _Pending(stamp_ns, T, cov_since, image, features, depth, right_image, False)
+        cur = _Pending(stamp_ns, T, cov_since, image, features, depth, right_image, False, colour)
 
         if segment_start:
             made = [self._make_keyframe(prev, prev.cov_since_kf, "before-break")] if not prev.is_keyframe else []

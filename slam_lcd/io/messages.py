@@ -267,3 +267,18 @@ def line_marker(segments, stamp_ns: int, frame_id: str, ns: str, marker_id: int,
 
 def marker_array(markers):
     return _T["visualization_msgs/msg/MarkerArray"](markers=list(markers))
+
+
+def point_cloud2_msg(points: np.ndarray, colours: np.ndarray, stamp_ns: int, frame_id: str):
+    """sensor_msgs/PointCloud2 of x y z (float32) and rgb (float32 holding 0x00RRGGBB, as PCL and RViz pack it)."""
+    PointCloud2, PointField = _T["sensor_msgs/msg/PointCloud2"], _T["sensor_msgs/msg/PointField"]
+    pts = np.asarray(points, np.float32).reshape(-1, 3)
+    c = np.asarray(colours, np.uint32).reshape(-1, 3)
+    rec = np.empty(len(pts), [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("rgb", "<u4")])
+    rec["x"], rec["y"], rec["z"] = pts[:, 0], pts[:, 1], pts[:, 2]
+    rec["rgb"] = (c[:, 0] << 16) | (c[:, 1] << 8) | c[:, 2]
+    fields = [PointField(name=n, offset=4 * i, datatype=PointField.FLOAT32, count=1) for i, n in enumerate("xyz")]
+    fields.append(PointField(name="rgb", offset=12, datatype=PointField.FLOAT32, count=1))
+    return PointCloud2(header=header(stamp_ns, frame_id), height=1, width=len(pts), fields=fields,
+                       is_bigendian=False, point_step=16, row_step=16 * len(pts),
+                       data=np.frombuffer(rec.tobytes(), np.uint8), is_dense=True)

@@ -21,7 +21,10 @@ of the log (fixed frame = the odometry's ``frame_id``, body = its ``child_frame_
   (nav_msgs/Path of the corrected keyframes, growing: once per keyframe, at most
   :data:`MAX_PATH_MESSAGES` messages so a long log does not grow quadratically) and
   ``/slam_lcd/loops`` (visualization_msgs/MarkerArray, one LINE_LIST marker per accepted
-  loop, at the loop's query stamp, between the corrected keyframe positions).
+  loop, at the loop's query stamp, between the corrected keyframe positions);
+- the map's point cloud (``map.ply``: :mod:`slam_lcd.cloud`) as one ``sensor_msgs/PointCloud2`` on
+  ``map_cloud.mcap_topic`` (``/slam_lcd/map_cloud``) in the corrected trajectory's frame, at the
+  first corrected stamp, so a viewer shows the whole map under the trajectory from the start.
 
 Poses are the final estimate (the whole log's optimum), shown as time goes on.
 
@@ -59,6 +62,7 @@ PATH_TOPIC = "/slam_lcd/corrected/path"
 LOOPS_TOPIC = "/slam_lcd/loops"
 GT_TOPIC = "/slam_lcd/ground_truth"  # ground truth given as a file (--gt), in frame GT_FILE_FRAME
 GT_FILE_FRAME = "ground_truth"
+CLOUD_TOPIC = "/slam_lcd/map_cloud"
 MAP_TOPIC_PREFIX = "/slam_lcd/map"
 SESSION_FRAME_PREFIX = "session_"
 
@@ -96,7 +100,7 @@ class TfPlan:
 
 def copied_topics(copy_topics) -> list[str]:
     """The input topics copied as they are (the file's own topics are written anew)."""
-    return [t for t in copy_topics if t not in (POSE_TOPIC, PATH_TOPIC, LOOPS_TOPIC, GT_TOPIC)
+    return [t for t in copy_topics if t not in (POSE_TOPIC, PATH_TOPIC, LOOPS_TOPIC, GT_TOPIC, CLOUD_TOPIC)
             and not t.startswith(MAP_TOPIC_PREFIX + "/")]
 
 
@@ -197,14 +201,17 @@ def _add_sessions(add, layer: SessionLayer, plan: TfPlan, s0: int) -> None:
 def write_corrected_log(path: Path, *, odom: Trajectory, corrected: Trajectory, kf_ids: list[int],
                         kf_corrected: Trajectory, loops: list[tuple[int, int, int]], log_frames: dict, run_conf,
                         copy_from: Path, copy_topics: list[str], gt_alignment=None, gt_poses: Trajectory | None = None,
-                        io_conf=None, spooled=None, sessions: SessionLayer | None = None) -> TfPlan:
+                        io_conf=None, spooled=None, sessions: SessionLayer | None = None, cloud=None,
+                        cloud_topic: str = CLOUD_TOPIC) -> TfPlan:
     """Write ``path`` (see the module docstring). ``loops``: ``(query_id, match_id, stamp_ns)`` of accepted loops.
 
     ``gt_poses``: a ground truth read from a file (it is not in the log), written on
     :data:`GT_TOPIC` in frame ``log_frames['gt']`` and tied to the tree like a log's.
     ``spooled``: a complete :class:`~slam_lcd.io.raw_spool.RawSpool` of the copied topics (the run's
     pass kept them): read instead of decompressing the log again. ``sessions``: a map's sessions
-    (``corrected`` and ``kf_corrected`` are then in the map frame, ``gt_alignment`` the map's)."""
+    (``corrected`` and ``kf_corrected`` are then in the map frame, ``gt_alignment`` the map's).
+    ``cloud``: the map's :class:`~slam_lcd.cloud.Cloud` in the corrected trajectory's frame,
+    written on ``cloud_topic``."""
     from ..io import messages as M
     from ..io.reader import open_log
     from ..io.writers import open_writer
@@ -260,6 +267,8 @@ def write_corrected_log(path: Path, *, odom: Trajectory, corrected: Trajectory, 
             if q in pos and mt in pos:
                 add(s, LOOPS_TOPIC, M.marker_array([M.line_marker([(pos[mt], pos[q])], s, plan.corrected_frame,
                                                                   "loops", n)]))
+        if cloud is not None and len(cloud) and cloud_topic:
+            add(s0, cloud_topic, M.point_cloud2_msg(cloud.points, cloud.colours, s0, plan.corrected_frame))
         own.sort(key=lambda x: (x[0], x[1]))
 
         with open_writer(path, "mcap", conf=io_conf, inputs=(copy_from,)) as w:

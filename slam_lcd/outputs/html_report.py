@@ -174,6 +174,7 @@ def write_html_report(out_dir: Path, facts: dict, summary_lines: list[str], rows
                 + ". Click a header to sort; a thumbnail opens its picture in <code>loops/</code>.</p>")
     body += _loop_table(rows, out_dir, set(pictures), thumbs)
     body += _map_section(facts.get("map"), facts.get("localization"))
+    body += _cloud_section(facts.get("map_cloud"), out_dir)
     body.append("<h2>Time per stage</h2><table id='stages'><tr><th class=t>stage</th><th>seconds</th><th>calls</th></tr>")
     body += [f"<tr><td class=t>{_e(k)}</td><td>{v['seconds']:.2f}</td><td>{v['calls']}</td></tr>"
              for k, v in facts["stages"].items()]
@@ -186,6 +187,26 @@ def write_html_report(out_dir: Path, facts: dict, summary_lines: list[str], rows
             f"<title>slam-lcd report: {_e(Path(inp['log']).name)}</title><style>{_CSS}</style>"
             f"<script>{_JS}</script></head><body>" + "\n".join(body) + "</body></html>\n")
     write_text(out_dir / "report.html", page)
+
+
+def _cloud_section(cloud: dict | None, out_dir: Path) -> list[str]:
+    """The map seen from above with the odometry poses and with the corrected ones (same scale), and its figures."""
+    from .map_cloud import TOP_FILE, TOP_ODOMETRY_FILE, cloud_lines
+
+    if not cloud:
+        return []
+    if not cloud.get("built"):
+        return [f"<h2>Map cloud</h2><p id='map-cloud'>{_e(cloud_lines(cloud)[0])}</p>"]
+    out = ["<h2>Map cloud</h2><p>The keyframes' depth / stereo points merged in "
+           f"{cloud['voxel_m']:g} m voxels, seen from above at the same scale: left with the odometry poses "
+           "(<code>map_odometry.ply</code>), right with the corrected poses (<code>map.ply</code>). A wall seen twice "
+           "is two lines before a good correction and one after.</p><div id='map-cloud'>"]
+    for name, key in ((TOP_ODOMETRY_FILE, "odometry"), (TOP_FILE, "corrected")):
+        uri = data_uri(out_dir / name)
+        if uri:
+            out.append(f"<img class=fig id='map-top-{key}' src='{uri}' alt='{_e(name)}'>")
+    out.append("</div><ul>" + "".join(f"<li>{_e(line)}</li>" for line in cloud_lines(cloud)) + "</ul>")
+    return out
 
 
 def _map_section(summary: dict | None, localization: dict | None) -> list[str]:

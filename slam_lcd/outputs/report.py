@@ -84,6 +84,8 @@ def report_facts(result: RunResult, cfg, rows: list[dict], ate_before, ate_after
         # localize: share of keyframes localised, reasons, errors against ground truth
         "localization": ({k: v for k, v in result.localization.items() if not k.startswith("_")}
                          if result.localization is not None else None),
+        # the map as a point cloud: sharpness before/after, distance to true surfaces (docs/map_cloud.md)
+        "map_cloud": result.map_cloud,
     }
 
 
@@ -128,10 +130,41 @@ def write_report(out_dir: Path, facts: dict, summary_lines: list[str]) -> None:
             gd = f"{lp['gt_distance_m']:.2f}" if lp["gt_distance_m"] is not None else ""
             md.append(f"| {lp['query_id']} | {lp['match_id']} | {lp['pose_inliers'] or ''} | {gd} | {err} |")
     md += _map_section(facts.get("map"), facts.get("localization"))
+    md += _cloud_section(facts.get("map_cloud"))
     md += ["", "## Time per stage", "", "| stage | seconds | calls |", "|---|---|---|"]
     md += [f"| {k} | {v['seconds']:.2f} | {v['calls']} |" for k, v in facts["stages"].items()]
     md += ["", "## Outputs", ""] + [f"- `{o}`" for o in facts["outputs"]]
     write_text(out_dir / "report.md", "\n".join(md) + "\n")
+
+
+def _cloud_section(cloud: dict | None) -> list[str]:
+    """report.md's table of the map cloud's figures, odometry poses against corrected poses."""
+    from .map_cloud import cloud_lines
+
+    if not cloud:
+        return []
+    if not cloud.get("built"):
+        return ["", "## Map cloud", "", f"- {cloud_lines(cloud)[0]}"]
+    s, t = cloud["sharpness"], cloud.get("truth")
+
+    def cell(x, f):
+        return "" if x is None else format(x, f)
+
+    md = ["", "## Map cloud (map.ply, map_odometry.ply)", "", f"- {cloud_lines(cloud)[0]}",
+          f"- neighbourhoods of {s['corrected']['radius_m']:g} m at {s['corrected']['evaluated']} points; lower is "
+          "sharper", "", "| figure | odometry poses | corrected poses |", "|---|---|---|",
+          f"| points | {cloud['points']['odometry']} | {cloud['points']['corrected']} |",
+          f"| mean map entropy | {cell(s['odometry']['mme'], '.3f')} | {cell(s['corrected']['mme'], '.3f')} |",
+          f"| mean plane variance (mm²) | {cell(_mm2(s['odometry']['plane_variance_m2']), '.2f')} | "
+          f"{cell(_mm2(s['corrected']['plane_variance_m2']), '.2f')} |"]
+    if t:
+        md.append(f"| mean distance to the true surfaces (m) | {cell(t['odometry']['mean_m'], '.4f')} | "
+                  f"{cell(t['corrected']['mean_m'], '.4f')} |")
+    return md
+
+
+def _mm2(x):
+    return None if x is None else 1e6 * x
 
 
 def _map_section(summary: dict | None, localization: dict | None) -> list[str]:

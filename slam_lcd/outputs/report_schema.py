@@ -38,6 +38,24 @@ _LOOP = {
         "gt_distance_m": _NUM_OR_NULL, "err_trans_m": _NUM_OR_NULL, "err_rot_deg": _NUM_OR_NULL,
     },
 }
+_SHARP = {"type": "object", "required": ["mme", "plane_variance_m2", "plane_std_mm", "points", "evaluated", "radius_m"],
+          "properties": {"mme": _NUM_OR_NULL, "plane_variance_m2": _NUM_OR_NULL, "plane_std_mm": _NUM_OR_NULL,
+                         "points": {"type": "integer", "minimum": 0}, "evaluated": {"type": "integer", "minimum": 0},
+                         "radius_m": _NUM}}
+_TRUTH = {"type": "object", "required": ["mean_m", "median_m", "p90_m", "evaluated"],
+          "properties": {"mean_m": _NUM_OR_NULL, "median_m": _NUM_OR_NULL, "p90_m": _NUM_OR_NULL}}
+_MAP_CLOUD = {  # the map as a point cloud (slam_lcd.outputs.map_cloud); absent/null when not asked for
+    "type": ["object", "null"], "required": ["built", "reason"],
+    "properties": {
+        "built": {"type": "boolean"}, "reason": {"type": ["string", "null"]},
+        "points": {"type": "object", "required": ["odometry", "corrected"],
+                   "properties": {"odometry": {"type": "integer"}, "corrected": {"type": "integer"}}},
+        "sharpness": {"type": "object", "required": ["odometry", "corrected"],
+                      "properties": {"odometry": _SHARP, "corrected": _SHARP}},
+        "truth": {"type": ["object", "null"], "required": ["odometry", "corrected", "ratio_after_before"],
+                  "properties": {"odometry": _TRUTH, "corrected": _TRUTH, "ratio_after_before": _NUM_OR_NULL}},
+    },
+}
 REPORT_SCHEMA: dict[str, Any] = {
     "$schema": "https://json-schema.org/draft/2020-12/schema",
     "title": "slam-lcd run report",
@@ -79,6 +97,7 @@ REPORT_SCHEMA: dict[str, Any] = {
         "stages": {"type": "object"},
         "outputs": {"type": "array", "items": {"type": "string"}},
         "config": {"type": "object"},
+        "map_cloud": _MAP_CLOUD,
     },
 }
 

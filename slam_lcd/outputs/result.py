@@ -51,6 +51,10 @@ class RunResult:
     map: dict | None = None
     # localize: slam_lcd.map.summary.localisation_report (with the Localisation under "_loc"), else None
     localization: dict | None = None
+    # the map as a point cloud (slam_lcd.outputs.map_cloud): its figures, or why it was not built; None: not asked
+    map_cloud: dict | None = None
+    # the sensor the cloud was built from (kind, topics, camera, mounting, rectification): export-map rebuilds it
+    map_cloud_sensor: dict | None = field(default=None, repr=False)
 
     @property
     def gt_position_only(self) -> bool:
@@ -73,6 +77,10 @@ class RunResult:
             lines.append(f"ATE ({self.alignment}): {self.ate_before:.3f} m -> {self.ate_after:.3f} m"
                          + (f" ({100 * ratio:.1f}% of odometry)" if ratio is not None else
                             " (odometry error ~0: no ratio)"))
+        if self.map_cloud is not None:
+            from .map_cloud import summary_line
+
+            lines.append(summary_line(self.map_cloud))
         lines.append(f"time: {self.wall_s:.1f} s wall for {self.log_duration_s:.1f} s of log"
                      + (" (interrupted: partial result)" if self.interrupted else ""))
         return lines

@@ -2,7 +2,8 @@
 
 :data:`RUN_OUTPUTS`: config.yaml, odometry.tum, corrected.tum, keyframes_corrected.tum,
 loops.csv, graph.g2o, corrected.mcap, report.json, report.md, report.html, trajectory.png,
-ate_over_time.png, loops/ (pictures); ``PARTIAL.txt`` when the run was interrupted.
+ate_over_time.png, loops/ (pictures), map.ply, map_odometry.ply and their top views (docs/map_cloud.md);
+``PARTIAL.txt`` when the run was interrupted.
 """
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ from ..errors import InputError, SlamLcdError
 from ..interrupts import defer_sigint
 from ..types import Trajectory
 from .loop_pictures import LOOPS_DIR
+from .map_cloud import MAP_CLOUD_FILES
 from .map_outputs import LOCALIZATION_FILES, MAP_DIR
 from .loops import VERIFIED, add_map_verdicts, count_false_accepted, loop_rows, write_loops_csv
 from .output_set import PARTIAL_MARKER, OutputSet
@@ -29,7 +31,7 @@ log = logging.getLogger(__name__)
 # every name `run` may write into --out (the set is published as a whole: slam_lcd.outputs.output_set)
 RUN_OUTPUTS = ("config.yaml", "odometry.tum", "corrected.tum", "keyframes_corrected.tum", "graph.g2o", "loops.csv",
                "corrected.mcap", "trajectory.png", "ate_over_time.png", "report.json", "report.md", "report.html", LOOPS_DIR,
-               MAP_DIR, *LOCALIZATION_FILES)
+               MAP_DIR, *LOCALIZATION_FILES, *MAP_CLOUD_FILES)
 
 
 def partial_text(result: RunResult, notes=(), *, read_to_end: bool, while_writing: bool = False) -> str:
@@ -50,10 +52,12 @@ def partial_text(result: RunResult, notes=(), *, read_to_end: bool, while_writin
 
 
 def write_set(outputs: OutputSet, pipe, result: RunResult, gt, mcap_source, copy_topics, notes=None,
-              read_to_end: bool = True, album=None, spool=None) -> None:
+              read_to_end: bool = True, album=None, spool=None, surfaces=None) -> None:
     """Write every output into the staging folder, then publish the set (partial when interrupted).
 
-    ``spool``: the run's :class:`~slam_lcd.io.raw_spool.RawSpool` of the copied topics (removed here)."""
+    ``spool``: the run's :class:`~slam_lcd.io.raw_spool.RawSpool` of the copied topics (removed here).
+    ``surfaces``: ``(name, {frame: Rectangles})``, the true surfaces of a simulated world in the frames its
+    ground truth may be given in (the map cloud's check)."""
     notes = list(notes or [])
     partial = result.interrupted
     try:
@@ -61,7 +65,7 @@ def write_set(outputs: OutputSet, pipe, result: RunResult, gt, mcap_source, copy
             outputs.mark_partial(partial_text(result, notes, read_to_end=read_to_end))
         try:
             write_outputs(pipe, outputs.staging, result, gt, mcap_source, copy_topics,
-                          skipped=notes if partial else None, album=album, spool=spool)
+                          skipped=notes if partial else None, album=album, spool=spool, surfaces=surfaces)
         finally:
             if spool is not None:  # a working file inside the staging folder: never published
                 spool.discard()
@@ -102,7 +106,7 @@ def _write_error(e: OSError, outputs: OutputSet) -> InputError:
 
 def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
                   mcap_source: Path | None, copy_topics: list[str] | None = None,
-                  skipped: list[str] | None = None, album=None, spool=None) -> None:
+                  skipped: list[str] | None = None, album=None, spool=None, surfaces=None) -> None:
     """Write every output of a run into ``out_dir`` (normally an :class:`OutputSet` staging folder).
 
     ``album``: the run's :class:`~.loop_pictures.KeyframeAlbum` (loop pictures), removed here.
@@ -167,6 +171,26 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
         result.alignment = result.alignment or cfg.eval.align  # the runner may add a note (position-only ground truth)
         result.false_loops_accepted = count_false_accepted(rows, cfg.run.loop_true_max_distance)
 
+    # ---- the map as a point cloud, before and after the correction (corrected.mcap carries it)
+    cloud = None
+    if getattr(pipe, "map_cloud", None) is not None:
+        from .map_cloud import write_map_clouds
+
+        name, by_frame = surfaces if surfaces is not None else ("", {})
+        rects = by_frame.get(result.frames.get("gt") or "world")  # the surfaces in the ground truth's frame
+        try:
+            result.map_cloud, cloud = write_map_clouds(out_dir, pipe, cfg.map_cloud, ate_before, ate_after, rects,
+                                                       name, result.map_cloud_sensor)
+        except OSError:
+            raise
+        except Exception as e:  # the map must never cost the user the trajectory
+            from .map_cloud import not_built
+
+            log.warning("map cloud not written: %s", e)
+            result.map_cloud = not_built(f"failed: {e}")
+        if result.map_cloud.get("built"):
+            outputs += list(MAP_CLOUD_FILES)
+
     # ---- loop pictures (need the verdicts and the ground-truth errors of the rows): drawn in a
     # thread while the corrected MCAP and the plots are written (their image coding, drawing and
     # file reads run outside the GIL; at this point no stage of the run holds a core)
@@ -174,7 +198,7 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
     pictures = _PictureThread(out_dir, album, rows, cfg) if album is not None else None
     try:
         _write_mcap_and_plots(pipe, out_dir, result, gt, mcap_source, copy_topics, skipped, outputs, odom, corrected,
-                              kf_corr, ate_before, ate_after, spool)
+                              kf_corr, ate_before, ate_after, spool, cloud)
     except BaseException:  # an error or Ctrl-C: the pictures stop between two, nothing is written after we leave
         if pictures is not None:
             pictures.join(stop=True)
@@ -200,7 +224,7 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
         from .html_report import write_html_report
 
         write_html_report(out_dir, facts, result.summary_lines(), rows,
-                          [f for f in outputs if f.endswith(".png")], result.loop_pictures,
+                          [f for f in outputs if f.endswith(".png") and f not in MAP_CLOUD_FILES], result.loop_pictures,
                           (out_dir / "config.yaml").read_text(encoding="utf-8"),
                           pictures.thumbs if pictures is not None else None)
     except OSError:
@@ -255,7 +279,7 @@ def _appended_to_map(pipe, result) -> bool:
 
 
 def _write_mcap_and_plots(pipe, out_dir, result, gt, mcap_source, copy_topics, skipped, outputs, odom, corrected,
-                          kf_corr, ate_before, ate_after, spool=None) -> None:
+                          kf_corr, ate_before, ate_after, spool=None, cloud=None) -> None:
     cfg = pipe.config
     # ---- corrected MCAP (input topics + corrected trajectory)
     if mcap_source is not None and len(corrected) == 0 and skipped is not None:
@@ -277,11 +301,15 @@ def _write_mcap_and_plots(pipe, out_dir, result, gt, mcap_source, copy_topics, s
             current = result.map["current_session"]
             shown, kf_shown = current_in_map_frame(pipe, pipe.map, current)
             layer, alignment = session_layer(pipe.map, current, result.map["inter_session_loops"])
+            if cloud is not None:  # built with the session's own corrected poses, not the map frame's
+                log.info("corrected.mcap: the point cloud of a run with a map is in map.ply only "
+                         "(it is in the session's own frame, the file shows the map frame)")
         write_corrected_log(out_dir / "corrected.mcap", odom=odom, corrected=shown,
                             kf_ids=[k.id for k in pipe.keyframes], kf_corrected=kf_shown, loops=accepted,
                             log_frames=frames, run_conf=cfg.run, copy_from=mcap_source,
                             copy_topics=copy_topics or [], io_conf=cfg.io, gt_poses=gt_file,
-                            gt_alignment=alignment, spooled=spool, sessions=layer)
+                            gt_alignment=alignment, spooled=spool, sessions=layer,
+                            cloud=cloud if layer is None else None, cloud_topic=cfg.map_cloud.mcap_topic)
         outputs.append("corrected.mcap")
 
     # ---- plots

@@ -12,7 +12,8 @@ written as real log files. Public API:
 - :func:`gt_loop_pairs`, :func:`write_loop_pairs`: ground-truth loop pairs;
   :func:`gt_cross_pairs`, :func:`shared_place_fraction`: the same between two recordings;
 - :data:`SESSIONS` / :func:`session_preset`: the world recorded as several sessions;
-- :func:`make_demo_log`: everything written as MCAP / rosbag2 / ROS1 bag / folder.
+- :func:`make_demo_log`: everything written as MCAP / rosbag2 / ROS1 bag / folder;
+- :func:`world_surfaces` / :func:`demo_surfaces`: the world's planes as rectangles (the map cloud's truth).
 """
 from .demo_log import DemoLogInfo, loops_path_for, make_demo_log
 from .loops import (gt_cross_pairs, gt_loop_pairs, keyframe_indices, read_loop_pairs, shared_place_fraction,
@@ -20,12 +21,13 @@ from .loops import (gt_cross_pairs, gt_loop_pairs, keyframe_indices, read_loop_p
 from .odometry import OdometryNoise, end_drift, simulate_odometry
 from .render import render
 from .rig import T_body_camera, T_left_right, demo_camera
+from .surfaces import demo_surfaces, world_surfaces
 from .sessions import SESSIONS, SessionPreset, session_preset, session_start_ns, world_frame
 from .trajectory import DemoPath, make_path, make_trajectory
 from .world import DemoWorld, Plane, build_world
 
 __all__ = [
-    "DemoLogInfo", "DemoPath", "DemoWorld", "OdometryNoise", "Plane", "SESSIONS", "SessionPreset", "T_body_camera",
+    "DemoLogInfo", "DemoPath", "DemoWorld", "OdometryNoise", "Plane", "SESSIONS", "SessionPreset", "T_body_camera", "demo_surfaces", "world_surfaces",
     "T_left_right", "build_world", "demo_camera", "end_drift", "gt_cross_pairs", "gt_loop_pairs", "keyframe_indices",
     "loops_path_for", "make_demo_log", "make_path", "make_trajectory", "read_loop_pairs", "render",
     "session_preset", "session_start_ns", "shared_place_fraction", "simulate_odometry", "world_frame",

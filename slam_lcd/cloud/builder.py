@@ -1,0 +1,125 @@
+"""The map's cloud from keyframes: sensor points per keyframe as they come, merged with any poses at the end.
+
+:class:`MapCloudBuilder` takes each keyframe while it still has its depth or stereo images
+(the pipeline hands it over before they are dropped), keeps its points (merged per voxel in the
+body frame) in a :class:`~.store.KeyframeCloudStore`, and :meth:`MapCloudBuilder.cloud` merges
+them into a :class:`~.voxel_grid.VoxelGrid` with the poses given (odometry or corrected).
+``export-map`` goes the same way, so that it gives the run's ``map.ply`` point for point when its
+settings are the run's.
+
+Keyframes it cannot use are skipped and counted by reason; each reason is said once (a log
+warning naming the source), never an error: the map is a view of the run, not part of it.
+"""
+from __future__ import annotations
+
+import logging
+import time
+import numpy as np
+
+from ..errors import InputError
+from ..types import Keyframe
+from .config import MapCloudConfig
+from .sensor_points import SensorPoints, depth_points, stereo_points
+from .store import KeyframeCloudStore
+from .voxel_grid import Cloud, VoxelGrid
+
+log = logging.getLogger(__name__)
+
+
+def keyframe_points(kf: Keyframe, conf: MapCloudConfig) -> SensorPoints | None:
+    """The keyframe's camera-frame points (depth first, else a rectified stereo pair); None without either."""
+    cam = kf.camera
+    if cam is None:
+        return None
+    colour = getattr(kf, "colour", None)
+    kw = dict(step=conf.pixel_step, min_depth=conf.min_depth_m, max_depth=conf.max_depth_m)
+    if kf.depth is not None:
+        return depth_points(cam, kf.depth, colour if colour is not None else kf.image, **kw)
+    if kf.right_image is not None and kf.image is not None and cam.baseline:
+        return stereo_points(cam, kf.image, kf.right_image, colour, **kw)
+    return None
+
+
+def _to_body(sp: SensorPoints, T_body_camera: np.ndarray, voxel: float) -> tuple[np.ndarray, np.ndarray]:
+    """Points in the body frame, merged per voxel (a keyframe's many pixels per voxel become one point)."""
+    T = np.asarray(T_body_camera, np.float64)
+    pts = sp.points.astype(np.float64) @ T[:3, :3].T + T[:3, 3]
+    grid = VoxelGrid(voxel)
+    grid.add(pts, sp.colours)
+    c = grid.cloud()
+    return c.points.astype(np.float64), c.colours
+
+
+class Skips:
+    """Keyframes left out, counted by reason; the first of each reason is said (naming ``source``)."""
+
+    def __init__(self, source: str = ""):
+        self.source = source
+        self.counts: dict[str, int] = {}
+
+    def add(self, reason: str) -> None:
+        if reason not in self.counts:
+            log.warning("%smap cloud: %s; such keyframes are left out of the map", f"{self.source}: " if self.source
+                        else "", reason)
+        self.counts[reason] = self.counts.get(reason, 0) + 1
+
+    def points_of(self, kf: Keyframe, conf: MapCloudConfig) -> SensorPoints | None:
+        """:func:`keyframe_points`, or None (counted) when the keyframe gives none."""
+        try:
+            sp = keyframe_points(kf, conf)
+        except InputError as e:
+            self.add(e.problem)
+            return None
+        if sp is None:
+            self.add("no depth image and no stereo pair")
+        elif len(sp) == 0:
+            self.add(f"no valid depth in range {conf.min_depth_m:g}-{conf.max_depth_m:g} m")
+            sp = None
+        return sp
+
+
+class MapCloudBuilder:
+    """See the module docstring. ``source``: the topic(s) named in warnings; ``folder``: where the store's file lives."""
+
+    def __init__(self, conf: MapCloudConfig | None = None, *, source: str = "", folder=None):
+        self.conf = conf or MapCloudConfig()
+        self.store = KeyframeCloudStore(self.conf.voxel_m, folder)
+        self.skips = Skips(source)
+        self.seconds = 0.0  # time spent taking keyframes in (the run's share of the cloud)
+        self.points_in = 0
+
+    @property
+    def skipped(self) -> dict[str, int]:
+        return self.skips.counts
+
+    def add_keyframe(self, kf: Keyframe) -> bool:
+        """Keep the keyframe's points; False (counted, said once) when it has none to give."""
+        t0 = time.perf_counter()
+        try:
+            sp = self.skips.points_of(kf, self.conf)
+            if sp is None:
+                return False
+            self.points_in += len(sp)
+            pts, col = _to_body(sp, kf.T_body_camera, self.conf.voxel_m)
+            self.store.add(kf.id, kf.stamp, pts, col)
+            return True
+        finally:
+            self.seconds += time.perf_counter() - t0
+
+    @property
+    def n_keyframes(self) -> int:
+        return len(self.store)
+
+    def cloud(self, poses: dict[int, np.ndarray], voxel: float | None = None) -> Cloud:
+        """The map with ``poses`` (keyframe id -> 4x4 ``T_world_body``); keyframes without a pose are left out."""
+        grid = VoxelGrid(voxel or self.conf.voxel_m)
+        for i, (kf_id, _, _, _) in enumerate(self.store.index):
+            T = poses.get(kf_id)
+            if T is None:
+                continue
+            pts, col = self.store.read(i)
+            grid.add(pts @ T[:3, :3].T + T[:3, 3], col)
+        return grid.cloud()
+
+    def close(self) -> None:
+        self.store.close()

@@ -1,0 +1,32 @@
+"""Section ``map_cloud`` of the configuration: how the map's point cloud is built and measured."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass
+class MapCloudConfig:
+    """Section `map_cloud`: the map as a point cloud (``map.ply``, ``map_odometry.ply``; docs/map_cloud.md)."""
+
+    # build the clouds, their sharpness figures and top views (needs depth or a stereo pair)
+    enabled: bool = True
+    # edge of the voxel that merges points (m): one point per occupied voxel (the centroid)
+    voxel_m: float = 0.05
+    # depth range used (m): nearer or farther sensor points are dropped (stereo and depth noise grow as z^2)
+    min_depth_m: float = 0.3
+    max_depth_m: float = 5.0
+    # every this-many-th pixel in both directions is back-projected (the voxel merges them anyway)
+    pixel_step: int = 2
+    # the sharpness figures: neighbours within this radius (m) of a point give its covariance
+    metric_radius_m: float = 0.3
+    # ... evaluated at this many points drawn evenly (seeded) from the cloud, all points as neighbours
+    metric_points: int = 20000
+    # a neighbourhood needs this many points for a covariance
+    metric_min_neighbours: int = 8
+    # the entropy's floor per direction, in voxels: thinner than this is below the map's resolution
+    # (docs/map_cloud.md: without it the figure rewards ghosting)
+    metric_min_std_voxels: float = 0.2
+    # write the cloud into corrected.mcap as sensor_msgs/PointCloud2 on this topic ("" = not written)
+    mcap_topic: str = "/slam_lcd/map_cloud"
+    # the top-view images: pixels of the longer side
+    top_view_px: int = 900
