@@ -128,6 +128,18 @@ class AteResult:
         }
 
 
+# an error below this (m) is numerical noise: a ratio against it would say nothing (a perfect
+# odometry would print "0.000 m -> 0.000 m (192.2% of odometry)")
+RATIO_FLOOR_M = 1e-3
+
+
+def ratio_or_none(after: float | None, before: float | None) -> float | None:
+    """``after / before``, or None when ``before`` is ~0 (below :data:`RATIO_FLOOR_M`) or missing."""
+    if after is None or before is None or before < RATIO_FLOOR_M:
+        return None
+    return after / before
+
+
 def ate(
     ref: Trajectory,
     est: Trajectory,

@@ -49,3 +49,12 @@ class FrontendConfig:
     tri_min_parallax_deg: float = 2.0  # triangulated points need at least this ray angle
     tri_max_reprojection_px: float = 2.0  # and reproject within this in every view used
     tri_max_neighbours: int = 2  # neighbour keyframes used per keyframe
+
+
+def default_extractor(conf: FrontendConfig):
+    """The tracking feature extractor named by ``conf.vo_features`` (slam_lcd.features)."""
+    from ..features import FeaturesConfig, load_extractor
+
+    if conf.vo_features == "orb":
+        return load_extractor(FeaturesConfig(kind="orb", orb_n_features=conf.vo_max_features))
+    return load_extractor(FeaturesConfig(kind="superpoint", max_keypoints=conf.vo_max_features))

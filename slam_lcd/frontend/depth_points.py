@@ -90,7 +90,7 @@ def landmarks_from_sensor(kf: Keyframe, conf: FrontendConfig | None = None, extr
         if not kf.camera.baseline:
             raise ValueError("stereo keyframe without a baseline in its camera model")
         if extractor is None:
-            from .vo import default_extractor
+            from .config import default_extractor
 
             extractor = default_extractor(conf or FrontendConfig())
         pts, _ = points_from_stereo(kf.camera, kf.camera.baseline, kf.features, to_gray_uint8(kf.image),

@@ -26,7 +26,7 @@ from ..types import CameraModel, Features, Trajectory
 from ..vision.camera import undistort_points
 from ..vision.gray import to_gray_uint8
 from ..vision.pnp import solve_pnp
-from .config import FrontendConfig
+from .config import FrontendConfig, default_extractor
 from .depth_points import points_from_depth, points_from_stereo
 from .matching import match_descriptors
 
@@ -90,15 +90,6 @@ class _TrackingKeyframe:
     T_world_cam: np.ndarray
     covariance: np.ndarray  # absolute, body frame
     stamp: int
-
-
-def default_extractor(conf: FrontendConfig):
-    """The tracking feature extractor named by ``conf.vo_features`` (slam_lcd.features)."""
-    from ..features import FeaturesConfig, load_extractor
-
-    if conf.vo_features == "orb":
-        return load_extractor(FeaturesConfig(kind="orb", orb_n_features=conf.vo_max_features))
-    return load_extractor(FeaturesConfig(kind="superpoint", max_keypoints=conf.vo_max_features))
 
 
 class _FrameToKeyframeOdometry:

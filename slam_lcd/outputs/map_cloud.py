@@ -22,7 +22,7 @@ from ..atomic import atomic_write
 from ..cloud import sharpness, write_cloud
 from ..cloud.topview import common_bounds, height_band, top_view_png
 from ..cloud.truth import aligned, truth_figures
-from .result import ratio_or_none
+from ..eval.metrics import ratio_or_none
 
 log = logging.getLogger(__name__)
 

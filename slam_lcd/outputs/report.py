@@ -16,7 +16,8 @@ from ..atomic import write_text
 from ..backend.pose_graph import ACCEPTED
 from ..sensors.ground_truth import POSITION_ONLY_REASON
 from .report_schema import REPORT_SCHEMA_VERSION
-from .result import RunResult, ratio_or_none
+from ..eval.metrics import ratio_or_none
+from .result import RunResult
 
 
 def _errors_dict(translation, rotation, n: int) -> dict:

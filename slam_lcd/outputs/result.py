@@ -4,16 +4,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-# an odometry error below this (m) is numerical noise: a ratio against it would say nothing
-# (a perfect odometry printed "0.000 m -> 0.000 m (192.2% of odometry)")
-RATIO_FLOOR_M = 1e-3
-
-
-def ratio_or_none(after: float | None, before: float | None) -> float | None:
-    """``after / before``, or None when ``before`` is ~0 (below :data:`RATIO_FLOOR_M`) or missing."""
-    if after is None or before is None or before < RATIO_FLOOR_M:
-        return None
-    return after / before
+from ..eval.metrics import ratio_or_none
 
 
 @dataclass

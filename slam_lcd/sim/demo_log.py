@@ -41,6 +41,7 @@ from ..atomic import atomic_path
 from ..errors import InputError
 from ..types import CameraModel, Trajectory
 from . import rig
+from .image_noise import NOISE_BANK, add_noise, noise_bank
 from .loops import gt_loop_pairs, write_loop_pairs
 from .odometry import end_drift, simulate_odometry
 from .render import render
@@ -51,8 +52,6 @@ log = logging.getLogger(__name__)
 
 FORMATS = ("mcap", "rosbag2", "rosbag1", "folder")
 DEPTH_STEP = 1.0 / 1024.0  # depth quantisation (m): like a sensor's millimetre steps, and compresses 40x
-NOISE_SIGMA = 1.5  # image noise (grey levels)
-NOISE_BANK = 16
 
 
 @dataclass
@@ -227,20 +226,11 @@ def make_path_start(kind: str, start_at: float | None) -> float:
     return START_AT["laps" if kind == "laps-wide" else kind] if start_at is None else float(start_at)
 
 
-def _noise_bank(seed: int, shape) -> np.ndarray:
-    rng = np.random.default_rng(np.random.SeedSequence([seed, 0x401CE]))
-    return np.round(rng.normal(0.0, NOISE_SIGMA, size=(NOISE_BANK, *shape))).astype(np.int16)
-
-
-def _add_noise(img: np.ndarray, noise: np.ndarray) -> np.ndarray:
-    return np.clip(img.astype(np.int16) + noise, 0, 255).astype(np.uint8)
-
-
 def _render_one(sc: _Scenario, i: int, bank: np.ndarray, *, color: bool, depth: bool, stereo: bool):
     T_wc = sc.gt_cam.poses[i] @ sc.T_bc
     img, dep = render(sc.world, sc.camera, T_wc, epoch=float(sc.laps[i]), color=color, with_depth=depth,
                       gain=sc.exposure)
-    img = _add_noise(img, bank[(7 * i) % NOISE_BANK])
+    img = add_noise(img, bank[(7 * i) % NOISE_BANK])
     if dep is not None:
         dep = (np.round(dep / DEPTH_STEP) * DEPTH_STEP).astype(np.float32)
     right = None
@@ -248,7 +238,7 @@ def _render_one(sc: _Scenario, i: int, bank: np.ndarray, *, color: bool, depth: 
         T_lr = rig.T_left_right(rig.STEREO_BASELINE)
         right, _ = render(sc.world, sc.camera, T_wc @ T_lr, epoch=float(sc.laps[i]), color=color, with_depth=False,
                           gain=sc.exposure)
-        right = _add_noise(right, bank[(7 * i + 3) % NOISE_BANK])
+        right = add_noise(right, bank[(7 * i + 3) % NOISE_BANK])
     return i, img, dep, right
 
 
@@ -263,7 +253,7 @@ def render_frames(sc: _Scenario, *, color: bool, depth: bool, stereo: bool, seed
     (:func:`slam_lcd.sim.layouts.frame_renderer`) instead of the demo log's.
     """
     shape = (sc.camera.height, sc.camera.width) + ((3,) if color else ())
-    bank = _noise_bank(seed, shape)
+    bank = noise_bank(seed, shape)
     flags = dict(color=color, depth=depth, stereo=stereo)
     if render_one is None:
         def render_one(i, bank):

@@ -159,7 +159,7 @@ def frame_renderer(layout: str, sc, bank, er: EurocRig | None, *, seed: int = 0,
     ``depth_noise``: the layout's depth sensor model (:data:`DEPTH_MODELS`), seeded per frame;
     False: the rendered depth, exact up to the encoding's millimetres.
     """
-    from .demo_log import NOISE_BANK, _add_noise
+    from .image_noise import NOISE_BANK, add_noise
     from .render import render
 
     sensor = depth_model(layout, depth_noise)
@@ -168,14 +168,14 @@ def frame_renderer(layout: str, sc, bank, er: EurocRig | None, *, seed: int = 0,
         T_wb, epoch = sc.gt_cam.poses[i], float(sc.laps[i])
         left = render_raw(sc.world, er.cam0, T_wb @ er.T_body_cam0, epoch, sc.exposure)
         right = render_raw(sc.world, er.cam1, T_wb @ er.T_body_cam1, epoch, sc.exposure)
-        return (i, _add_noise(left, bank[(7 * i) % NOISE_BANK]), None,
-                _add_noise(right, bank[(7 * i + 3) % NOISE_BANK]))
+        return (i, add_noise(left, bank[(7 * i) % NOISE_BANK]), None,
+                add_noise(right, bank[(7 * i + 3) % NOISE_BANK]))
 
     def tum(i):
         T_wc = sc.gt_cam.poses[i] @ sc.T_bc
         img, dep = render(sc.world, sc.camera, T_wc, epoch=float(sc.laps[i]), color=True, with_depth=True,
                           gain=sc.exposure)
-        img = _add_noise(img, bank[(7 * i) % NOISE_BANK])
+        img = add_noise(img, bank[(7 * i) % NOISE_BANK])
         if sensor is not None:
             dep = sensor.measure(dep, depth_rng(seed, i))
         return i, img, depth_mm(dep), None
@@ -185,8 +185,8 @@ def frame_renderer(layout: str, sc, bank, er: EurocRig | None, *, seed: int = 0,
         img, _ = render(sc.world, sc.camera, T_wc, epoch=float(sc.laps[i]), with_depth=False, gain=sc.exposure)
         right, _ = render(sc.world, sc.camera, T_wc @ rig.T_left_right(rig.STEREO_BASELINE),
                           epoch=float(sc.laps[i]), with_depth=False, gain=sc.exposure)
-        return (i, _add_noise(img, bank[(7 * i) % NOISE_BANK]), None,
-                _add_noise(right, bank[(7 * i + 3) % NOISE_BANK]))
+        return (i, add_noise(img, bank[(7 * i) % NOISE_BANK]), None,
+                add_noise(right, bank[(7 * i + 3) % NOISE_BANK]))
 
     return {"euroc": euroc, "tum": tum, "kitti": kitti}[layout]
 
