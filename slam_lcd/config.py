@@ -191,8 +191,9 @@ def _from_dict(cls, data: dict, where: str = ""):
         moved = [f"{where}.{u} moved to {MOVED_KEYS[f'{where}.{u}']}" for u in sorted(unknown) if f"{where}.{u}" in MOVED_KEYS]
         if moved:
             raise ConfigError(f"unknown key(s) {sorted(unknown)} in section {where}: {'; '.join(moved)}")
-        hints = [f"{u!r} -> {near[0]!r}" for u in sorted(unknown) if (near := difflib.get_close_matches(u, names, n=1))]
-        hint = f"; did you mean {', '.join(hints)}?" if hints else ""
+        guesses = [f"{u!r} -> {near[0]!r}" for u in sorted(unknown)
+                   if (near := difflib.get_close_matches(u, names, n=1))]
+        hint = f"; did you mean {', '.join(guesses)}?" if guesses else ""
         raise ConfigError(f"unknown key(s) {sorted(unknown)} in section {where or 'top'}{hint} (known: {sorted(names)})")
     kwargs = {k: _coerce(v, hints[k], f"{where}.{k}".lstrip(".")) for k, v in data.items()}
     return cls(**kwargs)

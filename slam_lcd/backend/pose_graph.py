@@ -148,7 +148,7 @@ class PoseGraph(GraphOutputs):
         with defer_sigint():  # iSAM2 and the lists change together
             self._isam.update(graph, values)
             self._base.push_back(graph)
-            if k:
+            if k and cov is not None:  # (every keyframe after the first has its odometry step)
                 self._base_edges.append(G2oEdge(k - 1, k, step, np.linalg.inv(cov)))
             self._register(kf_id, key, stamp_ns, T, prefix)
         self.update_times.append(time.perf_counter() - t0)

@@ -19,6 +19,7 @@ import logging
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 
@@ -114,7 +115,7 @@ class Map:
         self._generation_read = manifest.generation
         self.last_join: JointResult | None = None
         self._vocab: dict | None = None  # the vocabulary snapshot to save (add_session), None: none
-        self._vocab_fh = None  # a reader's snapshot file, opened with the manifest that names it
+        self._vocab_fh: BinaryIO | None = None  # a reader's snapshot file, opened with the manifest that names it
 
     # ------------------------------------------------------------------ open / close
     @classmethod
