@@ -12,9 +12,8 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import time
-from dataclasses import dataclass, field
-from typing import Any, Callable
+from functools import partial
+from typing import Callable
 
 import numpy as np
 
@@ -23,156 +22,18 @@ from ..features.matching import mutual_nn_match_symmetric
 from ..types import CameraModel, Features, Keyframe, LoopClosure
 from ..vision.camera import default_camera
 from .config import LcdConfig, stops_at_first_accepted
-from .geometry import EpipolarVerdict, PoseVerdict, estimate_loop_pose, keyframe_points3d
-from .graph import GraphVerdict
-from .islands import IslandMember, group_islands
+from .geometry import estimate_loop_pose, keyframe_points3d
+from .islands import IslandMember, verification_order
 from .odometry_check import odometry_drift_reason
 from .pair import check_pair
-from .store import DESCRIPTOR_DTYPES, DescriptorSource, DescriptorStore, compact_descriptors
+from .records import CandidateRecord, PartClock, StoredKeyframe, drop_arrays, failed_on_a_count, loop_closure
+from .store import DESCRIPTOR_DTYPES, DescriptorSource, DescriptorStore, compact_descriptors, compact_loaded
 from .temporal import TemporalConsistency
 from .user_keyframe import check_user_keyframe
 
 log = logging.getLogger(__name__)
 
 VERIFY_MODES = ("none", "ransac", "graph", "graph+ransac")
-
-
-class PartClock:
-    """Seconds per part of one ``LoopDetector.add`` (BoW, matching, graph, RANSAC, pose, ...)."""
-
-    def __init__(self):
-        self.seconds: dict[str, float] = {}
-        self._t = time.perf_counter()
-
-    def lap(self, part: str) -> None:
-        """Charge the time since the previous lap to ``part``."""
-        now = time.perf_counter()
-        self.seconds[part] = self.seconds.get(part, 0.0) + (now - self._t)
-        self._t = now
-
-
-def _drop_arrays(rec: "CandidateRecord") -> None:
-    """A record kept for the run's report needs its figures, not its per-match arrays."""
-    if rec.graph is not None:
-        rec.graph.kept = rec.graph.kept[:0]
-    rec.graph_matches = None
-    for v in (rec.ransac, rec.ransac_on_graph):
-        if v is not None:
-            v.mask = v.mask[:0]
-
-
-@dataclass
-class CandidateRecord:
-    """One BoW candidate of one query, with every check that ran on it."""
-
-    query_id: int
-    match_id: int
-    rank: int  # 0 = best BoW score
-    bow_score: float
-    n_matches: int = 0  # one-to-one matches found
-    n_verified: int = 0  # of those, handed to verification (at most ``lcd.verify_max_matches``)
-    graph: GraphVerdict | None = None
-    ransac: EpipolarVerdict | None = None  # on all mutual matches
-    ransac_on_graph: EpipolarVerdict | None = None  # on the graph's surviving nodes
-    pose: PoseVerdict | None = None
-    accepted: bool = False
-    reason: str = "not_checked"
-    query_stamp: int | None = None
-    match_stamp: int | None = None
-    relaxed: bool = False  # verified at lcd.consistent_min_matches (continues the previous keyframe's loop)
-    # the matches the graph verified, (query, match) rows (graph.kept indexes them); dropped like the masks
-    graph_matches: np.ndarray | None = None
-
-    def passes(self, mode: str) -> bool:
-        """Would this candidate pass verification ``mode`` (pose and temporal checks excluded)?"""
-        if mode == "none":
-            return True
-        if mode == "ransac":
-            return bool(self.ransac and self.ransac.accepted)
-        if mode == "graph":
-            return bool(self.graph and self.graph.accepted)
-        if mode == "graph+ransac":
-            return bool(self.graph and self.graph.accepted and self.ransac_on_graph and self.ransac_on_graph.accepted)
-        raise ValueError(f"unknown verification mode {mode!r}")
-
-    def support(self, mode: str) -> float:
-        """Verified correspondences under ``mode`` (BoW score for 'none'): picks the best of a query's passing candidates."""
-        if mode == "ransac" and self.ransac is not None:
-            return float(self.ransac.inliers)
-        if mode == "graph" and self.graph is not None:
-            return float(self.graph.n_nodes)
-        if mode == "graph+ransac" and self.ransac_on_graph is not None:
-            return float(self.ransac_on_graph.inliers)
-        return float(self.bow_score)
-
-    def row(self) -> dict[str, Any]:
-        """Flat dict for CSV/JSON output."""
-        out: dict[str, Any] = {
-            "query_id": self.query_id,
-            "match_id": self.match_id,
-            "rank": self.rank,
-            "bow_score": round(float(self.bow_score), 6),
-            "n_matches": self.n_matches,
-            "n_verified": self.n_verified,
-            "accepted": self.accepted,
-            "reason": self.reason,
-            "graph_nodes": self.graph.n_nodes if self.graph else "",
-            "graph_score": round(self.graph.score, 4) if self.graph else "",
-            "graph_reason": self.graph.reason if self.graph else "",
-            "ransac_inliers": self.ransac.inliers if self.ransac else "",
-            "ransac_reason": self.ransac.reason if self.ransac else "",
-            "graph_ransac_inliers": self.ransac_on_graph.inliers if self.ransac_on_graph else "",
-            "graph_ransac_reason": self.ransac_on_graph.reason if self.ransac_on_graph else "",
-            "pose_inliers": self.pose.inliers if self.pose else "",
-            "pose_rms_px": (round(self.pose.rms, 4) if self.pose and np.isfinite(self.pose.rms) else ""),
-            "pose_reason": self.pose.reason if self.pose else "",
-            "relaxed": self.relaxed,
-        }
-        return out
-
-
-@dataclass
-class _Entry:
-    """What the detector keeps of a past keyframe (no images; descriptors live in the store).
-
-    ``features`` holds the keypoints only (no scores, zero-length descriptors); 3-D points and
-    landmarks are float32 (what later verification needs, in the precision it needs).
-    """
-
-    id: int
-    stamp: int
-    position: int
-    features: Features
-    camera: CameraModel
-    T_body_camera: np.ndarray
-    points3d: np.ndarray | None
-    points_source: str
-    keyframe: Keyframe = field(repr=False, default=None)  # light copy without images
-    path_m: float = 0.0  # odometry distance travelled from the first keyframe to this one
-
-    def nbytes(self) -> int:
-        """Bytes of the arrays this entry holds (descriptors excluded: see the store)."""
-        arrays = [self.features.keypoints, self.points3d, self.keyframe.landmarks if self.keyframe else None]
-        seen, total = set(), 0
-        for a in arrays:
-            if a is not None and id(a) not in seen:
-                seen.add(id(a))
-                total += a.nbytes
-        return total
-
-
-_COUNT_REASONS = ("too_few_matches", "too_few_nodes", "too_few_inliers")
-
-
-def _failed_on_a_count(rec: "CandidateRecord") -> bool:
-    """Did a candidate fail only because some count was below its minimum (not a ratio or the score)?"""
-    if rec.reason == "low_bow_score" or rec.reason.startswith("pose:"):
-        return False
-    return any(rec.reason.endswith(":" + r) for r in _COUNT_REASONS)
-
-
-def _float32_or_none(a) -> np.ndarray | None:
-    return None if a is None else np.ascontiguousarray(a, dtype=np.float32)
 
 
 class LoopDetector:
@@ -206,7 +67,7 @@ class LoopDetector:
         self.records: list[CandidateRecord] = []
         self.last_part_seconds: dict[str, float] = {}  # seconds per part of the last add()
         self.closures: list[LoopClosure] = []
-        self._entries: dict[int, _Entry] = {}
+        self._entries: dict[int, StoredKeyframe] = {}
         self._temporal = TemporalConsistency(self.conf.temporal_k, self.conf.temporal_window)
         self._prior: tuple[int, int] | None = None  # (query position, match position) of the last full-threshold loop
         self._kind: str | None = None
@@ -253,6 +114,8 @@ class LoopDetector:
         if kf.id in self._entries:
             raise InputError(f"keyframe id {kf.id} was already added to the loop detector")
         feats = kf.features
+        if feats is None:
+            raise InputError(f"keyframe {kf.id} comes without its keypoints (Keyframe.features)")
         if self._kind is None:
             self._kind = feats.kind
         elif feats.kind != self._kind:
@@ -266,19 +129,19 @@ class LoopDetector:
         kept = Features(keypoints=np.asarray(feats.keypoints, np.float32), scores=np.zeros(0, np.float32),
                         descriptors=np.zeros((0,) + desc.shape[1:], desc.dtype), image_size=feats.image_size,
                         kind=feats.kind)
-        points3d = _float32_or_none(points3d)
+        points3d = None if points3d is None else np.ascontiguousarray(points3d, dtype=np.float32)
         camera = self._camera(kf, feats)
         light = Keyframe(id=kf.id, stamp=kf.stamp, T_world_body=np.array(kf.T_world_body, float), camera=camera,
                          T_body_camera=np.array(kf.T_body_camera, float), features=kept,
                          landmarks=points3d if points_source == "landmarks" else None)
-        entry = _Entry(kf.id, int(kf.stamp), len(self._entries), kept, camera, light.T_body_camera, points3d,
+        entry = StoredKeyframe(kf.id, int(kf.stamp), len(self._entries), kept, camera, light.T_body_camera, points3d,
                        points_source if points3d is not None else "none", light, self._path_to(kf))
         if bow is None:  # (with a bow the float copy is not needed: ~0.25 ms a keyframe)
             self.db.add(kf.id, int(kf.stamp), desc if desc.dtype == np.uint8 else np.asarray(desc, np.float32))
         else:
             self.db.add_bow(kf.id, int(kf.stamp), bow)
         if source is not None:
-            self._store.put_source(kf.id, lambda load=source.load: compact_descriptors(load(), dtype))
+            self._store.put_source(kf.id, partial(compact_loaded, source.load, dtype))
         else:
             self._store.put(kf.id, desc)
         self._entries[kf.id] = entry
@@ -368,8 +231,9 @@ class LoopDetector:
         points3d, source = (None, "none")
         if c.pose and kf.camera is not None:
             points3d, source = keyframe_points3d(kf, c)
-        points3d = _float32_or_none(points3d)
-        landmarks = points3d if source == "landmarks" else _float32_or_none(kf.landmarks)
+        points3d = None if points3d is None else np.ascontiguousarray(points3d, dtype=np.float32)
+        landmarks = points3d if source == "landmarks" else (
+            None if kf.landmarks is None else np.ascontiguousarray(kf.landmarks, dtype=np.float32))
         position = len(self._entries)
         path_m = self._path_to(kf)
         # the query is matched with the same compact descriptors it is stored with (symmetric pairs)
@@ -381,7 +245,7 @@ class LoopDetector:
         light = Keyframe(id=kf.id, stamp=kf.stamp, T_world_body=np.array(kf.T_world_body, float), camera=camera,
                          T_body_camera=np.array(kf.T_body_camera, float), features=kept,
                          landmarks=landmarks)
-        entry = _Entry(kf.id, int(kf.stamp), position, kept, camera, light.T_body_camera, points3d, source, light,
+        entry = StoredKeyframe(kf.id, int(kf.stamp), position, kept, camera, light.T_body_camera, points3d, source, light,
                        path_m)
         clock.lap("points3d")
 
@@ -405,18 +269,19 @@ class LoopDetector:
         for r in accepted:
             if r is not best:
                 r.accepted, r.reason = False, "not_best"
-        ok, run = self._temporal.update(position, self._entries[best.match_id].position if best else None)
-        if best is not None and not ok:
-            best.accepted, best.reason = False, f"temporal_pending({run}/{c.temporal_k})"
-        elif best is not None:
-            closures.append(self._closure(best))
+        ok, run = self._temporal.update(position, None if best is None else self._entries[best.match_id].position)
+        if best is not None:
+            if not ok:
+                best.accepted, best.reason = False, f"temporal_pending({run}/{c.temporal_k})"
+            else:
+                closures.append(self._closure(best))
         strong = best is not None and best.accepted and not best.relaxed
-        self._prior = (position, self._entries[best.match_id].position) if strong else None
+        self._prior = (position, self._entries[best.match_id].position) if best is not None and strong else None
         self.closures.extend(closures)
-        if self.loop_sink is not None and closures:
+        if self.loop_sink is not None and closures and best is not None:  # closures holds best's loop
             self.loop_sink(best)
         for r in records:
-            _drop_arrays(r)
+            drop_arrays(r)
         clock.lap("decision")
         if not insert:
             self.last_part_seconds = clock.seconds
@@ -438,14 +303,10 @@ class LoopDetector:
         return last.path_m + (step if np.isfinite(step) else 0.0)
 
     def _verification_order(self, candidates) -> list[IslandMember]:
-        """What is verified, in order: the top-K in BoW order, or island by island (``lcd.islands``)."""
-        c = self.conf
-        if not c.islands:
-            return [IslandMember(cand, rank, rank, float(cand.bow_score)) for rank, cand in enumerate(candidates[:c.top_k])]
         positions = {cand.match_id: self._entries[cand.match_id].position for cand in candidates}
-        return group_islands(candidates[:c.island_pool], positions, c.top_k, c.island_gap, c.island_tries)
+        return verification_order(candidates, positions, self.conf)
 
-    def _verify_candidates(self, entry: _Entry, desc: np.ndarray, candidates, clock: PartClock) -> list[CandidateRecord]:
+    def _verify_candidates(self, entry: StoredKeyframe, desc: np.ndarray, candidates, clock: PartClock) -> list[CandidateRecord]:
         """Verify a query's candidates; stops at the first accepted one when ``verify_until`` says so.
 
         With islands, an island whose member was accepted verifies none of its other members
@@ -469,17 +330,17 @@ class LoopDetector:
             records.append(rec)
         return records
 
-    def _continues_prior(self, q: _Entry, match_id: int) -> bool:
+    def _continues_prior(self, q: StoredKeyframe, match_id: int) -> bool:
         """Does (q, match) continue the previous keyframe's full-threshold loop (``lcd.consistent_*``)?"""
         c, prior = self.conf, self._prior
         if c.consistent_min_matches <= 0 or prior is None or prior[0] != q.position - 1:
             return False
         return abs(self._entries[match_id].position - prior[1]) <= c.consistent_window
 
-    def _verify(self, q: _Entry, q_desc: np.ndarray, cand, rank: int, clock: PartClock | None = None,
+    def _verify(self, q: StoredKeyframe, q_desc: np.ndarray, cand, rank: int, clock: PartClock | None = None,
                 relax: bool = False) -> CandidateRecord:
         rec = self._verify_with(self.conf, q, q_desc, cand, rank, clock)
-        if relax and not rec.accepted and _failed_on_a_count(rec):
+        if relax and not rec.accepted and failed_on_a_count(rec):
             k = self.conf.consistent_min_matches
             low = dataclasses.replace(self.conf, graph_min_matches=min(k, self.conf.graph_min_matches),
                                       graph_min_nodes=min(k, self.conf.graph_min_nodes),
@@ -488,7 +349,7 @@ class LoopDetector:
             rec.relaxed = True
         return rec
 
-    def _verify_with(self, c: LcdConfig, q: _Entry, q_desc: np.ndarray, cand, rank: int,
+    def _verify_with(self, c: LcdConfig, q: StoredKeyframe, q_desc: np.ndarray, cand, rank: int,
                      clock: PartClock | None = None) -> CandidateRecord:
         clock = clock or PartClock()
         m = self._entries[cand.match_id]
@@ -509,12 +370,7 @@ class LoopDetector:
         rec.graph_matches = checks.graph_matches if checks.graph is not None else None
         matches = checks.graph_matches if need_graph else checks.ransac_matches
         if not rec.passes(mode):
-            rec.reason = {
-                "ransac": lambda: f"ransac:{rec.ransac.reason}",
-                "graph": lambda: f"graph:{rec.graph.reason}",
-                "graph+ransac": lambda: (f"graph:{rec.graph.reason}" if not rec.graph.accepted
-                                         else f"ransac:{rec.ransac_on_graph.reason}"),
-            }[mode]()
+            rec.reason = rec.failure(mode)
             return rec
         if c.pose:
             used = matches
@@ -528,6 +384,7 @@ class LoopDetector:
                                           source=m.points_source) if m.points3d is not None else \
                 estimate_loop_pose(q.keyframe, m.keyframe, used, c)
             if rec.pose.ok and rec.pose.tight and m.position >= self._floor:  # odometry links one session only
+                assert rec.pose.T_match_query is not None  # an ok pose has its transform
                 why, rec.pose.odometry = odometry_drift_reason(rec.pose.T_match_query, m.keyframe.T_world_body,
                                                                q.keyframe.T_world_body, q.path_m - m.path_m, c)
                 if why:
@@ -540,22 +397,4 @@ class LoopDetector:
         return rec
 
     def _closure(self, r: CandidateRecord) -> LoopClosure:
-        evidence: dict[str, Any] = {"bow_score": r.bow_score, "n_matches": r.n_matches, "verify": self.conf.verify,
-                                    "inter_session": not self.in_current_session(r.match_id)}
-        if r.graph is not None:
-            evidence.update(r.graph.evidence())
-            evidence["structural_score"] = r.graph.score
-        if r.ransac is not None:
-            evidence.update(r.ransac.evidence())
-        if r.ransac_on_graph is not None:
-            evidence["graph_ransac_inliers"] = r.ransac_on_graph.inliers
-        pose_ok = r.pose is not None and r.pose.ok
-        if r.pose is not None:
-            evidence.update(r.pose.evidence())
-        T = r.pose.T_match_query if pose_ok else np.full((4, 4), np.nan)
-        info = r.pose.information if pose_ok else np.zeros((6, 6))
-        evidence["inliers"] = (r.pose.inliers if pose_ok else
-                               (r.ransac_on_graph.inliers if r.ransac_on_graph else
-                                (r.ransac.inliers if r.ransac else (r.graph.n_nodes if r.graph else r.n_matches))))
-        return LoopClosure(query_id=r.query_id, match_id=r.match_id, T_match_query=T, information=info,
-                           evidence=evidence, query_stamp=r.query_stamp, match_stamp=r.match_stamp)
+        return loop_closure(r, self.conf.verify, inter_session=not self.in_current_session(r.match_id))

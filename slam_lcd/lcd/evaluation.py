@@ -33,7 +33,6 @@ from ..errors import FileMissingError, InputError, UnsupportedFormatError
 from ..image_files import IMAGE_SUFFIXES
 from .detector import CandidateRecord
 
-
 # ----------------------------------------------------------------------------- ground truth
 
 

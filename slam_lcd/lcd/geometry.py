@@ -24,7 +24,6 @@ from ..vision.points import backproject, dense_disparity, sample_nearest, unit_r
 from .config import LcdConfig
 from .information import loop_information
 
-
 # ----------------------------------------------------------------------------- essential matrix
 
 

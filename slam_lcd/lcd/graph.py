@@ -32,7 +32,7 @@ import numpy as np
 from scipy.spatial import Delaunay, QhullError
 
 from .config import LcdConfig
-from .segments import crossing_counts, crosses_any
+from .segments import crosses_any, crossing_counts
 
 
 @dataclass

@@ -16,14 +16,17 @@ top-K did not name; they add its temporal neighbours.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
+
+if TYPE_CHECKING:  # the vocabulary's candidate type, for the annotation only
+    from ..vocab import LoopCandidate
 
 
 @dataclass
 class IslandMember:
     """One candidate to verify: the BoW candidate, its BoW rank, its island (0 = best island)."""
 
-    candidate: object  # vocab LoopCandidate (match_id, bow_score)
+    candidate: LoopCandidate  # its match_id and bow_score
     rank: int
     island: int
     island_score: float
@@ -66,3 +69,13 @@ def group_islands(candidates: Sequence, positions: dict[int, int], top_k: int, g
         members = sorted(isl, key=lambda rc: rc[0])[:max(tries, 1)]  # BoW rank order = score order
         out.extend(IslandMember(c, rank, i, total) for rank, c in members)
     return out
+
+
+def verification_order(candidates, positions: dict[int, int], conf) -> list[IslandMember]:
+    """What is verified, in order: the top-K in BoW order, or island by island (``lcd.islands``).
+
+    ``positions``: each candidate's keyframe position in the database (islands are runs of
+    neighbouring positions)."""
+    if not conf.islands:
+        return [IslandMember(cand, rank, rank, float(cand.bow_score)) for rank, cand in enumerate(candidates[:conf.top_k])]
+    return group_islands(candidates[:conf.island_pool], positions, conf.top_k, conf.island_gap, conf.island_tries)

@@ -48,6 +48,11 @@ class DescriptorSource:
     dim: int
 
 
+def compact_loaded(load: Callable[[], np.ndarray], dtype: str) -> np.ndarray:
+    """What ``load()`` gives, in the stored precision (a :class:`DescriptorSource` read on demand)."""
+    return compact_descriptors(load(), dtype)
+
+
 class DescriptorStore:
     """Descriptors by keyframe id, in memory or in a temporary file (see the module note)."""
 
