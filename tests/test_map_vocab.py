@@ -1,19 +1,17 @@
 """The map's vocabulary snapshot: a reopened map queries like the database that saved it, without replay."""
 from __future__ import annotations
 
-from types import SimpleNamespace
-
 import numpy as np
 import pytest
 
 from slam_lcd.lcd import LoopDetector
 from slam_lcd.map import store
 from slam_lcd.map.config import MapConfig
+from slam_lcd.map.keyframe_arrays import session_arrays
 from slam_lcd.map.session_map import Map
 from slam_lcd.map.store import MapError
 from slam_lcd.types import Features, Keyframe
 from slam_lcd.vocab import VocabConfig
-from slam_lcd.vocab.database import snapshot
 
 FEATURES = {"kind": "superpoint", "weights_sha256": "x", "descriptor_dim": 32, "descriptor_form": "int8"}
 
@@ -42,7 +40,7 @@ def _save_map(root, vconf, centres="int8", n=40):
         det.remember(kf, d, None, "none")
     m = Map.open(root, features=FEATURES, write=True, create=True, conf=MapConfig(visual_links=False,
                                                                                   vocab_centres=centres))
-    m.sessions = [m._session_arrays(SimpleNamespace(detector=det), kfs, None)]
+    m.sessions = [session_arrays(det, kfs, None, FEATURES["descriptor_form"])]
     m._unsaved = [({"name": "s", "keyframes": n, "kf_id_start": 0, "kf_id_end": n, "T_map_session": np.eye(4).tolist(),
                     "component": 0}, m.sessions[0])]
     m.manifest.sessions = [m._unsaved[0][0]]

@@ -24,8 +24,8 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass, field
 
-import numpy as np
 import gtsam
+import numpy as np
 from scipy.stats import chi2 as chi2_dist
 
 from ..backend.gnc import gnc_loop_weights

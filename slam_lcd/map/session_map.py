@@ -14,81 +14,33 @@ Use (the pipeline takes a map the way it takes a user's iSAM2, as a collaborator
 """
 from __future__ import annotations
 
-import hashlib
 import logging
 from dataclasses import dataclass
-from functools import partial
 from pathlib import Path
 from typing import BinaryIO
 
 import numpy as np
 
 from ..geometry import inv
-from ..types import CameraModel, Features, Keyframe, Trajectory
+from ..types import Trajectory
 from . import store
 from .config import MapConfig
+from .detector_load import load_into
 from .joint_graph import JointLoop, JointResult, SessionPoses, solve
+from .keyframe_arrays import (
+    camera_json,
+    compact_for_map,
+    extractor_meta,
+    log_sha256,
+    session_arrays,
+    visual_links,
+)
 from .store import MapError, MapGraph, MapManifest, SessionKeyframes
 
 log = logging.getLogger(__name__)
 
 
 READ_ATTEMPTS = 3  # a reader racing writers' commits reads the newest manifest again, this many times at most
-
-
-def extractor_meta(extractor, descriptor_form: str = "int8") -> dict:
-    """What a map records of the features it holds: kind, weights' sha256, descriptor size and form."""
-    ident = extractor.identity() if hasattr(extractor, "identity") else {"kind": extractor.kind}
-    return {"kind": ident.get("kind", getattr(extractor, "kind", "")), "weights_sha256": ident.get("weights_sha256"),
-            "descriptor_dim": int(getattr(extractor, "descriptor_dim", 0) or 0),
-            "descriptor_form": descriptor_form if ident.get("kind") != "orb" else "binary",
-            "identity": {k: (v if isinstance(v, (int, float, str, bool, type(None))) else str(v))
-                         for k, v in ident.items()}}
-
-
-def _camera_json(c: CameraModel | None) -> dict | None:
-    if c is None:
-        return None
-    return {"width": c.width, "height": c.height, "fx": c.fx, "fy": c.fy, "cx": c.cx, "cy": c.cy,
-            "distortion_model": c.distortion_model, "D": np.asarray(c.D, float).tolist(), "baseline": c.baseline}
-
-
-def _camera_from_json(d: dict | None) -> CameraModel | None:
-    if not d:
-        return None
-    return CameraModel(int(d["width"]), int(d["height"]), float(d["fx"]), float(d["fy"]), float(d["cx"]),
-                       float(d["cy"]), str(d.get("distortion_model", "none")), np.asarray(d.get("D", []), float),
-                       d.get("baseline"))
-
-
-INT4_CLIP_SIGMAS = 2.5  # int4: values beyond 2.5 standard deviations of the row are clipped
-
-
-def compact_for_map(desc: np.ndarray, form: str) -> tuple[np.ndarray, np.ndarray]:
-    """(stored descriptors, scales) of one keyframe's descriptors in the map's ``descriptor_form``.
-
-    SuperPoint rows: ``int4`` (two values a byte, 128 B, one scale per row: value = q / scale,
-    the scale putting 2.5 standard deviations at the last level), ``int8`` (256 B, the scale
-    putting the row's peak at 127) or ``float16``. ORB's binary rows as they are (no scales).
-    Restored rows are renormalised to unit length (SuperPoint's are), so the scale only has to
-    be right up to a factor.
-    """
-    desc = np.asarray(desc)
-    if desc.dtype == np.uint8:
-        return np.ascontiguousarray(desc), np.zeros(0, np.float32)
-    d = desc.astype(np.float32)
-    if form == "float16":
-        return d.astype(np.float16), np.zeros(0, np.float32)
-    if form == "int4":
-        if d.shape[1] % 2:
-            raise ValueError(f"int4 descriptors need an even dimension, not {d.shape[1]}")
-        spread = INT4_CLIP_SIGMAS * d.std(axis=1) if len(d) else np.zeros(0, np.float32)
-        scale = np.where(spread > 0, 7.0 / np.maximum(spread, 1e-12), 1.0).astype(np.float32)
-        q = (np.clip(np.rint(d * scale[:, None]), -7, 7).astype(np.int16) + 8).astype(np.uint8)  # 1..15
-        return (q[:, 0::2] << 4) | q[:, 1::2], scale
-    peak = np.abs(d).max(axis=1) if len(d) else np.zeros(0, np.float32)
-    scale = np.where(peak > 0, 127.0 / np.maximum(peak, 1e-12), 1.0).astype(np.float32)
-    return np.clip(np.rint(d * scale[:, None]), -127, 127).astype(np.int8), scale
 
 
 @dataclass
@@ -229,7 +181,7 @@ class Map:
         known = {s.get("log_sha256"): s["name"] for s in self.manifest.sessions if s.get("log_sha256")}
         if not known:
             return None
-        return known.get(_sha256_log(log_path))
+        return known.get(log_sha256(log_path))
 
     def next_kf_id(self) -> int:
         return self.manifest.next_kf_id()
@@ -251,63 +203,15 @@ class Map:
             comps.setdefault(int(s["component"]), []).append(s["name"])
         return [comps[k] for k in sorted(comps)]
 
-    def keyframes_for_detector(self):
-        """Per session: (meta, [(light Keyframe with keypoints, descriptors, points3d, source), ...]).
-
-        Float descriptors come as a :class:`~slam_lcd.lcd.store.DescriptorSource` (read from the
-        map's arrays when a keyframe is a candidate), ORB's bytes as they are."""
-        from ..lcd.store import DescriptorSource
-
-        dim = int(self.manifest.features.get("descriptor_dim", 0))
-        for meta, s in zip(self.manifest.sessions, self.sessions):
-            camera = _camera_from_json(meta.get("camera"))
-            T_bc = np.asarray(meta.get("T_body_camera", np.eye(4).tolist()), float)
-            kind = self.manifest.features.get("kind", "superpoint")
-            size = (camera.width, camera.height) if camera else tuple(meta.get("image_size", (0, 0)))
-            items = []
-            for i, k in enumerate(s.ids):
-                r = s.rows(i)
-                feats = Features(s.keypoints[r], np.zeros(0, np.float32), np.zeros((0, 1), np.float32), size, kind)
-                kf = Keyframe(id=int(k), stamp=int(s.stamps[i]), T_world_body=s.T_odom[i], camera=camera,
-                              T_body_camera=T_bc, features=feats)
-                p3 = s.points3d[r]
-                src = str(s.points_source[i])
-                desc = (s.descriptors_of(i) if s.descriptors.dtype == np.uint8 and not len(s.scales)  # ORB: as is
-                        else DescriptorSource(partial(s.descriptors_of, i), dim))
-                items.append((kf, desc, p3 if src != "none" else None, src))
-            yield meta, items
-
     def load_into(self, detector) -> None:
         """Give ``detector`` every keyframe of the map as a candidate (each session begins afresh).
 
         An empty online detector takes the map's vocabulary snapshot (words and bags of words as
         saved) when it holds exactly the map's keyframes in order; otherwise the stored
         descriptors are replayed through the vocabulary (a trained vocabulary always: its tree
-        quantises cheaply).
+        quantises cheaply). See :mod:`slam_lcd.map.detector_load`.
         """
-        bows = self._restore_vocab(detector)
-        at = 0
-        for _, items in self.keyframes_for_detector():
-            detector.begin_session()
-            for kf, desc, p3, src in items:
-                detector.remember(kf, desc, p3, src, bow=bows[at] if bows is not None else None)
-                at += 1
-
-    def _restore_vocab(self, detector):
-        """Bags of words of the snapshot restored into ``detector.db``, or None (replay instead)."""
-        from ..vocab.database import restore_into
-
-        db = detector.db
-        if self.manifest.vocab_file is None or not db.online or len(db) or db.words is not None:
-            return None
-        state = store.read_vocab(self.root, self.manifest, self._vocab_fh)
-        ids = np.concatenate([s.ids for s in self.sessions]) if self.sessions else np.zeros(0, np.int64)
-        if state is None or not np.array_equal(state["kf_ids"], ids):
-            return None
-        try:
-            return restore_into(db, state)
-        except (ValueError, KeyError, TypeError, RuntimeError) as e:
-            raise MapError(f"vocabulary snapshot cannot be used ({e})", self.root / self.manifest.vocab_file) from None
+        load_into(detector, self.root, self.manifest, self.sessions, self._vocab_fh)
 
     # ------------------------------------------------------------------ appending
     def add_session(self, pipeline, *, name: str | None = None, log_path: str | Path | None = None,
@@ -318,7 +222,8 @@ class Map:
         kfs = list(pipeline.keyframes)
         if not kfs:
             raise MapError("the session has no keyframe: nothing to add to the map", log_path or self.root)
-        sess = self._session_arrays(pipeline, kfs, ground_truth)
+        sess = session_arrays(pipeline.detector, kfs, ground_truth,
+                              self.manifest.features.get("descriptor_form", self.conf.descriptor_form))
         name = name or f"session{len(self.sessions) + 1}"
         names = set(self.session_names)
         base, n = name, 2
@@ -356,8 +261,8 @@ class Map:
         meta = {"name": name, "keyframes": len(sess), "kf_id_start": int(sess.ids.min()),
                 "kf_id_end": int(sess.ids.max()) + 1, "stamps": [int(sess.stamps[0]), int(sess.stamps[-1])],
                 "log_path": str(Path(log_path).resolve()) if log_path else None,
-                "log_sha256": _sha256_log(log_path) if log_path else None,
-                "camera": _camera_json(cam), "T_body_camera": np.asarray(pipeline.T_body_camera, float).tolist(),
+                "log_sha256": log_sha256(log_path) if log_path else None,
+                "camera": camera_json(cam), "T_body_camera": np.asarray(pipeline.T_body_camera, float).tolist(),
                 "features": self.manifest.features.get("kind"), "T_map_session": np.eye(4).tolist(),
                 "component": 0, **(extra or {})}
         # the in-memory map follows at once (a second session may be added before saving)
@@ -463,23 +368,6 @@ class Map:
                         np.array([k.T_world_body for k in kfs], float).reshape(-1, 4, 4),
                         [k.covariance_since_last for k in kfs], getattr(pipeline, "map_closures", []), self.conf)
 
-    def gt_alignment(self, component: int = 0):
-        """(R, t) taking this component's map frame to the ground truth's frame, from the sessions' keyframe GT; or None."""
-        from ..eval.align import umeyama
-
-        P, G = [], []
-        poses = self.poses()
-        for meta, s in zip(self.manifest.sessions, self.sessions):
-            if int(meta["component"]) != component:
-                continue
-            ok = np.all(np.isfinite(s.T_gt[:, :3, 3]), axis=1)
-            P += [poses[int(k)][:3, 3] for k in s.ids[ok]]
-            G += list(s.T_gt[ok, :3, 3])
-        if len(P) < 3:
-            return None
-        R, t, _ = umeyama(np.array(P), np.array(G), with_scale=False)
-        return R, t
-
     # ------------------------------------------------------------------ helpers
     def _existing_loops(self) -> list[JointLoop]:
         g = self.graph
@@ -498,72 +386,6 @@ class Map:
             T = np.array([P[int(k)] for k in s.ids]) if P else s.T_odom.copy()
             out.append(SessionPoses(meta["name"], s.ids, s.T_odom, s.cov, T.reshape(-1, 4, 4), int(meta["component"])))
         return out
-
-    def _session_arrays(self, pipeline, kfs: list[Keyframe], gt: Trajectory | None) -> SessionKeyframes:
-        det = pipeline.detector
-        form = self.manifest.features.get("descriptor_form", self.conf.descriptor_form)
-        ids, stamps, T_odom, cov, offs = [], [], [], [], [0]
-        kps, descs, scales, p3s, srcs = [], [], [], [], []
-        for kf in kfs:
-            light, desc, p3, src = det.stored(kf.id)
-            n = len(light.features.keypoints)
-            ids.append(int(kf.id))
-            stamps.append(int(kf.stamp))
-            T_odom.append(np.asarray(kf.T_world_body, float))
-            c = kf.covariance_since_last
-            cov.append(np.asarray(c, float) if c is not None else np.full((6, 6), np.nan))
-            kps.append(np.asarray(light.features.keypoints, np.float32).reshape(-1, 2))
-            d, sc = compact_for_map(desc, form)
-            descs.append(d)
-            scales.append(sc)
-            p3s.append(np.asarray(p3, np.float32).reshape(-1, 3) if p3 is not None else np.full((n, 3), np.nan, np.float32))
-            srcs.append(src if p3 is not None else "none")
-            offs.append(offs[-1] + n)
-        stamps_a = np.array(stamps, np.int64)
-        T_gt = np.full((len(ids), 4, 4), np.nan)
-        if gt is not None and len(gt) > 1:
-            from ..geometry import interpolate_poses
-
-            inside = (stamps_a >= gt.stamps[0]) & (stamps_a <= gt.stamps[-1])
-            if inside.any():
-                T_gt[inside] = interpolate_poses(gt.stamps, gt.poses, stamps_a[inside])
-        dim = descs[0].shape[1] if descs and descs[0].ndim == 2 else 0
-        return SessionKeyframes(
-            ids=np.array(ids, np.int64), stamps=stamps_a, T_odom=np.array(T_odom).reshape(-1, 4, 4),
-            cov=np.array(cov).reshape(-1, 6, 6), T_gt=T_gt, offsets=np.array(offs, np.int64),
-            keypoints=np.concatenate(kps) if kps else np.zeros((0, 2), np.float32),
-            descriptors=np.concatenate([d.reshape(-1, dim) for d in descs]) if descs else np.zeros((0, dim)),
-            scales=np.concatenate(scales).astype(np.float32) if scales else np.zeros(0, np.float32),
-            points3d=np.concatenate(p3s) if p3s else np.zeros((0, 3), np.float32),
-            points_source=np.array(srcs, dtype="<U10"))
-
-
-LINK = "link"  # the reason of a visual link between consecutive keyframes (not a loop)
-
-
-def visual_links(detector, kf_ids: list[int]) -> list[JointLoop]:
-    """Visual relative poses of consecutive keyframes (``map.visual_links``); pairs that do not verify get none."""
-    out = []
-    for a, b in zip(kf_ids[:-1], kf_ids[1:]):
-        c = detector.verify_pair(b, a)
-        if c is not None and np.all(np.isfinite(c.T_match_query)):
-            out.append(JointLoop(int(b), int(a), np.asarray(c.T_match_query, float), np.asarray(c.information, float),
-                                 False, True, LINK))
-    return out
-
-
-def _sha256_log(path) -> str | None:
-    """sha256 of a log file; of a rosbag2 folder, the sha256 of its files' relative names and sha256s."""
-    from ..features.weights import sha256_of
-
-    p = Path(path)
-    try:
-        if not p.is_dir():
-            return sha256_of(p)
-        return hashlib.sha256("".join(f"{q.relative_to(p).as_posix()} {sha256_of(q)}\n"
-                                      for q in sorted(p.rglob("*")) if q.is_file()).encode()).hexdigest()
-    except OSError:
-        return None
 
 
 __all__ = ["Map", "MapError", "compact_for_map", "extractor_meta"]

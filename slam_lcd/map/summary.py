@@ -57,6 +57,24 @@ def session_ates(m) -> dict[str, dict]:
     return out
 
 
+def gt_alignment(m, component: int = 0):
+    """(R, t) taking this component's map frame to the ground truth's frame, from the sessions' keyframe GT; or None."""
+    from ..eval.align import umeyama
+
+    P, G = [], []
+    poses = m.poses()
+    for meta, s in zip(m.manifest.sessions, m.sessions):
+        if int(meta["component"]) != component:
+            continue
+        ok = np.all(np.isfinite(s.T_gt[:, :3, 3]), axis=1)
+        P += [poses[int(k)][:3, 3] for k in s.ids[ok]]
+        G += list(s.T_gt[ok, :3, 3])
+    if len(P) < 3:
+        return None
+    R, t, _ = umeyama(np.array(P), np.array(G), with_scale=False)
+    return R, t
+
+
 def map_summary(m, joined=None, *, current: str | None = None, pipe=None) -> dict:
     """The map as report.json / ``map info`` give it (plain JSON types)."""
     sess_of = {int(k): m.manifest.sessions[si]["name"] for si, s in enumerate(m.sessions) for k in s.ids}
@@ -137,7 +155,7 @@ def localisation_report(m, loc, gt=None) -> dict:
     out = {"map": str(m.root), "keyframes": len(ks), "localised": sum(k.localised for k in ks),
            "share_localised": loc.share_localised, "component": loc.component, "not_localised_reasons": reasons,
            "errors": None, "_loc": loc}
-    al = m.gt_alignment(loc.component or 0)
+    al = gt_alignment(m, loc.component or 0)
     if gt is not None and len(gt) > 1 and al is not None:
         R, t = al
         stamps = np.array([k.stamp for k in ks], np.int64)

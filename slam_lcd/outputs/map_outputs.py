@@ -91,7 +91,9 @@ def session_layer(the_map, current: str, inter_session_loops: list[dict]):
     loops = [(poses[int(r["match_id"])][:3, 3], poses[int(r["query_id"])][:3, 3]) for r in inter_session_loops
              if r["accepted"] and comp[r["query_session"]] == mine and comp[r["match_session"]] == mine
              and int(r["match_id"]) in poses and int(r["query_id"]) in poses]
-    al = the_map.gt_alignment(mine)
+    from ..map.summary import gt_alignment
+
+    al = gt_alignment(the_map, mine)
     return (SessionLayer(names, paths, joined, loops),
             SimpleNamespace(R=al[0], t=al[1]) if al is not None else None)
 

@@ -17,12 +17,12 @@ from ..config import save_config
 from ..errors import InputError, SlamLcdError
 from ..interrupts import defer_sigint
 from ..types import Trajectory
+from .figures import write_plots
 from .loop_pictures import LOOPS_DIR
+from .loops import VERIFIED, add_map_verdicts, count_false_accepted, loop_rows, write_loops_csv
 from .map_cloud import MAP_CLOUD_FILES
 from .map_outputs import LOCALIZATION_FILES, MAP_DIR
-from .loops import VERIFIED, add_map_verdicts, count_false_accepted, loop_rows, write_loops_csv
 from .output_set import PARTIAL_MARKER, OutputSet
-from .figures import write_plots
 from .report import report_facts, write_report
 from .result import RunResult
 
