@@ -78,7 +78,7 @@ class BackendConfig:
     final_solver: Literal["lm", "none"] = "lm"
 
 
-def gnc_due(loops_since: int, loops_held: int, conf: "BackendConfig") -> bool:
+def gnc_due(loops_since: int, loops_held: int, conf: BackendConfig) -> bool:
     """Whether the batch GNC re-check is due after ``loops_since`` new gated loops (``loops_held`` offered in all)."""
     n = conf.gnc_every_n_loops
     if n <= 0:

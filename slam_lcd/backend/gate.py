@@ -28,8 +28,9 @@ integers whose differences count keyframes (insertion positions), used for the P
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Protocol, Sequence
+from typing import Protocol
 
 import numpy as np
 from scipy.special import chdtri  # chi-square quantile without importing scipy.stats
@@ -50,7 +51,7 @@ class GateLoop:
     excluded: bool = False  # no PCM partner any more (e.g. a batch re-check found it an outlier)
 
     @classmethod
-    def from_closure(cls, closure, a: int, b: int) -> "GateLoop":
+    def from_closure(cls, closure, a: int, b: int) -> GateLoop:
         """A :class:`~slam_lcd.types.LoopClosure` at positions ``a`` (its match) and ``b`` (its query)."""
         info = np.asarray(closure.information, dtype=np.float64)
         return cls(int(a), int(b), np.asarray(closure.T_match_query, dtype=np.float64),
@@ -154,7 +155,7 @@ class PcmGate:
         self.rescue_max_factor, self.max_inconsistent = float(rescue_max_factor), float(max_inconsistent)
 
     @classmethod
-    def from_config(cls, conf) -> "PcmGate":
+    def from_config(cls, conf) -> PcmGate:
         """The gate a :class:`~slam_lcd.backend.config.BackendConfig` describes."""
         return cls(conf.gate_chi2_probability, conf.gate_pairwise_window, conf.gate_min_support,
                    conf.gate_rescue_max_factor, conf.gate_pairwise_max_inconsistent)

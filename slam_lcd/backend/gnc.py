@@ -8,12 +8,11 @@ IMU, GPS or odometry factors, are never weighted, removed or changed.
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
-
-import numpy as np
 
 import gtsam
+import numpy as np
 
 
 @dataclass

@@ -14,11 +14,10 @@ each keyframe's ``T_body_camera``; a user whose graph holds camera poses passes
 """
 from __future__ import annotations
 
-from typing import Callable, Iterable
-
-import numpy as np
+from collections.abc import Callable, Iterable
 
 import gtsam
+import numpy as np
 
 from ..errors import InputError
 from ..geometry import adjoint, inv

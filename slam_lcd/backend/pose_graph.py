@@ -26,11 +26,10 @@ from __future__ import annotations
 
 import logging
 import time
-from typing import Callable
-
-import numpy as np
+from collections.abc import Callable
 
 import gtsam
+import numpy as np
 
 from ..errors import InputError
 from ..geometry import inv
@@ -40,8 +39,8 @@ from .config import BackendConfig, gnc_due
 from .g2o import G2oEdge
 from .gate import ChainRelatives, GateLoop, LoopGate, default_gate
 from .gnc import gnc_loop_weights
-from .loop_factors import robust_kernel, valid_information
 from .graph_outputs import GraphOutputs
+from .loop_factors import robust_kernel, valid_information
 from .poses import check_pose, isam2_params, values_to_array
 from .records import ACCEPTED, REJECTED, LoopEntry, LoopRecord
 from .relatives import MarginalRelatives

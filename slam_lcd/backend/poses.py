@@ -1,9 +1,8 @@
 """Small GTSAM helpers of the pose graph: checked poses in, iSAM2 parameters, Values out."""
 from __future__ import annotations
 
-import numpy as np
-
 import gtsam
+import numpy as np
 
 from ..errors import InvalidPoseError
 from ..geometry import project_to_se3

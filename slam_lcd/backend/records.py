@@ -3,9 +3,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import numpy as np
-
 import gtsam
+import numpy as np
 
 from .gate import GateLoop
 

@@ -13,11 +13,10 @@ estimate, loop-free relative pose) are answered from the user's estimate and its
 """
 from __future__ import annotations
 
-from typing import Callable
-
-import numpy as np
+from collections.abc import Callable
 
 import gtsam
+import numpy as np
 
 from .gate import relative_from_marginals
 

@@ -22,9 +22,9 @@ import logging
 import os
 import sys
 import time
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Iterable, Sequence
 
 from ..atomic import check_no_clash
 from ..config import Config, validate_config

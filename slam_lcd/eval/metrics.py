@@ -33,7 +33,7 @@ class ErrorStats:
     max: float
 
     @classmethod
-    def of(cls, errors: np.ndarray) -> "ErrorStats":
+    def of(cls, errors: np.ndarray) -> ErrorStats:
         e = np.asarray(errors, dtype=np.float64)
         if e.size == 0:
             nan = float("nan")

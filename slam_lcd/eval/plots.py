@@ -6,8 +6,8 @@ every title, because an ATE figure without it cannot be read correctly.
 """
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import Iterable, Sequence
 
 import matplotlib
 

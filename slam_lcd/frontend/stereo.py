@@ -10,8 +10,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from ..types import Features
 from ..features.matching import descriptor_distances
+from ..types import Features
 from .config import FrontendConfig
 from .matching import DEFAULT_MAX_DISTANCE
 

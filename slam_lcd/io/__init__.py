@@ -5,10 +5,9 @@ See docs/io.md. Public API: :func:`open_log`, :class:`LogMessage`, :class:`Topic
 :func:`read_trajectory_from_log`, :mod:`.decode`, :mod:`.tf`, :mod:`.messages`, :mod:`.writers`,
 and the trajectory-file functions of :mod:`.trajectory_files`.
 """
-from .reader import LogMessage, LogReader, RawMessage, TopicInfo, open_log
-from .log_trajectory import read_trajectory_from_log
-
 from . import trajectory_files as _tf_files
+from .log_trajectory import read_trajectory_from_log
+from .reader import LogMessage, LogReader, RawMessage, TopicInfo, open_log
 from .trajectory_files import *  # noqa: F401,F403
 
 __all__ = ["open_log", "LogReader", "LogMessage", "RawMessage", "TopicInfo", "read_trajectory_from_log",

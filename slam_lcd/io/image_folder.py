@@ -12,8 +12,8 @@ not a silent skip: skipping would shift every later frame's index against a loop
 from __future__ import annotations
 
 import re
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Iterable
 
 from ..errors import FileMissingError, InputError
 from ..image_files import IMAGE_SUFFIXES, read_image

@@ -11,8 +11,18 @@ from pathlib import Path
 
 from ..errors import CorruptLogError, TruncatedLogError, UnsupportedFormatError
 from .config import IOConfig
-from .log_backend import (TF_TYPE, LogContents, RawMessage, TopicInfo, build_typestore, deserialised, has_header,
-                          one_line, unreadable, with_raw_copies)
+from .log_backend import (
+    TF_TYPE,
+    LogContents,
+    RawMessage,
+    TopicInfo,
+    build_typestore,
+    deserialised,
+    has_header,
+    one_line,
+    unreadable,
+    with_raw_copies,
+)
 
 log = logging.getLogger(__name__)
 
@@ -106,7 +116,7 @@ class McapStreamBackend:
 
     def _scan(self):
         """Forward scan of all message records; stops quietly where the readable bytes end."""
-        from .mcap_recover import Channel, Message, Schema, ScanEnd, scan
+        from .mcap_recover import Channel, Message, ScanEnd, Schema, scan
 
         for rec in scan(self.fh):
             if isinstance(rec, Message):

@@ -9,7 +9,8 @@ is returned. Memory: one chunk at a time.
 from __future__ import annotations
 
 import struct
-from typing import BinaryIO, Iterator, NamedTuple
+from collections.abc import Iterator
+from typing import BinaryIO, NamedTuple
 
 OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK, OP_FOOTER, OP_DATA_END = 0x03, 0x04, 0x05, 0x06, 0x02, 0x0F
 _U16 = struct.Struct("<H")

@@ -8,7 +8,7 @@ returns), whatever the stored encoding, so that write-then-read is the identity.
 """
 from __future__ import annotations
 
-from typing import Iterable
+from collections.abc import Iterable
 
 import cv2
 import numpy as np

@@ -21,7 +21,8 @@ from __future__ import annotations
 
 import queue
 import threading
-from typing import Iterable, Iterator, TypeVar
+from collections.abc import Iterable, Iterator
+from typing import TypeVar
 
 T = TypeVar("T")
 
@@ -104,7 +105,7 @@ class Prefetched(Iterator[T]):
             except Exception:  # noqa: BLE001 - closing must not mask what happened
                 pass
 
-    def __iter__(self) -> "Prefetched[T]":
+    def __iter__(self) -> Prefetched[T]:
         return self
 
     def __next__(self) -> T:
@@ -152,7 +153,7 @@ class Prefetched(Iterator[T]):
                 pass
             self._thread.join(timeout=0.05)
 
-    def __enter__(self) -> "Prefetched[T]":
+    def __enter__(self) -> Prefetched[T]:
         return self
 
     def __exit__(self, *exc) -> None:

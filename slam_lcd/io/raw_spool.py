@@ -16,8 +16,8 @@ reached the end of the log (an interrupted run's spool ends early and is not use
 from __future__ import annotations
 
 import struct
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 from .log_backend import RawMessage
 

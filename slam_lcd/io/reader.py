@@ -10,8 +10,8 @@ the header stamp, nothing else (see tools/bench_io.py for the cost).
 """
 from __future__ import annotations
 
+from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Iterable, Iterator
 
 from ..errors import FileMissingError, TopicNotFoundError, UnsupportedFormatError
 from .config import IOConfig
@@ -76,7 +76,7 @@ class LogReader:
         self._contents = LogContents()
 
     # -- life cycle ---------------------------------------------------------------------
-    def open(self) -> "LogReader":
+    def open(self) -> LogReader:
         if self.format == "mcap":
             self._backend = open_mcap(self.path, self.conf)
         else:

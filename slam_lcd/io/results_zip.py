@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from ..atomic import atomic_path
-from .trajectory_files import write_tum
 from ..types import Trajectory
+from .trajectory_files import write_tum
 
 
 def _npy(array: np.ndarray) -> bytes:

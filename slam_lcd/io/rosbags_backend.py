@@ -6,8 +6,18 @@ from pathlib import Path
 
 from ..errors import CorruptLogError, SlamLcdError
 from .config import IOConfig
-from .log_backend import (TF_TYPE, LogContents, RawMessage, TopicInfo, build_typestore, deserialised, has_header,
-                          one_line, unreadable, with_raw_copies)
+from .log_backend import (
+    TF_TYPE,
+    LogContents,
+    RawMessage,
+    TopicInfo,
+    build_typestore,
+    deserialised,
+    has_header,
+    one_line,
+    unreadable,
+    with_raw_copies,
+)
 from .ros1_chunks import ros1_messages
 
 log = logging.getLogger(__name__)

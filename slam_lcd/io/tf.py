@@ -131,7 +131,7 @@ class TfBuffer:
             edge.add(int(stamp_ns), t, q)
 
     @classmethod
-    def from_log(cls, source, tf_topics=("/tf",), static_topics=("/tf_static",), extrapolation_ns: int = 0) -> "TfBuffer":
+    def from_log(cls, source, tf_topics=("/tf",), static_topics=("/tf_static",), extrapolation_ns: int = 0) -> TfBuffer:
         """Buffer filled from an open LogReader or a path (topics that the log lacks are skipped)."""
         from .reader import LogReader, open_log
 

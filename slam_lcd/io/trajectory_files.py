@@ -26,9 +26,9 @@ one warning line per file (a norm of 2 is a broken writer, not rounding).
 from __future__ import annotations
 
 import logging
+from collections.abc import Iterator
 from decimal import Decimal, InvalidOperation
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 
@@ -80,7 +80,7 @@ def _data_lines(path: Path, comma: bool = False) -> Iterator[tuple[int, list[str
     if not path.is_file():
         raise FileMissingError("trajectory path is not a file", path)
     try:
-        with open(path, "r", encoding="utf-8") as fh:
+        with open(path, encoding="utf-8") as fh:
             for number, line in enumerate(fh, start=1):
                 text = line.strip()
                 if not text or text.startswith("#") or text.startswith("%"):

@@ -6,18 +6,18 @@ ROS1 Noetic definitions, whose md5sums ROS1 tools expect.
 """
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 
 from rosbags.typesys import Stores, get_typestore
 
 
-@lru_cache(maxsize=None)
+@cache
 def ros2_store():
     """ROS2 Humble type store (the types of every message slam-lcd builds)."""
     return get_typestore(Stores.ROS2_HUMBLE)
 
 
-@lru_cache(maxsize=None)
+@cache
 def ros1_store():
     """ROS1 Noetic type store (definitions and md5sums for ROS1 bags), plus tf2_msgs/TFMessage,
     which rosbags' Noetic store lacks (same definition as ROS1's tf2_msgs/TFMessage)."""

@@ -17,15 +17,15 @@ import logging
 import os
 import shutil
 import tempfile
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Iterable
 
 import numpy as np
 
 from .. import __version__
 from ..atomic import guard_not_input
-from ..interrupts import defer_sigint, finish
 from ..errors import InputError, InvalidPoseError, UnsupportedFormatError
+from ..interrupts import defer_sigint, finish
 from ..types import Trajectory
 from . import messages as M
 from .config import IOConfig

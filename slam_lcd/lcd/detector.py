@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+from collections.abc import Callable
 from functools import partial
-from typing import Callable
 
 import numpy as np
 

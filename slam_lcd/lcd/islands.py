@@ -15,8 +15,9 @@ top-K did not name; they add its temporal neighbours.
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Sequence
+from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # the vocabulary's candidate type, for the annotation only
     from ..vocab import LoopCandidate

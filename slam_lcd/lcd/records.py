@@ -31,7 +31,7 @@ class PartClock:
         self._t = now
 
 
-def drop_arrays(rec: "CandidateRecord") -> None:
+def drop_arrays(rec: CandidateRecord) -> None:
     """A record kept for the run's report needs its figures, not its per-match arrays."""
     if rec.graph is not None:
         rec.graph.kept = rec.graph.kept[:0]
@@ -151,7 +151,7 @@ class StoredKeyframe:
 _COUNT_REASONS = ("too_few_matches", "too_few_nodes", "too_few_inliers")
 
 
-def failed_on_a_count(rec: "CandidateRecord") -> bool:
+def failed_on_a_count(rec: CandidateRecord) -> bool:
     """Did a candidate fail only because some count was below its minimum (not a ratio or the score)?"""
     if rec.reason == "low_bow_score" or rec.reason.startswith("pose:"):
         return False

@@ -143,7 +143,7 @@ class _Sweep:
             row = stop
 
 
-def _registrations(seg_: "_Segments") -> tuple[np.ndarray, np.ndarray]:
+def _registrations(seg_: _Segments) -> tuple[np.ndarray, np.ndarray]:
     """(cell id, segment) of every grid cell a piece of each segment touches, sorted by cell."""
     p, q = seg_.p, seg_.q
     m = len(p)

@@ -106,7 +106,7 @@ class MapGraph:
     ARRAYS = ("kf_ids", "T_map", "loop_query", "loop_match", "loop_T", "loop_info", "loop_accepted", "loop_reason")
 
     @classmethod
-    def empty(cls) -> "MapGraph":
+    def empty(cls) -> MapGraph:
         return cls(np.zeros(0, np.int64), np.zeros((0, 4, 4)), np.zeros(0, np.int64), np.zeros(0, np.int64),
                    np.zeros((0, 4, 4)), np.zeros((0, 6, 6)), np.zeros(0, bool), np.zeros(0, "<U8"))
 

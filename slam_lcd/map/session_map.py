@@ -72,7 +72,7 @@ class Map:
     # ------------------------------------------------------------------ open / close
     @classmethod
     def open(cls, root: str | Path, *, features: dict | None = None, conf: MapConfig | None = None,
-             write: bool = False, create: bool = False) -> "Map":
+             write: bool = False, create: bool = False) -> Map:
         """Read the map at ``root``. ``write``: take the writer lock first; ``create``: an absent map is empty.
 
         ``features`` (from :func:`extractor_meta`): refused with :class:`MapError` when the map holds
@@ -110,7 +110,7 @@ class Map:
             raise
 
     @classmethod
-    def _read(cls, root: Path, conf: MapConfig, lock, write: bool) -> "Map":
+    def _read(cls, root: Path, conf: MapConfig, lock, write: bool) -> Map:
         """The map as its manifest names it. A reader holds no lock: when a writer commits (and
         removes the generation the reader's manifest named) while it reads, it reads again."""
         for attempt in range(READ_ATTEMPTS):

@@ -6,9 +6,9 @@ ground-truth loop matrix). Stamps: a folder whose file stems are all numbers lar
 """
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 

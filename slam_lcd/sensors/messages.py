@@ -12,13 +12,20 @@ import contextlib
 
 import numpy as np
 
-from ..errors import (CalibrationError, DamagedImageError, MessageEncodingError, PipelineError, SlamLcdError,
-                      in_context, stamp_text)
-from ..vision.camera import normalise_camera
+from ..errors import (
+    CalibrationError,
+    DamagedImageError,
+    MessageEncodingError,
+    PipelineError,
+    SlamLcdError,
+    in_context,
+    stamp_text,
+)
 from ..io.decode import decode_camera_info, decode_compressed_image, decode_image, decode_pose
 from ..types import CameraModel
-from .ground_truth import decode_ground_truth
+from ..vision.camera import normalise_camera
 from ..vision.gray import image_to_gray
+from .ground_truth import decode_ground_truth
 
 DEPTH_ENCODINGS = ("16UC1", "mono16", "32FC1")
 

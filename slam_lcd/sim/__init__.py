@@ -16,13 +16,19 @@ written as real log files. Public API:
 - :func:`world_surfaces` / :func:`demo_surfaces`: the world's planes as rectangles (the map cloud's truth).
 """
 from .demo_log import DemoLogInfo, loops_path_for, make_demo_log
-from .loops import (gt_cross_pairs, gt_loop_pairs, keyframe_indices, read_loop_pairs, shared_place_fraction,
-                    write_loop_pairs)
+from .loops import (
+    gt_cross_pairs,
+    gt_loop_pairs,
+    keyframe_indices,
+    read_loop_pairs,
+    shared_place_fraction,
+    write_loop_pairs,
+)
 from .odometry import OdometryNoise, end_drift, simulate_odometry
 from .render import render
 from .rig import T_body_camera, T_left_right, demo_camera
-from .surfaces import demo_surfaces, world_surfaces
 from .sessions import SESSIONS, SessionPreset, session_preset, session_start_ns, world_frame
+from .surfaces import demo_surfaces, world_surfaces
 from .trajectory import DemoPath, make_path, make_trajectory
 from .world import DemoWorld, Plane, build_world
 
