@@ -44,10 +44,10 @@ def correct_full_rate(
     ``kf_corrected_poses`` the optimised ones; both (K, 4, 4) aligned with ``kf_stamps``.
     """
     ks = np.asarray(kf_stamps, dtype=np.int64).reshape(-1)
-    O = np.asarray(kf_odom_poses, dtype=np.float64).reshape(-1, 4, 4)
+    odo = np.asarray(kf_odom_poses, dtype=np.float64).reshape(-1, 4, 4)
     X = np.asarray(kf_corrected_poses, dtype=np.float64).reshape(-1, 4, 4)
-    if not (len(ks) == len(O) == len(X)):
-        raise InputError(f"keyframe arrays differ in length: {len(ks)} stamps, {len(O)} odometry, {len(X)} corrected")
+    if not (len(ks) == len(odo) == len(X)):
+        raise InputError(f"keyframe arrays differ in length: {len(ks)} stamps, {len(odo)} odometry, {len(X)} corrected")
     if len(ks) == 0:
         raise InputError("full-rate correction needs at least one keyframe")
     if np.any(np.diff(ks) <= 0):
@@ -55,7 +55,7 @@ def correct_full_rate(
     t = odometry.stamps
     if len(t) and np.any(np.diff(t) < 0):
         raise UnsortedStampsError("odometry stamps go backwards")
-    C = X @ inv(O)  # world-frame corrections per keyframe
+    C = X @ inv(odo)  # world-frame corrections per keyframe
     # Segment of each stamp: k0 = last keyframe with stamp <= t (clipped to the ends).
     seg = np.searchsorted(ks, t, side="right") - 1
     before = seg < 0
@@ -64,7 +64,7 @@ def correct_full_rate(
     out = C[k0] @ odometry.poses
     inside = ~(before | after)
     if np.any(inside) and len(ks) > 1:
-        M = inv(C[:-1] @ O[1:]) @ X[1:]  # (K-1) mismatches
+        M = inv(C[:-1] @ odo[1:]) @ X[1:]  # (K-1) mismatches
         k = k0[inside]
         s = (t[inside] - ks[k]).astype(np.float64) / (ks[k + 1] - ks[k]).astype(np.float64)
         out[inside] = out[inside] @ _interp_batch(M[k], s)

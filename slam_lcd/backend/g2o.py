@@ -71,12 +71,12 @@ def read_g2o(
     for tag, rotation in (("VERTEX_SE3:QUAT", "quat"), ("VERTEX3", "rpy")):
         if rows[tag]:
             ids, T, _ = _parse_block(path, rows[tag], 1, rotation, None)
-            poses.update({int(i[0]): t for i, t in zip(ids, T)})
+            poses.update({int(i[0]): t for i, t in zip(ids, T, strict=True)})
     edges: list[G2oEdge] = []
     for tag, rotation, kind in (("EDGE_SE3:QUAT", "quat", "information"), ("EDGE3", "rpy", edge3_matrix)):
         if rows[tag]:
             ids, T, info = _parse_block(path, rows[tag], 2, rotation, kind)
-            edges += [G2oEdge(int(i), int(j), t, m) for (i, j), t, m in zip(ids, T, info)]
+            edges += [G2oEdge(int(i), int(j), t, m) for (i, j), t, m in zip(ids, T, info, strict=True)]
     return poses, edges
 
 

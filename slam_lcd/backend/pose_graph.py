@@ -264,7 +264,7 @@ class PoseGraph(GraphOutputs):
             res = self._isam.update(graph, gtsam.Values(), rm)
             for lp in remove:
                 lp.isam_index = None
-            for lp, idx in zip(add, res.getNewFactorsIndices()):
+            for lp, idx in zip(add, res.getNewFactorsIndices(), strict=True):
                 lp.isam_index = int(idx)
         for _ in range(self.conf.isam2_extra_updates_per_loop):
             self._isam.update()
@@ -332,7 +332,7 @@ class PoseGraph(GraphOutputs):
         # decide first, then change iSAM2 and the records together (an interrupt in between
         # leaves the records as iSAM2 is)
         stats, add, remove = [], [], []
-        for lp, wi, chi2 in zip(cands, res.weights, res.residual_chi2):
+        for lp, wi, chi2 in zip(cands, res.weights, res.residual_chi2, strict=True):
             stats.append((lp, float(wi), float(chi2)))
             inlier = wi >= self.conf.gnc_outlier_weight
             if inlier and lp.record.verdict == REJECTED:

@@ -86,7 +86,7 @@ def output_names(paths: Sequence[Path]) -> list[str]:
     parts = [[*(_safe(x) for x in p.resolve().parent.parts[1:]), _safe(_stem(p))] for p in paths]
     depth = [1] * len(paths)
     while True:
-        names = ["__".join(pp[-d:]) for pp, d in zip(parts, depth)]
+        names = ["__".join(pp[-d:]) for pp, d in zip(parts, depth, strict=True)]
         seen: dict[str, list[int]] = {}
         for i, n in enumerate(names):
             seen.setdefault(n, []).append(i)
@@ -114,7 +114,7 @@ def discover_logs(args: Iterable[str | Path]) -> list[LogEntry]:
     paths = expand_log_args(args)
     if not paths:
         raise InputError("no log given: name logs, folders of logs or glob patterns")
-    return [LogEntry(p, n) for p, n in zip(paths, output_names(paths))]
+    return [LogEntry(p, n) for p, n in zip(paths, output_names(paths), strict=True)]
 
 
 def ground_truth_in(gt_dir: Path, entry: LogEntry) -> Path | None:

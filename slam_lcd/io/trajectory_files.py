@@ -128,7 +128,7 @@ def _float_matrix(rows: list[list[str]], lines: list[int], path: Path) -> np.nda
     try:
         values = np.array(rows, dtype=np.float64)
     except ValueError:
-        for line, fields in zip(lines, rows):
+        for line, fields in zip(lines, rows, strict=True):
             for f in fields:
                 if not _is_float(f):
                     raise TrajectoryFormatError(f"value {f!r} is not a number", path, line) from None
@@ -230,7 +230,7 @@ def read_tum(path: str | Path) -> Trajectory:
     if not rows:
         raise TrajectoryFormatError("no poses in file", path)
     values = _float_matrix([r[1:] for r in rows], lines, path)
-    stamps = [_seconds_to_ns(r[0], path, ln) for ln, r in zip(lines, rows)]
+    stamps = [_seconds_to_ns(r[0], path, ln) for ln, r in zip(lines, rows, strict=True)]
     poses = _poses_from_quats(values[:, 0:3], values[:, 3:7], lines, path)
     return _finish(stamps, poses, lines, path)
 
@@ -242,7 +242,7 @@ def write_tum(path: str | Path, traj: Trajectory) -> None:
     quats = rot_to_quat(traj.poses[:, :3, :3])
     with atomic_write(path, "w", encoding="utf-8") as fh:
         fh.write("# timestamp tx ty tz qx qy qz qw\n")
-        for stamp, t, q in zip(traj.stamps.tolist(), traj.poses[:, :3, 3].tolist(), quats.tolist()):
+        for stamp, t, q in zip(traj.stamps.tolist(), traj.poses[:, :3, 3].tolist(), quats.tolist(), strict=True):
             fh.write(" ".join([ns_to_seconds_text(stamp), *map(repr, t), *map(repr, q)]) + "\n")
 
 
@@ -253,7 +253,7 @@ def read_kitti_times(path: str | Path) -> tuple[np.ndarray, list[int]]:
     """Read a KITTI ``times.txt`` (one stamp in seconds per line) → (ns stamps, line numbers)."""
     path = Path(path)
     lines, rows = _collect(path, 1, "(time in seconds)")
-    stamps = [_seconds_to_ns(r[0], path, ln) for ln, r in zip(lines, rows)]
+    stamps = [_seconds_to_ns(r[0], path, ln) for ln, r in zip(lines, rows, strict=True)]
     _check_sorted(stamps, lines, path)
     return np.asarray(stamps, dtype=np.int64), lines
 
@@ -317,7 +317,7 @@ def read_euroc(path: str | Path) -> Trajectory:
     if not rows:
         raise TrajectoryFormatError("no poses in file", path)
     values = _float_matrix([r[1:8] for r in rows], lines, path)
-    stamps = [_ns_text_to_ns(r[0], path, ln) for ln, r in zip(lines, rows)]
+    stamps = [_ns_text_to_ns(r[0], path, ln) for ln, r in zip(lines, rows, strict=True)]
     q_xyzw = values[:, [4, 5, 6, 3]]
     poses = _poses_from_quats(values[:, 0:3], q_xyzw, lines, path)
     return _finish(stamps, poses, lines, path)
@@ -330,7 +330,7 @@ def write_euroc(path: str | Path, traj: Trajectory) -> None:
     q_wxyz = rot_to_quat(traj.poses[:, :3, :3])[:, [3, 0, 1, 2]]
     with atomic_write(path, "w", encoding="utf-8") as fh:
         fh.write(EUROC_HEADER + "\n")
-        for stamp, t, q in zip(traj.stamps.tolist(), traj.poses[:, :3, 3].tolist(), q_wxyz.tolist()):
+        for stamp, t, q in zip(traj.stamps.tolist(), traj.poses[:, :3, 3].tolist(), q_wxyz.tolist(), strict=True):
             fh.write(",".join([str(stamp), *map(repr, t), *map(repr, q)]) + "\n")
 
 

@@ -300,7 +300,7 @@ def write_pr_csv(path: str | Path, results: Sequence[PRResult]) -> None:
     w = csv.writer(buf)
     w.writerow(["mode", "threshold", "precision", "recall"])
     for r in results:
-        for t, p, rc in zip(r.thresholds, r.precision, r.recall):
+        for t, p, rc in zip(r.thresholds, r.precision, r.recall, strict=True):
             w.writerow([r.mode, f"{t:.6f}", f"{p:.6f}", f"{rc:.6f}"])
     write_text(path, buf.getvalue())
 

@@ -38,7 +38,7 @@ def map_keyframes(manifest: MapManifest, sessions: list[SessionKeyframes]):
     from ..lcd.store import DescriptorSource
 
     dim = int(manifest.features.get("descriptor_dim", 0))
-    for meta, s in zip(manifest.sessions, sessions):
+    for meta, s in zip(manifest.sessions, sessions, strict=True):
         camera = camera_from_json(meta.get("camera"))
         T_bc = np.asarray(meta.get("T_body_camera", np.eye(4).tolist()), float)
         kind = manifest.features.get("kind", "superpoint")

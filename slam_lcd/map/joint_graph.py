@@ -225,7 +225,7 @@ def solve(sessions: list[SessionPoses], loops: list[JointLoop], conf: MapConfig 
     # 3. the graph: odometry and own loops of each session, inter-session loops; a prior per component
     known = gtsam.NonlinearFactorGraph()
     values = gtsam.Values()
-    for si, s in enumerate(sessions):
+    for s in sessions:
         for i, k in enumerate(s.ids):
             values.insert(int(k), gtsam.Pose3(init[int(k)]))
             if i:
@@ -235,7 +235,7 @@ def solve(sessions: list[SessionPoses], loops: list[JointLoop], conf: MapConfig 
     roots = {}
     for si in range(len(sessions)):
         roots.setdefault(comp[si], si)
-    for ci, si in roots.items():
+    for si in roots.values():
         k0 = int(sessions[si].ids[0])
         known.add(gtsam.PriorFactorPose3(k0, gtsam.Pose3(init[k0]),
                                          gtsam.noiseModel.Diagonal.Sigmas(np.r_[[1e-6] * 3, [1e-6] * 3])))
@@ -253,7 +253,7 @@ def solve(sessions: list[SessionPoses], loops: list[JointLoop], conf: MapConfig 
             start.add(f)
         values = solve_lm(start, values)
         res = gnc_loop_weights(known, factors, values, inlier_probability=gnc_inlier_probability)
-        for lp, w, c2 in zip(inter, res.weights, res.residual_chi2):
+        for lp, w, c2 in zip(inter, res.weights, res.residual_chi2, strict=True):
             if w < 0.5:
                 lp.accepted = False
                 lp.reason = f"gnc: outlier of the joint graph (weight {w:.2f}, residual chi2 {c2:.1f})"
@@ -270,7 +270,7 @@ def solve(sessions: list[SessionPoses], loops: list[JointLoop], conf: MapConfig 
 
 
 def _place(s: SessionPoses, A: np.ndarray, init: dict[int, np.ndarray]) -> None:
-    for k, T in zip(s.ids, s.T_init):
+    for k, T in zip(s.ids, s.T_init, strict=True):
         init[int(k)] = A @ T
 
 

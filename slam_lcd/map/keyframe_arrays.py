@@ -6,6 +6,7 @@ consecutive keyframes and the sha256 by which a log is recognised.
 from __future__ import annotations
 
 import hashlib
+from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
@@ -116,7 +117,7 @@ LINK = "link"  # the reason of a visual link between consecutive keyframes (not 
 def visual_links(detector, kf_ids: list[int]) -> list[JointLoop]:
     """Visual relative poses of consecutive keyframes (``map.visual_links``); pairs that do not verify get none."""
     out = []
-    for a, b in zip(kf_ids[:-1], kf_ids[1:]):
+    for a, b in pairwise(kf_ids):
         c = detector.verify_pair(b, a)
         if c is not None and np.all(np.isfinite(c.T_match_query)):
             out.append(JointLoop(int(b), int(a), np.asarray(c.T_match_query, float), np.asarray(c.information, float),

@@ -131,7 +131,7 @@ def localise(map_poses: dict[int, np.ndarray], session_of: dict[int, str], compo
     priors = [gtsam.PriorFactorPose3(i, gtsam.Pose3(kept[i][1]), information_noise(kept[i][0].information)) for i in order]
     if len(priors) >= 2:
         res = gnc_loop_weights(known, priors, values)
-        for i, w in zip(order, res.weights):
+        for i, w in zip(order, res.weights, strict=True):
             if w < 0.5:
                 reasons[i] = f"fix rejected by the joint solve (GNC weight {w:.2f})"
                 del kept[i]

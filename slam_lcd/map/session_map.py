@@ -187,7 +187,7 @@ class Map:
         return self.manifest.next_kf_id()
 
     def poses(self) -> dict[int, np.ndarray]:
-        return {int(k): T for k, T in zip(self.graph.kf_ids, self.graph.T_map)}
+        return {int(k): T for k, T in zip(self.graph.kf_ids, self.graph.T_map, strict=True)}
 
     def session_trajectory(self, index: int, frame: str = "map") -> Trajectory:
         """Session ``index``'s keyframes in its component's frame (``frame='map'``) or its own odometry."""
@@ -345,9 +345,9 @@ class Map:
                                                        gtsam.Pose3(inv(s.T_odom[i - 1]) @ s.T_odom[i]),
                                                        gtsam.noiseModel.Gaussian.Covariance(odometry_covariance(s.cov[i]))))
         g = self.graph
-        for q, mt, T, I, acc in zip(g.loop_query, g.loop_match, g.loop_T, g.loop_info, g.loop_accepted):
+        for q, mt, T, info, acc in zip(g.loop_query, g.loop_match, g.loop_T, g.loop_info, g.loop_accepted, strict=True):
             if acc:
-                graph.add(gtsam.BetweenFactorPose3(key(int(mt)), key(int(q)), gtsam.Pose3(T), information_noise(I)))
+                graph.add(gtsam.BetweenFactorPose3(key(int(mt)), key(int(q)), gtsam.Pose3(T), information_noise(info)))
         return graph, values
 
     # ------------------------------------------------------------------ localisation
@@ -357,7 +357,7 @@ class Map:
 
         poses = self.poses()
         session_of, component_of = {}, {}
-        for meta, s in zip(self.manifest.sessions, self.sessions):
+        for meta, s in zip(self.manifest.sessions, self.sessions, strict=True):
             for k in s.ids:
                 session_of[int(k)] = meta["name"]
                 component_of[int(k)] = int(meta["component"])
@@ -373,16 +373,16 @@ class Map:
         g = self.graph
         sess_of = {int(k): si for si, s in enumerate(self.sessions) for k in s.ids}
         out = []
-        for q, m_, T, I, acc, why in zip(g.loop_query, g.loop_match, g.loop_T, g.loop_info, g.loop_accepted,
-                                         g.loop_reason):
+        for q, m_, T, info, acc, why in zip(g.loop_query, g.loop_match, g.loop_T, g.loop_info, g.loop_accepted,
+                                            g.loop_reason, strict=True):
             inter = sess_of.get(int(q)) != sess_of.get(int(m_))
-            out.append(JointLoop(int(q), int(m_), T, I, inter, bool(acc), str(why)))
+            out.append(JointLoop(int(q), int(m_), T, info, inter, bool(acc), str(why)))
         return out
 
     def _session_poses(self) -> list[SessionPoses]:
         P = self.poses()
         out = []
-        for meta, s in zip(self.manifest.sessions, self.sessions):
+        for meta, s in zip(self.manifest.sessions, self.sessions, strict=True):
             T = np.array([P[int(k)] for k in s.ids]) if P else s.T_odom.copy()
             out.append(SessionPoses(meta["name"], s.ids, s.T_odom, s.cov, T.reshape(-1, 4, 4), int(meta["component"])))
         return out

@@ -42,7 +42,7 @@ def session_ates(m) -> dict[str, dict]:
         P_cat, G_cat = np.concatenate(P_all), np.concatenate(G_all)
         aligned = _aligned(P_cat, G_cat) if len(P_cat) >= 3 else None
         start = 0
-        for (i, n), P, G in zip(spans, P_all, G_all):
+        for (i, n), G in zip(spans, G_all, strict=True):
             s = m.sessions[i]
             name = m.manifest.sessions[i]["name"]
             ok = np.all(np.isfinite(s.T_gt[:, :3, 3]), axis=1)
@@ -63,7 +63,7 @@ def gt_alignment(m, component: int = 0):
 
     P, G = [], []
     poses = m.poses()
-    for meta, s in zip(m.manifest.sessions, m.sessions):
+    for meta, s in zip(m.manifest.sessions, m.sessions, strict=True):
         if int(meta["component"]) != component:
             continue
         ok = np.all(np.isfinite(s.T_gt[:, :3, 3]), axis=1)
@@ -82,7 +82,7 @@ def map_summary(m, joined=None, *, current: str | None = None, pipe=None) -> dic
     g = m.graph
     inter = []
     within = accepted_within = links = 0
-    for q, mt, acc, why in zip(g.loop_query, g.loop_match, g.loop_accepted, g.loop_reason):
+    for q, mt, acc, why in zip(g.loop_query, g.loop_match, g.loop_accepted, g.loop_reason, strict=True):
         a, b = sess_of.get(int(mt)), sess_of.get(int(q))
         if str(why) == "link":  # a visual link between consecutive keyframes, not a loop
             links += bool(acc)
@@ -99,7 +99,7 @@ def map_summary(m, joined=None, *, current: str | None = None, pipe=None) -> dic
     ates = session_ates(m)
     first_comp = int(m.manifest.sessions[0]["component"]) if m.manifest.sessions else 0
     sessions = []
-    for meta, s in zip(m.manifest.sessions, m.sessions):
+    for meta, s in zip(m.manifest.sessions, m.sessions, strict=True):
         name = meta["name"]
         n_inter = sum(1 for r in inter if r["accepted"] and name in (r["query_session"], r["match_session"]))
         entry = {"name": name, "keyframes": len(s), "component": int(meta["component"]),
@@ -165,9 +165,9 @@ def localisation_report(m, loc, gt=None) -> dict:
             G = interpolate_poses(gt.stamps, gt.poses, stamps[inside])[:, :3, 3]
             P = np.array([k.T_map[:3, 3] for k in ks])[inside] @ R.T + t
             err[inside] = np.linalg.norm(P - G, axis=1)
-        for k, e in zip(ks, err):
+        for k, e in zip(ks, err, strict=True):
             k.error_m = float(e) if np.isfinite(e) else None
-        e_loc = np.array([e for k, e in zip(ks, err) if k.localised and np.isfinite(e)])
+        e_loc = np.array([e for k, e in zip(ks, err, strict=True) if k.localised and np.isfinite(e)])
         e_all = err[np.isfinite(err)]
         out["errors"] = {"median_m": float(np.median(e_loc)) if len(e_loc) else None,
                          "max_m": float(e_loc.max()) if len(e_loc) else None,
