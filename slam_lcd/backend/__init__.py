@@ -1,4 +1,5 @@
-"""slam_lcd.backend: the GTSAM iSAM2 pose graph, robust loop handling (gates, GNC re-check), full-rate correction, g2o files.
+"""slam_lcd.backend: the GTSAM iSAM2 pose graph, robust loop handling (gates, GNC re-check), full-rate correction,
+g2o files.
 May import: gtsam and the base modules (types, errors, geometry, atomic); never io, sensors or another stage.
 
 Public API (see docs/CONTRACTS.md and docs/backend.md):

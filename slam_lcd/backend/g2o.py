@@ -63,7 +63,8 @@ def read_g2o(
             if tag not in need:
                 raise UnsupportedFormatError(f"line {n}: unsupported g2o record {tag!r} (3D SE3 graphs only)", path)
             if len(s) - 1 != need[tag]:
-                raise TrajectoryFormatError(f"bad {tag} record: expected {need[tag]} fields, got {len(s) - 1}", path, line=n)
+                raise TrajectoryFormatError(f"bad {tag} record: expected {need[tag]} fields, got {len(s) - 1}",
+                                            path, line=n)
             rows[tag].append((n, s[1:]))
     if not any(rows.values()):
         raise UnsupportedFormatError("no VERTEX/EDGE records found", path)

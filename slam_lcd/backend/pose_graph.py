@@ -3,7 +3,8 @@
 This module keeps iSAM2 and the Python-side lists in step; the decisions live in modules
 usable without a ``PoseGraph``: :mod:`.gate`: accept/reject one new loop (chi-square against the estimate, PCM pairwise
   tests), behind the small :class:`~slam_lcd.backend.gate.LoopGate` protocol; :mod:`.gnc`:
-  the batch GNC (TLS) re-check of the loop factors; :mod:`.loop_factors`: loop closures as ``BetweenFactorPose3`` with robust kernels.
+  the batch GNC (TLS) re-check of the loop factors; :mod:`.loop_factors`: loop closures as ``BetweenFactorPose3``
+  with robust kernels.
 
 Two ways to run:
 - **own graph** (default): one ``Pose3`` per keyframe, key = insertion index (or ``key(kf_id)``),
@@ -290,7 +291,9 @@ class PoseGraph(GraphOutputs):
                 g.push_back(f)
         return g
 
-    def batch_graph(self, loops: str = "accepted", robust: bool = False) -> tuple[gtsam.NonlinearFactorGraph, list[LoopEntry]]:
+    def batch_graph(
+        self, loops: str = "accepted", robust: bool = False
+    ) -> tuple[gtsam.NonlinearFactorGraph, list[LoopEntry]]:
         """Known factors + loops ('accepted', 'candidates' (accepted or turned away by the pairwise test) or 'all')."""
         g, chosen = self.known_factors(), [lp for lp in self._loops if self._selected(lp, loops)]
         for lp in chosen:
@@ -349,7 +352,8 @@ class PoseGraph(GraphOutputs):
                 rec = lp.record
                 rec.gnc_weight, rec.chi2_residual = wi, chi2
                 if id(lp) in add_ids and lp.isam_index is not None:
-                    lp.set_verdict(ACCEPTED, "gnc", f"restored by GNC re-check (weight {wi:.2f}, residual chi2 {chi2:.1f})")
+                    lp.set_verdict(ACCEPTED, "gnc",
+                                   f"restored by GNC re-check (weight {wi:.2f}, residual chi2 {chi2:.1f})")
                 elif id(lp) in remove_ids and lp.isam_index is None:
                     lp.set_verdict(REJECTED, "gnc", f"GNC (TLS) outlier: weight {wi:.2f}, residual chi2 {chi2:.1f}")
                 else:

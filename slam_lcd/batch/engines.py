@@ -167,7 +167,8 @@ class RayEngine(Engine):
         os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")  # offline machines: no usage report
         # workers import the same slam_lcd as the driver (a source checkout too)
         pkg_root = str(Path(__file__).resolve().parents[2])
-        path = os.pathsep.join(dict.fromkeys([pkg_root, *filter(None, os.environ.get("PYTHONPATH", "").split(os.pathsep))]))
+        inherited = filter(None, os.environ.get("PYTHONPATH", "").split(os.pathsep))
+        path = os.pathsep.join(dict.fromkeys([pkg_root, *inherited]))
         kwargs: dict = dict(include_dashboard=False, log_to_driver=False, configure_logging=False)
         if self.address == "local":
             kwargs.update(num_cpus=self.workers or os.cpu_count(), _node_ip_address="127.0.0.1",
@@ -243,7 +244,8 @@ def _ray_row(ray, ref, task: LogTask, config, since_ns: int) -> dict:
     except RayTaskError as e:  # run_task returns rows for failing logs: this is Ray's or the worker's failure
         return error_row(task.name, task.log, task.out_dir, f"{task.log}: the Ray task failed ({e.cause!r})")
     except Exception as e:  # worker or node lost after its retries, object lost ...
-        return error_row(task.name, task.log, task.out_dir, f"{task.log}: the Ray task failed ({type(e).__name__}: {e})")
+        return error_row(task.name, task.log, task.out_dir,
+                         f"{task.log}: the Ray task failed ({type(e).__name__}: {e})")
 
 
 def import_ray():

@@ -83,7 +83,8 @@ def make_engine(ray: str | None, workers: int | None, config: Config, *, ray_tem
     """The engine for ``--ray`` / ``--workers`` (None workers: one per core, at most one per log)."""
     if ray is not None:
         import_ray()  # an InputError before any work when Ray is missing
-        return RayEngine(ray, workers, cpus=config.batch.cpus_per_task, gpus=gpus_per_task(config.batch, config.features),
+        return RayEngine(ray, workers, cpus=config.batch.cpus_per_task,
+                         gpus=gpus_per_task(config.batch, config.features),
                          max_retries=config.batch.max_retries, temp_dir=ray_temp_dir)
     if workers is not None and workers < 1:
         raise InputError(f"--workers must be at least 1, got {workers}")

@@ -43,7 +43,8 @@ def summary_csv(rows: Sequence[dict]) -> str:
 
 def read_summary_csv(path: str | Path) -> list[dict]:
     """Rows of a summary.csv with numbers as numbers (empty cells: None)."""
-    ints = {"frames", "keyframes", "loops_proposed", "loops_verified", "loops_accepted", "loops_rejected", "false_loops"}
+    ints = {"frames", "keyframes", "loops_proposed", "loops_verified", "loops_accepted", "loops_rejected",
+            "false_loops"}
     floats = {"ate_before_m", "ate_after_m", "ate_ratio", "wall_s", "log_s", "realtime_factor"}
     rows = []
     with open(path, newline="", encoding="utf-8") as fh:
@@ -63,7 +64,8 @@ def summary_md(rows: Sequence[dict], *, engine: str, wall_s: float, interrupted:
     if interrupted:
         from ..interrupts import signal_name
 
-        lines += [f"**Interrupted ({signal_name()}): a partial summary.** Logs marked `interrupted` hold a result marked",
+        lines += [f"**Interrupted ({signal_name()}): a partial summary.** "
+                  "Logs marked `interrupted` hold a result marked",
                   "partial (or nothing); `cancelled` ones were not run. Run the same command again to finish.", ""]
     lines += [f"- {len(rows)} logs: " + ", ".join(f"{n} {s}" for s, n in counts.items()),
               f"- engine: {engine}; batch wall time {wall_s:.1f} s", "",
@@ -106,7 +108,8 @@ def plot_ate(rows: Sequence[dict], out: Path) -> bool:
     ax.bar(x - w / 2, [r["ate_before_m"] for r in have], w, label="odometry (before)", color="tab:orange")
     ax.bar(x + w / 2, [r["ate_after_m"] for r in have], w, label="corrected (after)", color="tab:blue")
     ax.set_xticks(x)
-    ax.set_xticklabels([r["name"] for r in have], rotation=30 if len(have) > 4 else 0, ha="right" if len(have) > 4 else "center")
+    ax.set_xticklabels([r["name"] for r in have], rotation=30 if len(have) > 4 else 0,
+                       ha="right" if len(have) > 4 else "center")
     aligns = sorted({r["alignment"] for r in have})
     ax.set_ylabel("ATE RMSE (m)")
     ax.set_title(f"ATE before / after loop closure per log ({', '.join(aligns)} alignment)")
@@ -129,11 +132,13 @@ def write_summary(out_dir: str | Path, rows: Sequence[dict], *, engine: str, wal
             not_done = [r["name"] for r in rows if r["status"] in ("interrupted", "cancelled")]
             from ..interrupts import signal_name
 
-            outputs.mark_partial(f"This batch was interrupted ({signal_name()}): the summary lists every log, but these did "
+            outputs.mark_partial(f"This batch was interrupted ({signal_name()}): the summary lists every log, "
+                                 "but these did "
                                  f"not finish: {', '.join(not_done) or '(none)'}. Run the same command again to "
                                  "finish them (logs with complete outputs are skipped).")
         write_text(outputs.staging / "summary.csv", summary_csv(rows))
-        write_text(outputs.staging / "summary.md", summary_md(rows, engine=engine, wall_s=wall_s, interrupted=interrupted))
+        write_text(outputs.staging / "summary.md",
+                   summary_md(rows, engine=engine, wall_s=wall_s, interrupted=interrupted))
         try:
             plot_ate(rows, outputs.staging / PLOT_NAME)
         except Exception as e:  # a plot must never cost the user the numbers

@@ -28,7 +28,9 @@ def ns_to_seconds(stamps_ns: np.ndarray) -> np.ndarray:
     return (st // 1_000_000_000).astype(np.float64) + (st % 1_000_000_000) / 1e9
 
 
-def nearest_indices(stamps_short: np.ndarray, stamps_long: np.ndarray, max_diff: float) -> tuple[np.ndarray, np.ndarray]:
+def nearest_indices(
+    stamps_short: np.ndarray, stamps_long: np.ndarray, max_diff: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Indices ``(i_short, i_long)`` of float-second stamps matched nearest-first within ``max_diff`` (evo's
     ``matching_time_indices``, vectorised).
 

@@ -128,7 +128,8 @@ class PoseErrorResult:
             text = (f"RPE w.r.t. {RELATION_TITLES[self.relation]}{unit} for delta = {self.delta:g} "
                     f"({DELTA_UNITS[self.delta_unit]}) using {'all' if self.all_pairs else 'consecutive'} pairs"
                     + (", pairs from the reference" if self.pairs_from_reference else ", pairs from the estimate"))
-        label = {"none": "not aligned", "scale": "scale corrected"}.get(self.alignment.mode, f"with {self.alignment.label}")
+        label = {"none": "not aligned", "scale": "scale corrected"}.get(self.alignment.mode,
+                                                                        f"with {self.alignment.label}")
         text += f" ({label}"
         if self.alignment.mode in ("se3", "sim3", "scale") and self.alignment.n_used < self.n_matched:
             text += f", aligned poses: {self.alignment.n_used}"
@@ -311,7 +312,8 @@ def rpe(
     t_offset: float = 0.0,
     n_to_align: int | None = None,
 ) -> PoseErrorResult:
-    """evo_rpe: associate, align, pick pairs (on the aligned estimate unless ``pairs_from_reference``), error per pair."""
+    """evo_rpe: associate, align, pick pairs (on the aligned estimate unless ``pairs_from_reference``),
+    error per pair."""
     if relation not in RPE_RELATIONS:
         raise AssociationError(f"unknown RPE pose relation {relation!r}; known: {', '.join(RPE_RELATIONS)}")
     if not delta > 0:

@@ -12,16 +12,23 @@ class FrontendConfig:
     kf_min_rotation_deg: float = 15.0  # degrees turned since the last keyframe
     kf_max_interval_s: float = 5.0  # seconds since the last keyframe (<= 0 disables)
     kf_min_interval_s: float = 0.0  # never two keyframes closer than this in time (rate cap)
-    kf_min_overlap: float = 0.15  # image overlap: keyframe when fewer than this fraction of the last keyframe's features is matched (<= 0 disables; ORB on adjacent demo frames gives ~0.35)
-    kf_overlap_max_descriptor_distance: float | None = None  # bound for overlap matching (None: SuperPoint 0.9, ORB 64 bits)
+    # image overlap: keyframe when fewer than this fraction of the last keyframe's features is matched
+    # (<= 0 disables; ORB on adjacent demo frames gives ~0.35)
+    kf_min_overlap: float = 0.15
+    # bound for overlap matching (None: SuperPoint 0.9, ORB 64 bits)
+    kf_overlap_max_descriptor_distance: float | None = None
     # --- odometry covariance (GTSAM order [rx ry rz tx ty tz], body frame) ---
-    odom_covariance: Literal["absolute", "relative", "model"] = "absolute"  # meaning of the cov given to push(): pose covariance, covariance of the motion since the previous push, or ignore it and use the motion model
-    odom_trans_sigma_per_m: float = 0.02  # motion model: translation sigma per metre travelled (used when no covariance is given)
+    # meaning of the cov given to push(): pose covariance, covariance of the motion since the previous push,
+    # or ignore it and use the motion model
+    odom_covariance: Literal["absolute", "relative", "model"] = "absolute"
+    # motion model: translation sigma per metre travelled (used when no covariance is given)
+    odom_trans_sigma_per_m: float = 0.02
     odom_rot_sigma_per_rad: float = 0.02  # motion model: rotation sigma (rad) per radian turned
     odom_min_sigma_trans: float = 0.002  # floor on each translation sigma of a relative motion (m)
     odom_min_sigma_rot_deg: float = 0.05  # floor on each rotation sigma of a relative motion (deg)
     # --- camera mounting ---
-    T_body_camera: list[float] | None = None  # 16 row-major numbers (or 7: x y z qx qy qz qw); None: from /tf_static, else identity
+    # 16 row-major numbers (or 7: x y z qx qy qz qw); None: from /tf_static, else identity
+    T_body_camera: list[float] | None = None
     body_frame: str = "base_link"  # body frame name for the /tf_static lookup
     camera_frame: str | None = None  # camera frame name (None: the CameraInfo header frame_id)
     # --- visual odometry (used only when the log has no odometry) ---

@@ -79,7 +79,8 @@ def stereo_disparities(feats: Features, left: np.ndarray, right: np.ndarray, ext
         return disp
     dx = feats.keypoints[:, 0][:, None] - fr.keypoints[:, 0][None, :]
     dy = np.abs(feats.keypoints[:, 1][:, None] - fr.keypoints[:, 1][None, :])
-    ok = (dy <= conf.stereo_max_row_diff_px) & (dx >= conf.stereo_min_disparity_px - 1.0) & (dx <= conf.stereo_max_disparity_px)
+    ok = ((dy <= conf.stereo_max_row_diff_px) & (dx >= conf.stereo_min_disparity_px - 1.0)
+          & (dx <= conf.stereo_max_disparity_px))
     dmax = DEFAULT_MAX_DISTANCE["uint8" if feats.descriptors.dtype == np.uint8 else "float"]
     if feats.descriptors.dtype == np.uint8:
         # only descriptor pairs inside the row band / disparity range are compared (masked matcher)

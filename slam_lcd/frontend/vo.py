@@ -250,7 +250,8 @@ class StereoOdometry(_FrameToKeyframeOdometry):
         return super().process(stamp_ns, image, right, features)
 
     def _points(self, feats: Features, left, right) -> tuple[np.ndarray, np.ndarray]:
-        return points_from_stereo(self.camera, self.baseline, feats, left, to_gray_uint8(right), self.extractor, self.conf)
+        return points_from_stereo(self.camera, self.baseline, feats, left, to_gray_uint8(right), self.extractor,
+                                  self.conf)
 
 
 def run_rgbd_odometry(camera, frames, conf=None, T_body_camera=None, extractor=None) -> VoResult:

@@ -150,12 +150,14 @@ def decode_camera_info(msg) -> CameraModel:
 
 
 def _pose_T(p, what):
-    return pose_from_tq((p.position.x, p.position.y, p.position.z), (p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w), what)
+    return pose_from_tq((p.position.x, p.position.y, p.position.z),
+                        (p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w), what)
 
 
 def transform_to_matrix(tr, what: str = "transform") -> np.ndarray:
     """geometry_msgs/Transform -> 4x4."""
-    return pose_from_tq((tr.translation.x, tr.translation.y, tr.translation.z), (tr.rotation.x, tr.rotation.y, tr.rotation.z, tr.rotation.w), what)
+    return pose_from_tq((tr.translation.x, tr.translation.y, tr.translation.z),
+                        (tr.rotation.x, tr.rotation.y, tr.rotation.z, tr.rotation.w), what)
 
 
 def decode_pose(msg) -> tuple[np.ndarray, np.ndarray | None]:
@@ -177,7 +179,8 @@ def decode_pose(msg) -> tuple[np.ndarray, np.ndarray | None]:
         return transform_to_matrix(msg, name), None
     if short == "Pose":
         return _pose_T(msg, name), None
-    raise MessageEncodingError(f"{name} is not a pose message (PoseStamped, PoseWithCovarianceStamped, Odometry, TransformStamped)")
+    raise MessageEncodingError(f"{name} is not a pose message "
+                               "(PoseStamped, PoseWithCovarianceStamped, Odometry, TransformStamped)")
 
 
 def header_stamp(msg) -> int:

@@ -69,7 +69,8 @@ def _from_topic(reader: LogReader, topic: str, with_covariance: bool) -> Traject
         try:
             T, cov = decode_pose(m.msg)
         except InvalidPoseError as e:
-            raise InvalidPoseError(f"topic {topic!r} message {i} (stamp {m.stamp} ns): {e.problem}", reader.path) from None
+            raise InvalidPoseError(f"topic {topic!r} message {i} (stamp {m.stamp} ns): {e.problem}",
+                                   reader.path) from None
         if i == 0:
             frame = m.msg.header.frame_id or frame
             child = getattr(m.msg, "child_frame_id", "") or child

@@ -138,11 +138,13 @@ class McapStreamBackend:
         encodings = {ch.message_encoding for ch in self.channels.values()}
         bad = encodings - {"cdr", "ros1"}
         if bad:
-            raise UnsupportedFormatError(f"MCAP message encoding(s) {sorted(bad)} not supported (only cdr and ros1)", path)
+            raise UnsupportedFormatError(f"MCAP message encoding(s) {sorted(bad)} not supported (only cdr and ros1)",
+                                         path)
         if len(encodings) > 1:
             raise UnsupportedFormatError("MCAP file mixes cdr and ros1 message encodings", path)
         self.ros1 = encodings == {"ros1"}
-        fmts = {"ros2msg": MessageDefinitionFormat.MSG, "ros1msg": MessageDefinitionFormat.MSG, "ros2idl": MessageDefinitionFormat.IDL}
+        fmts = {"ros2msg": MessageDefinitionFormat.MSG, "ros1msg": MessageDefinitionFormat.MSG,
+                "ros2idl": MessageDefinitionFormat.IDL}
         pseudo = []
         for ch in self.channels.values():
             sc = self.schemas.get(ch.schema_id)
@@ -150,7 +152,8 @@ class McapStreamBackend:
                 raise CorruptLogError(f"channel {ch.topic!r} has no schema", path)
             fmt = fmts.get(sc.encoding, MessageDefinitionFormat.NONE)
             data = sc.data.decode("utf-8", "replace") if isinstance(sc.data, (bytes, bytearray)) else sc.data
-            pseudo.append(Connection(ch.id, ch.topic, _normalise_type(sc.name), MessageDefinition(fmt, data), "", 0, None, None))
+            pseudo.append(Connection(ch.id, ch.topic, _normalise_type(sc.name), MessageDefinition(fmt, data), "", 0,
+                                     None, None))
         store = build_typestore(pseudo, ros1_store() if self.ros1 else ros2_store(), path)
         c.typestore = store
         self.deser = store.deserialize_ros1 if self.ros1 else store.deserialize_cdr

@@ -201,7 +201,8 @@ def pose_with_covariance_stamped_msg(T: np.ndarray, cov6x6: np.ndarray | None, s
     T = np.asarray(T, dtype=np.float64)
     pose = pose_msg(T)
     cov = gtsam_cov_to_ros(cov6x6, T[:3, :3])
-    return PoseWithCovarianceStamped(header=header(stamp_ns, frame_id), pose=PoseWithCovariance(pose=pose, covariance=cov))
+    return PoseWithCovarianceStamped(header=header(stamp_ns, frame_id),
+                                     pose=PoseWithCovariance(pose=pose, covariance=cov))
 
 
 def odometry_msg(T: np.ndarray, cov6x6: np.ndarray | None, stamp_ns: int, frame_id: str, child_frame_id: str):

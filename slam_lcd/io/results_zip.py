@@ -1,4 +1,5 @@
-"""evo's result archive (``--save_results res.zip``), so ``evo_res`` and ``evo.tools.file_interface.load_res_file`` read ours.
+"""evo's result archive (``--save_results res.zip``), so ``evo_res`` and ``evo.tools.file_interface.load_res_file``
+read ours.
 
 Layout (evo's ``save_res_file``): ``info.json`` (title, ref_name, est_name, label), ``stats.json``
 (rmse, mean, median, std, min, max, sse), one ``.npy`` per array (``error_array``,
@@ -37,7 +38,8 @@ def _safe_name(name: str) -> str:
 
 
 def write_evo_results(out: str | Path, result, *, ref_name: str = "reference", est_name: str = "estimate") -> Path:
-    """Write ``result`` (a :class:`slam_lcd.eval.relations.PoseErrorResult`, or anything with its fields) as an evo result zip."""
+    """Write ``result`` (a :class:`slam_lcd.eval.relations.PoseErrorResult`, or anything with its fields)
+    as an evo result zip."""
     out = Path(out)
     unit = result.unit or "none"
     info = {"title": result.title(), "ref_name": ref_name, "est_name": est_name,

@@ -55,7 +55,8 @@ class RosbagsBackend:
         for topic, cs in by_topic.items():
             types = {x.msgtype for x in cs}
             if len(types) > 1:
-                log.warning("%s: topic %s carries several types %s; using %s", path, topic, sorted(types), cs[0].msgtype)
+                log.warning("%s: topic %s carries several types %s; using %s", path, topic, sorted(types),
+                            cs[0].msgtype)
             c.topics[topic] = TopicInfo(topic, cs[0].msgtype, sum(max(x.msgcount, 0) for x in cs))
             c.conns[topic] = cs
         if c.message_count:

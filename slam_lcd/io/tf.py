@@ -98,13 +98,15 @@ class TfBuffer:
             child = ts.child_frame_id.lstrip("/")
             stamp = int(ts.header.stamp.sec) * 1_000_000_000 + int(ts.header.stamp.nanosec)
             if static:
-                self.add_transform(transform_to_matrix(ts.transform, f"transform {parent} -> {child}"), stamp, parent, child, True)
+                self.add_transform(transform_to_matrix(ts.transform, f"transform {parent} -> {child}"), stamp, parent,
+                                   child, True)
                 continue
             tr, ro = ts.transform.translation, ts.transform.rotation
             t = (float(tr.x), float(tr.y), float(tr.z))
             if not all(map(math.isfinite, t)):
                 raise InvalidPoseError(f"transform {parent} -> {child} at {stamp} ns has NaN/inf translation")
-            q = checked_quat(float(ro.x), float(ro.y), float(ro.z), float(ro.w), f"transform {parent} -> {child} rotation")
+            q = checked_quat(float(ro.x), float(ro.y), float(ro.z), float(ro.w),
+                             f"transform {parent} -> {child} rotation")
             self._edge(parent, child, False).add(stamp, t, q)
 
     def _edge(self, parent: str, child: str, static: bool) -> _Edge:
@@ -142,7 +144,8 @@ class TfBuffer:
             present = reader.topics
             wanted = [t for t in (*tf_topics, *static_topics) if t in present or t.lstrip("/") in present]
             if not wanted:
-                raise TfLookupError(f"log has none of the TF topics {list(tf_topics) + list(static_topics)}", reader.path)
+                raise TfLookupError(f"log has none of the TF topics {list(tf_topics) + list(static_topics)}",
+                                    reader.path)
             statics = {t.lstrip("/") for t in static_topics}
             for m in reader.messages(wanted):
                 buf.add(m.msg, static=m.topic.lstrip("/") in statics)

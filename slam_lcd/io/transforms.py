@@ -41,7 +41,9 @@ def pose_from_tq(t, q, what: str = "pose") -> np.ndarray:
     return T
 
 
-def tq_from_pose(T: np.ndarray, what: str = "pose") -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
+def tq_from_pose(
+    T: np.ndarray, what: str = "pose"
+) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
     """Translation and quaternion (x, y, z, w) of a 4x4 pose; refuses NaN/inf and non-rotations."""
     T = np.asarray(T, dtype=np.float64)
     if T.shape != (4, 4):

@@ -152,7 +152,8 @@ class McapLogWriter(LogWriter):
     def _write(self, topic, msgtype, data, log_time, ros1, typestore):
         data = _to_cdr(data, msgtype, ros1, typestore)
         self._seq += 1
-        self._w.add_message(self._channels[topic], log_time=log_time, data=bytes(data), publish_time=log_time, sequence=self._seq)
+        self._w.add_message(self._channels[topic], log_time=log_time, data=bytes(data), publish_time=log_time,
+                            sequence=self._seq)
 
     def close(self):
         self._w.finish()
@@ -215,7 +216,8 @@ class Rosbag1LogWriter(LogWriter):
     def _add_topic(self, topic, msgtype, typestore):
         store = ros1_store() if msgtype in ros1_store().fielddefs else typestore
         if store is None or msgtype not in store.fielddefs:
-            raise UnsupportedFormatError(f"message type {msgtype} has no ROS1 definition; cannot write it to a ROS1 bag")
+            raise UnsupportedFormatError(f"message type {msgtype} has no ROS1 definition; "
+                                         "cannot write it to a ROS1 bag")
         self._conns[topic] = self._w.add_connection(topic, msgtype, typestore=store)
 
     def _write(self, topic, msgtype, data, log_time, ros1, typestore):

@@ -1,4 +1,5 @@
-"""slam_lcd.lcd: loop-closure detection and verification (BoW candidates, graph verification, RANSAC, metric pose) and its evaluation.
+"""slam_lcd.lcd: loop-closure detection and verification (BoW candidates, graph verification, RANSAC, metric pose)
+and its evaluation.
 May import: vision, vocab, features and the base modules; never io or sensors (frames come in as arrays).
 
 Public API (docs/CONTRACTS.md): :func:`verify_graph` -> :class:`GraphVerdict`,

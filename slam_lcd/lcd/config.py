@@ -26,8 +26,10 @@ class LcdConfig:
 
     # --- matching ---
     # one-to-one (mutual nearest neighbour) matches; the ratio test is symmetric (distinct in both images)
-    match_ratio: float | None = None  # ratio test for the RANSAC-only chain (None: off; 0.9 measured lower: docs/lcd_pose.md)
-    graph_match_ratio: float | None = None  # ratio test for the graph chains: off, the graph rejects the outliers (paper III-E)
+    # ratio test for the RANSAC-only chain (None: off; 0.9 measured lower: docs/lcd_pose.md)
+    match_ratio: float | None = None
+    # ratio test for the graph chains: off, the graph rejects the outliers (paper III-E)
+    graph_match_ratio: float | None = None
     match_max_distance_sp: float | None = 0.8  # max L2 distance between SuperPoint descriptors (None: off)
     match_max_distance_orb: float | None = 64.0  # max Hamming distance between ORB descriptors (None: off)
     # 'all': every top-K candidate is verified and the one with the most verified
@@ -39,11 +41,14 @@ class LcdConfig:
     # false loop that 'all' rejects (docs/lcd.md). Evaluation (run_all_checks) always verifies all.
     verify_until: Literal["auto", "all", "first_accepted"] = "auto"
     verify_max_matches: int = 400  # budget: at most this many one-to-one matches go to graph/RANSAC/pose (0: all)
-    verify_spread_cells: int = 4  # budget picks the best by distance round-robin over an NxN grid of the query image (0: globally best)
+    # budget picks the best by distance round-robin over an NxN grid of the query image (0: globally best)
+    verify_spread_cells: int = 4
 
     # --- what is kept of past keyframes ---
-    descriptor_dtype: Literal["float16", "float32"] = "float16"  # SuperPoint descriptors kept (and matched) in this precision
-    descriptor_storage: Literal["memory", "disk"] = "disk"  # past descriptors in an anonymous temp file ($TMPDIR; ~12 kB/keyframe resident) or in RAM
+    # SuperPoint descriptors kept (and matched) in this precision
+    descriptor_dtype: Literal["float16", "float32"] = "float16"
+    # past descriptors in an anonymous temp file ($TMPDIR; ~12 kB/keyframe resident) or in RAM
+    descriptor_storage: Literal["memory", "disk"] = "disk"
 
     # --- graph verification (paper III-E) ---
     graph_min_matches: int = 20  # fewer one-to-one matches than this: reject before building a graph
@@ -55,8 +60,11 @@ class LcdConfig:
     graph_remove_fraction: float = 0.2  # at most this fraction of the violating nodes is removed per iteration
     graph_max_iterations: int = 50  # cap on pruning rounds
     graph_min_separation_px: float = 2.0  # merge matched points closer than this (duplicates break triangulation)
-    graph_knn: int = 8  # >0: a node's neighbourhood test is the overlap of its k nearest matched neighbours in both images (0: Delaunay neighbour Jaccard)
-    graph_early_exit: bool = True  # stop pruning once the node ratio can no longer be reached (same decisions, less work)
+    # >0: a node's neighbourhood test is the overlap of its k nearest matched neighbours in both images
+    # (0: Delaunay neighbour Jaccard)
+    graph_knn: int = 8
+    # stop pruning once the node ratio can no longer be reached (same decisions, less work)
+    graph_early_exit: bool = True
 
     # --- geometric verification (essential matrix) ---
     ransac_threshold_px: float = 2.0  # Sampson/epipolar RANSAC threshold in pixels
@@ -67,7 +75,9 @@ class LcdConfig:
 
     # --- metric relative pose ---
     pnp_threshold_px: float = 3.0  # PnP-RANSAC reprojection threshold in pixels
-    pnp_min_inliers: int = 40  # PnP inliers required for a metric pose (ORB-SLAM accepts a loop at 40 matched points after Sim3 refinement; on the demo every true loop had >= 46, every false one <= 45)
+    # PnP inliers required for a metric pose (ORB-SLAM accepts a loop at 40 matched points after Sim3
+    # refinement; on the demo every true loop had >= 46, every false one <= 45)
+    pnp_min_inliers: int = 40
     pnp_max_rms_px: float = 2.0  # reject a pose whose refined reprojection RMS exceeds this
     # fewer PnP inliers than pnp_min_inliers are accepted down to this many when the pose is tight:
     # the inliers are at least pnp_tight_min_share of the matched 3-D points and the pose's 1-sigma

@@ -183,7 +183,8 @@ class LoopDetector:
         return kf.features
 
     def _match(self, dq: np.ndarray, dm: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """One-to-one matches, distances and symmetric ratios (None when no ratio test is on; ``mutual_nn_match_symmetric``)."""
+        """One-to-one matches, distances and symmetric ratios (None when no ratio test is on;
+        ``mutual_nn_match_symmetric``)."""
         c = self.conf
         binary = dq.dtype == np.uint8
         max_d = c.match_max_distance_orb if binary else c.match_max_distance_sp
@@ -245,8 +246,8 @@ class LoopDetector:
         light = Keyframe(id=kf.id, stamp=kf.stamp, T_world_body=np.array(kf.T_world_body, float), camera=camera,
                          T_body_camera=np.array(kf.T_body_camera, float), features=kept,
                          landmarks=landmarks)
-        entry = StoredKeyframe(kf.id, int(kf.stamp), position, kept, camera, light.T_body_camera, points3d, source, light,
-                       path_m)
+        entry = StoredKeyframe(kf.id, int(kf.stamp), position, kept, camera, light.T_body_camera, points3d, source,
+                               light, path_m)
         clock.lap("points3d")
 
         closures: list[LoopClosure] = []
@@ -306,7 +307,9 @@ class LoopDetector:
         positions = {cand.match_id: self._entries[cand.match_id].position for cand in candidates}
         return verification_order(candidates, positions, self.conf)
 
-    def _verify_candidates(self, entry: StoredKeyframe, desc: np.ndarray, candidates, clock: PartClock) -> list[CandidateRecord]:
+    def _verify_candidates(
+        self, entry: StoredKeyframe, desc: np.ndarray, candidates, clock: PartClock
+    ) -> list[CandidateRecord]:
         """Verify a query's candidates; stops at the first accepted one when ``verify_until`` says so.
 
         With islands, an island whose member was accepted verifies none of its other members
@@ -318,7 +321,8 @@ class LoopDetector:
         done_islands: set[int] = set()
         for member in self._verification_order(candidates):
             cand, rank = member.candidate, member.rank
-            if (stop and any(r.accepted for r in records)) or (member.island in done_islands and not self.run_all_checks):
+            if ((stop and any(r.accepted for r in records))
+                    or (member.island in done_islands and not self.run_all_checks)):
                 # bounded work per keyframe: the BoW ranking already put the likeliest first
                 records.append(CandidateRecord(entry.id, cand.match_id, rank, float(cand.bow_score),
                                                reason="skipped_after_accept", query_stamp=entry.stamp,
@@ -363,7 +367,8 @@ class LoopDetector:
         need_graph = self.run_all_checks or mode in ("graph", "graph+ransac")
         need_ransac = self.run_all_checks or mode == "ransac"
         checks = check_pair(q.features, m.features, q_desc, m_desc, q.camera, m.camera, c,
-                            graph=need_graph, ransac=need_ransac, graph_ransac=self.run_all_checks or mode == "graph+ransac",
+                            graph=need_graph, ransac=need_ransac,
+                            graph_ransac=self.run_all_checks or mode == "graph+ransac",
                             match=self._match, clock=clock)
         rec.n_matches, rec.n_verified = checks.n_matches, checks.n_verified
         rec.graph, rec.ransac, rec.ransac_on_graph = checks.graph, checks.ransac, checks.ransac_on_graph

@@ -257,7 +257,8 @@ def place_recall(records: Iterable[CandidateRecord], gt: np.ndarray, mode: str,
 def format_table(results: Sequence[PRResult], features: str,
                  places: dict[str, tuple[int, int]] | None = None) -> str:
     """One line per mode: R@100P, PR AUC, precision / recall of all detections (and places found)."""
-    head = f"{'features':<11} {'verification':<16} {'R@100P':>7} {'AUC':>6} {'precision':>9} {'recall':>7} {'detections':>10}"
+    head = (f"{'features':<11} {'verification':<16} {'R@100P':>7} {'AUC':>6} "
+            f"{'precision':>9} {'recall':>7} {'detections':>10}")
     lines = [head + (f" {'places':>8}" if places else "")]
     for r in results:
         label = "BoW only" if r.mode == "none" else f"BoW+{r.mode}"

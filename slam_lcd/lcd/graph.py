@@ -175,7 +175,8 @@ def _directional(src: np.ndarray, dst: np.ndarray, tri: np.ndarray, edges: np.nd
 
 
 def knn_overlap(pq: np.ndarray, pm: np.ndarray, k: int) -> np.ndarray:
-    """Per node: share of its ``k`` nearest matched neighbours in one image that are also among its ``k`` nearest in the other.
+    """Per node: share of its ``k`` nearest matched neighbours in one image that are also among its ``k`` nearest
+    in the other.
 
     Symmetric in the two images. Unlike the neighbours of a Delaunay graph, which change
     wherever four points are nearly cocircular (any perspective change flips such edges),

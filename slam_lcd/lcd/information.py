@@ -20,8 +20,8 @@ covariance
   Jacobian with respect to the point;
 
 and, because the pose comes from *unweighted* Gauss-Newton, the sandwich information
-``Info = H M^-1 H / k`` with ``H = sum J_i^T J_i`` and ``M = sum J_i^T C_i J_i``, where ``k >= 1`` inflates for few inliers
-(``1 + few_inliers_ref / N``) and for inliers clustered in a small part of the image
+``Info = H M^-1 H / k`` with ``H = sum J_i^T J_i`` and ``M = sum J_i^T C_i J_i``, where ``k >= 1`` inflates for
+few inliers (``1 + few_inliers_ref / N``) and for inliers clustered in a small part of the image
 (coverage = the inliers' spread against a uniform spread over the image; below
 ``cluster_coverage`` ``k`` grows as ``(coverage / cluster_coverage)^-1/2``, at most
 ``max_cluster_inflation``). The constants below were calibrated

@@ -78,5 +78,6 @@ def verification_order(candidates, positions: dict[int, int], conf) -> list[Isla
     ``positions``: each candidate's keyframe position in the database (islands are runs of
     neighbouring positions)."""
     if not conf.islands:
-        return [IslandMember(cand, rank, rank, float(cand.bow_score)) for rank, cand in enumerate(candidates[:conf.top_k])]
+        return [IslandMember(cand, rank, rank, float(cand.bow_score))
+                for rank, cand in enumerate(candidates[:conf.top_k])]
     return group_islands(candidates[:conf.island_pool], positions, conf.top_k, conf.island_gap, conf.island_tries)

@@ -42,7 +42,8 @@ class PairChecks:
 
 def _fingerprint(feats: Features, desc: np.ndarray) -> tuple:
     kp = np.asarray(feats.keypoints, dtype=np.float64)
-    return (len(kp), float(kp.sum()) if len(kp) else 0.0, float(np.abs(kp[:, 0] - 0.5 * kp[:, 1]).sum()) if len(kp) else 0.0,
+    return (len(kp), float(kp.sum()) if len(kp) else 0.0,
+            float(np.abs(kp[:, 0] - 0.5 * kp[:, 1]).sum()) if len(kp) else 0.0,
             bytes(np.ascontiguousarray(desc[:4]).tobytes()))
 
 

@@ -83,7 +83,8 @@ class CandidateRecord:
         return f"ransac:{check.reason if check else 'not_run'}"
 
     def support(self, mode: str) -> float:
-        """Verified correspondences under ``mode`` (BoW score for 'none'): picks the best of a query's passing candidates."""
+        """Verified correspondences under ``mode`` (BoW score for 'none'): picks the best of a query's passing
+        candidates."""
         if mode == "ransac" and self.ransac is not None:
             return float(self.ransac.inliers)
         if mode == "graph" and self.graph is not None:

@@ -90,7 +90,8 @@ class _Segments:
         Pairs whose padded boxes are disjoint are rejected first; the rest get the same float64
         expressions as the all-pairs reference (sign of the cross products, strict tests).
         """
-        box = (self.x0[i] <= self.x1[j]) & (self.x0[j] <= self.x1[i]) & (self.y0[i] <= self.y1[j]) & (self.y0[j] <= self.y1[i])
+        box = ((self.x0[i] <= self.x1[j]) & (self.x0[j] <= self.x1[i])
+               & (self.y0[i] <= self.y1[j]) & (self.y0[j] <= self.y1[i]))
         ai, bi, aj, bj = self.a[i], self.b[i], self.a[j], self.b[j]
         box &= (ai != aj) & (ai != bj) & (bi != aj) & (bi != bj)
         out = np.zeros(len(i), bool)

@@ -101,7 +101,8 @@ class _Chain:
         for i in range(1, n):
             d = float(np.linalg.norm(s.T_odom[i, :3, 3] - s.T_odom[i - 1, :3, 3]))
             own = odometry_covariance(s.cov[i]) if np.all(np.isfinite(s.cov[i])) else np.zeros((6, 6))
-            floor = np.diag(np.r_[[(conf.pcm_sigma_rot_per_m ** 2) * d] * 3, [(conf.pcm_sigma_trans_per_m ** 2) * d] * 3])
+            floor = np.diag(np.r_[[(conf.pcm_sigma_rot_per_m ** 2) * d] * 3,
+                                  [(conf.pcm_sigma_trans_per_m ** 2) * d] * 3])
             steps[i] = own + floor
         self.prefix = np.cumsum(steps, axis=0)
         self.index = {int(k): i for i, k in enumerate(s.ids)}
@@ -244,7 +245,8 @@ def solve(sessions: list[SessionPoses], loops: list[JointLoop], conf: MapConfig 
             known.add(gtsam.BetweenFactorPose3(lp.match, lp.query, gtsam.Pose3(lp.T), information_noise(lp.info)))
     inter = [lp for lp in loops if lp.inter and lp.accepted]
     if inter:
-        factors = [gtsam.BetweenFactorPose3(lp.match, lp.query, gtsam.Pose3(lp.T), information_noise(lp.info)) for lp in inter]
+        factors = [gtsam.BetweenFactorPose3(lp.match, lp.query, gtsam.Pose3(lp.T), information_noise(lp.info))
+                   for lp in inter]
         # GNC starts from the optimum with every PCM-consistent loop: the initial values (each session's
         # own estimate, placed by one loop) can be far from what the visual links say, and TLS started
         # there turned every loop of a consistent set into an outlier

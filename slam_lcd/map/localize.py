@@ -106,7 +106,8 @@ def localise(map_poses: dict[int, np.ndarray], session_of: dict[int, str], compo
             D = inv(rel_odo) @ rel_map
             d = abs(path[j] - path[i])
             if (np.linalg.norm(D[:3, 3]) <= conf.localize_max_disagreement_m * 0.5 + DRIFT_PER_M * d
-                    and rotation_angle_deg(D[:3, :3]) <= conf.localize_max_disagreement_deg * 0.5 + DRIFT_DEG_PER_M * d):
+                    and rotation_angle_deg(D[:3, :3])
+                    <= conf.localize_max_disagreement_deg * 0.5 + DRIFT_DEG_PER_M * d):
                 support += 1
         if support:
             kept[i] = (c, Ti)
@@ -128,7 +129,8 @@ def localise(map_poses: dict[int, np.ndarray], session_of: dict[int, str], compo
         if i:
             noise = gtsam.noiseModel.Gaussian.Covariance(odometry_covariance(cov[i]))
             known.add(gtsam.BetweenFactorPose3(i - 1, i, gtsam.Pose3(inv(T_odom[i - 1]) @ T_odom[i]), noise))
-    priors = [gtsam.PriorFactorPose3(i, gtsam.Pose3(kept[i][1]), information_noise(kept[i][0].information)) for i in order]
+    priors = [gtsam.PriorFactorPose3(i, gtsam.Pose3(kept[i][1]), information_noise(kept[i][0].information))
+              for i in order]
     if len(priors) >= 2:
         res = gnc_loop_weights(known, priors, values)
         for i, w in zip(order, res.weights, strict=True):

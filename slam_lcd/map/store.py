@@ -227,8 +227,9 @@ def write_lock(root: Path, timeout_s: float = 60.0) -> Iterator[None]:
 def remove_unlisted(root: Path, manifest: MapManifest | None) -> None:
     """Remove files of ours that the manifest does not name (a failed append's, an old graph). Under the lock."""
     keep = set(manifest.files) if manifest else set()
-    for path in list(root.glob("graph-*.npz")) + list(root.glob("vocab-*.npz")) + list((root / "sessions").glob("*.npz")) + \
-            list(root.glob(".*.tmp")) + list((root / "sessions").glob(".*.tmp")):
+    for path in (list(root.glob("graph-*.npz")) + list(root.glob("vocab-*.npz"))
+                 + list((root / "sessions").glob("*.npz"))
+                 + list(root.glob(".*.tmp")) + list((root / "sessions").glob(".*.tmp"))):
         rel = path.relative_to(root).as_posix()
         if rel not in keep:
             with contextlib.suppress(OSError):

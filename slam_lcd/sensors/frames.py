@@ -48,7 +48,9 @@ def folder_frames(folder: str | Path, exclude=()) -> tuple[list[str], list[int],
     return [p.name for p in files], stamps, gen()
 
 
-def log_frames(path: str | Path, topic: str, camera_info_topic: str | None = None) -> tuple[list[str], list[int], list[Frame]]:
+def log_frames(
+    path: str | Path, topic: str, camera_info_topic: str | None = None
+) -> tuple[list[str], list[int], list[Frame]]:
     """All frames of an image (or compressed image) topic of a bag/MCAP file, in time order."""
     frames: list[Frame] = []
     camera = None

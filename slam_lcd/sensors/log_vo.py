@@ -70,7 +70,8 @@ def visual_odometry_from_log(path, conf: FrontendConfig | None = None, *, image_
     """
     conf = conf or FrontendConfig()
     if (depth_topic is None) == (right_topic is None):
-        raise PipelineError("visual odometry needs exactly one of a depth topic (RGB-D) or a right image topic (stereo)")
+        raise PipelineError("visual odometry needs exactly one of a depth topic (RGB-D) "
+                            "or a right image topic (stereo)")
     mode = "rgbd" if depth_topic else "stereo"
     aux_topic = depth_topic or right_topic
     info_topic = camera_info_topic or camera_info_topic_of(image_topic)

@@ -33,7 +33,8 @@ from .trajectory import DemoPath, make_path, make_trajectory
 from .world import DemoWorld, Plane, build_world
 
 __all__ = [
-    "DemoLogInfo", "DemoPath", "DemoWorld", "OdometryNoise", "Plane", "SESSIONS", "SessionPreset", "T_body_camera", "demo_surfaces", "world_surfaces",
+    "DemoLogInfo", "DemoPath", "DemoWorld", "OdometryNoise", "Plane", "SESSIONS", "SessionPreset", "T_body_camera",
+    "demo_surfaces", "world_surfaces",
     "T_left_right", "build_world", "demo_camera", "end_drift", "gt_cross_pairs", "gt_loop_pairs", "keyframe_indices",
     "loops_path_for", "make_demo_log", "make_path", "make_trajectory", "read_loop_pairs", "render",
     "session_preset", "session_start_ns", "shared_place_fraction", "simulate_odometry", "world_frame",

@@ -375,7 +375,10 @@ def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int |
         calib_path = L.camchain_path_for(out)
         L.write_camchain(calib_path, er)
     pairs = gt_loop_pairs(sc.gt_cam, T_body_camera=sc.T_bc)
-    lp = Path(loops_csv) if loops_csv is not None else (out / "loop_pairs.csv" if fmt == "folder" else loops_path_for(out))
+    if loops_csv is not None:
+        lp = Path(loops_csv)
+    else:
+        lp = out / "loop_pairs.csv" if fmt == "folder" else loops_path_for(out)
     write_loop_pairs(lp, sc.gt_cam, pairs, T_body_camera=sc.T_bc)
     duration = (sc.cam_stamps[-1] - sc.cam_stamps[0]) * 1e-9
     topics = {}
@@ -417,7 +420,8 @@ def _write_log(out, fmt, sc: _Scenario, frames_iter, *, depth, stereo, compresse
             statics.append((sc.T_bc @ rig.T_left_right(rig.STEREO_BASELINE), t0, rig.BODY_FRAME, right_frame))
         put(w, "/tf_static", M.tf_message(statics), t0)
         # merge camera frames and odometry samples in time order (camera first at equal stamps)
-        events = [(int(s), 0, i) for i, s in enumerate(sc.cam_stamps)] + [(int(s), 1, i) for i, s in enumerate(sc.odo_stamps)]
+        events = ([(int(s), 0, i) for i, s in enumerate(sc.cam_stamps)]
+                  + [(int(s), 1, i) for i, s in enumerate(sc.odo_stamps)])
         events.sort()
         frames_iter = iter(frames_iter)
         for stamp, kind, i in events:
@@ -426,7 +430,8 @@ def _write_log(out, fmt, sc: _Scenario, frames_iter, *, depth, stereo, compresse
                 assert fi == cam_index[stamp]
                 put(w, "/camera/camera_info", M.camera_info_msg(left_cam, stamp, cam_frame), stamp)
                 if compressed:
-                    put(w, "/camera/image_raw/compressed", M.compressed_image_msg(img, stamp, cam_frame, "jpeg", conf.jpeg_quality), stamp)
+                    put(w, "/camera/image_raw/compressed",
+                        M.compressed_image_msg(img, stamp, cam_frame, "jpeg", conf.jpeg_quality), stamp)
                 else:
                     put(w, "/camera/image_raw", M.image_msg(img, stamp, cam_frame), stamp)
                 if dep is not None:
@@ -439,7 +444,8 @@ def _write_log(out, fmt, sc: _Scenario, frames_iter, *, depth, stereo, compresse
                     else:
                         put(w, "/camera/right/image_raw", M.image_msg(right, stamp, right_frame), stamp)
             else:
-                put(w, "/odom", M.odometry_msg(odo.poses[i], odo.covariances[i], stamp, rig.ODOM_FRAME, rig.BODY_FRAME), stamp)
+                put(w, "/odom",
+                    M.odometry_msg(odo.poses[i], odo.covariances[i], stamp, rig.ODOM_FRAME, rig.BODY_FRAME), stamp)
                 put(w, "/ground_truth/pose", M.pose_stamped_msg(gt.poses[i], stamp, sc.world_frame), stamp)
         counts = dict(w.counts)
     return {t: (types[t], n) for t, n in counts.items()}
@@ -491,7 +497,8 @@ def _write_folder(out: Path, sc: _Scenario, frames_iter, *, color, depth, stereo
                 cv2.imwrite(str(tmp / "depth" / f"{name}.png"), mm)
                 lists["depth"].append(name)
             if right is not None:
-                cv2.imwrite(str(tmp / "right" / f"{name}.png"), cv2.cvtColor(right, cv2.COLOR_RGB2BGR) if right.ndim == 3 else right)
+                cv2.imwrite(str(tmp / "right" / f"{name}.png"),
+                            cv2.cvtColor(right, cv2.COLOR_RGB2BGR) if right.ndim == 3 else right)
                 lists["right"].append(name)
         for key, names in lists.items():
             text = f"# {key} images of the slam-lcd demo world\n# timestamp filename\n"

@@ -47,7 +47,8 @@ def demo_keyframes(extractor, *, laps: float = 2.0, rate_hz: float = 1.0, width:
     T_bc = T_body_camera()
     T_lr = T_left_right(cam.baseline) if sensor == "stereo" else None
     fc = FeatureCache(extractor) if cache else None
-    virtual_log = cache_dir() / "sim" / f"demo-keyframes-seed{seed}-laps{laps:g}-{rate_hz:g}hz-{width}x{height}-v{__version__}"
+    virtual_log = (cache_dir() / "sim"
+                   / f"demo-keyframes-seed{seed}-laps{laps:g}-{rate_hz:g}hz-{width}x{height}-v{__version__}")
     kfs = []
     for k in range(len(traj)):
         T_wc = traj.poses[k] @ T_bc

@@ -142,11 +142,14 @@ def loop_pair_table(traj: Trajectory, pairs: np.ndarray, T_body_camera: np.ndarr
         d = np.linalg.norm(T[i, :3, 3] - T[j, :3, 3], axis=1)
         a = _angles_deg(T[i, :3, :3], T[j, :3, :3])
         for k in range(len(pairs)):
-            rows.append((int(i[k]), int(j[k]), int(traj.stamps[i[k]]), int(traj.stamps[j[k]]), float(d[k]), float(a[k])))
+            rows.append((int(i[k]), int(j[k]), int(traj.stamps[i[k]]), int(traj.stamps[j[k]]),
+                         float(d[k]), float(a[k])))
     return rows
 
 
-def write_loop_pairs(path: str | Path, traj: Trajectory, pairs: np.ndarray, T_body_camera: np.ndarray | None = None) -> Path:
+def write_loop_pairs(
+    path: str | Path, traj: Trajectory, pairs: np.ndarray, T_body_camera: np.ndarray | None = None
+) -> Path:
     """Write loop pairs as CSV (see module docstring), atomically."""
     path = Path(path)
     with atomic_write(path, "w", encoding="utf-8", newline="\n") as fh:

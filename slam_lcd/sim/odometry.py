@@ -70,7 +70,8 @@ def _gauss_markov(rng, n: int, dt: float, sigma: float, tau: float) -> np.ndarra
 
 def _noise_free_end(biases, x0, y0, th0, dx, dy, dth, dt) -> np.ndarray:
     """End positions (B, 2) of dead reckoning with each constant yaw-rate bias in ``biases``."""
-    th = th0 + np.concatenate([np.zeros((len(biases), 1)), np.cumsum(dth[None] + biases[:, None] * dt[None], axis=1)], 1)[:, :-1]
+    turned = np.cumsum(dth[None] + biases[:, None] * dt[None], axis=1)
+    th = th0 + np.concatenate([np.zeros((len(biases), 1)), turned], 1)[:, :-1]
     c, s = np.cos(th), np.sin(th)
     return np.column_stack([x0 + (c * dx - s * dy).sum(1), y0 + (s * dx + c * dy).sum(1)])
 
@@ -183,4 +184,5 @@ def end_drift(gt: Trajectory, odom: Trajectory) -> dict:
     cov = odom.covariances[-1] if odom.covariances is not None else None
     sigma = float(np.sqrt(cov[3, 3] + cov[4, 4])) if cov is not None else float("nan")
     return {"end_error_m": err, "path_length_m": length, "drift_percent": 100.0 * err / max(length, 1e-9),
-            "end_yaw_error_deg": dyaw, "end_sigma_m": sigma, "error_over_sigma": err / sigma if sigma > 0 else float("nan")}
+            "end_yaw_error_deg": dyaw, "end_sigma_m": sigma,
+            "error_over_sigma": err / sigma if sigma > 0 else float("nan")}

@@ -22,7 +22,9 @@ CAMERA_FRAME = "camera_optical_frame"
 RIGHT_CAMERA_FRAME = "camera_right_optical_frame"
 
 
-def demo_camera(width: int = 640, height: int = 480, hfov_deg: float = 70.0, baseline: float | None = None) -> CameraModel:
+def demo_camera(
+    width: int = 640, height: int = 480, hfov_deg: float = 70.0, baseline: float | None = None
+) -> CameraModel:
     """Pinhole camera without distortion; focal length from the horizontal field of view.
 
     At 640x480 and 70 degrees: fx = fy = 457.0, principal point at the image centre.

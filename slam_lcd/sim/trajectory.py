@@ -24,7 +24,8 @@ WAYPOINTS = {
     # counter-clockwise around block A (block on the robot's left)
     "laps": [(1.5, 1.5), (12.5, 1.5), (12.5, 12.5), (1.5, 12.5)],
     # around A counter-clockwise, then around B clockwise, north through the middle corridor both times
-    "figure8": [(12.5, 1.5), (12.5, 12.5), (1.5, 12.5), (1.5, 1.5), (12.5, 1.5), (12.5, 12.5), (23.5, 12.5), (23.5, 1.5)],
+    "figure8": [(12.5, 1.5), (12.5, 12.5), (1.5, 12.5), (1.5, 1.5),
+                (12.5, 1.5), (12.5, 12.5), (23.5, 12.5), (23.5, 1.5)],
 }
 START_AT = {"laps": 3.0, "figure8": 2.0}  # arc length of the start point along the centre line (m)
 # 'laps-wide': the laps of block A, every second lap driven 0.45 m to the side with the body

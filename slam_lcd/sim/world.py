@@ -358,7 +358,9 @@ def _paint_wall(rng: np.random.Generator, length: float, material: str, groups, 
     a = float(rng.uniform(0.2, 0.8))
     while a < length - 0.4:
         kind = rng.choice(["poster", "poster", "poster", "door", "board", "gap"])
-        wid = {"poster": rng.uniform(0.45, 1.1), "door": 0.9, "board": rng.uniform(1.2, 1.8), "gap": rng.uniform(0.2, 0.8)}[kind]
+        # all three widths are drawn whatever the kind: the random stream, hence the world, depends on that
+        wid = {"poster": rng.uniform(0.45, 1.1), "door": 0.9, "board": rng.uniform(1.2, 1.8),
+               "gap": rng.uniform(0.2, 0.8)}[kind]
         if a + wid > length - 0.1 or any(a < e and a + wid > s for s, e in reserved):
             a += 0.3
             continue
@@ -492,7 +494,8 @@ def build_world(seed: int = 0) -> DemoWorld:
         record_sites(name, p0, p1)
     # pillars out of the outer walls (identical textures: more aliasing)
     front = tx.plaster(rng, int(HEIGHT * WALL_RES), int(0.4 * WALL_RES), WALL_RES)
-    tx.paste(front, tx.poster(rng, int(0.3 * WALL_RES), int(0.3 * WALL_RES), WALL_RES), int(0.05 * WALL_RES), int(0.9 * WALL_RES))
+    tx.paste(front, tx.poster(rng, int(0.3 * WALL_RES), int(0.3 * WALL_RES), WALL_RES),
+             int(0.05 * WALL_RES), int(0.9 * WALL_RES))
     side = tx.plaster(rng, int(HEIGHT * WALL_RES), int(0.3 * WALL_RES), WALL_RES)
     for name, x, y, inward, along in bld.pillars:
         planes += _pillar_planes(name, x, y, inward, along, front, side, lamps)
@@ -509,7 +512,8 @@ def build_world(seed: int = 0) -> DemoWorld:
         else:
             ptex = np.empty((int(2.2 * WALL_RES), int(1.84 * WALL_RES), 3), np.uint8)
             ptex[:] = tx.random_color(rng, 40, 120)
-            tx.paste(ptex, tx.poster(rng, int(1.6 * WALL_RES), int(1.5 * WALL_RES), WALL_RES), int(0.17 * WALL_RES), int(0.15 * WALL_RES))
+            tx.paste(ptex, tx.poster(rng, int(1.6 * WALL_RES), int(1.5 * WALL_RES), WALL_RES),
+                     int(0.17 * WALL_RES), int(0.15 * WALL_RES))
         planes += _corner_panel(f"panel{k}", corner, dx, dy, ptex, lamps, reach_x, reach_y, height)
     # floor and ceiling (texture row 0 at y = Y1, column 0 at x = X0)
     fh, fw = int(round((Y1 - Y0) * FLOOR_RES)), int(round((X1 - X0) * FLOOR_RES))

@@ -62,7 +62,9 @@ def pnp_ransac(X: np.ndarray, uv: np.ndarray, K: np.ndarray, *, threshold: float
     return T, inl
 
 
-def projection_jacobians(p: np.ndarray, z: np.ndarray, fx: float = 1.0, fy: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+def projection_jacobians(
+    p: np.ndarray, z: np.ndarray, fx: float = 1.0, fy: float = 1.0
+) -> tuple[np.ndarray, np.ndarray]:
     """Jacobians of the pinhole projection of ``p`` (points in the camera, ``p = T^-1 X``, at
     depths ``z`` as the projection uses them): ``(N, 2, 6)`` with respect to ``xi`` for
     ``T = T_hat Exp(xi)``, and ``(N, 2, 3)`` with respect to the point."""
