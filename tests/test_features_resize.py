@@ -134,3 +134,25 @@ def test_a_corner_lands_on_the_same_full_resolution_pixel(superpoint_weights):
         scale = 640 / (resize_max or 640)
         assert np.all(np.abs(off) <= 0.5 + scale), (resize_max, off)
         assert np.all(np.abs(off.mean(axis=0)) < 0.5), (resize_max, off.mean(axis=0))
+
+
+def test_unset_gives_the_same_pipeline_result(tmp_path, superpoint_weights):
+    """A short run (a little more than a lap at 160x120, so loops close) with the knob unset and with a
+    resize_max the images already fit: the same keyframes, loops and corrected trajectory, bit for bit."""
+    from slam_lcd.runner import run_log
+    from slam_lcd.sim import make_demo_log
+
+    log = tmp_path / "tiny.mcap"
+    make_demo_log(log, "mcap", frames=470, seed=1, depth=True, width=160, height=120)
+    outs = {}
+    for label, sets in (("unset", []), ("fits", ["features.resize_max=160"])):
+        cfg = load_config("default", ["features.feature_cache=false", f"features.weights={superpoint_weights}",
+                                      "run.plots=false", "run.write_mcap=false", "run.loop_pictures=false", *sets])
+        res = run_log(log, tmp_path / label, cfg, progress=False)
+        outs[label] = res
+    a, b = outs["unset"], outs["fits"]
+    assert a.n_keyframes > 50 and a.loops_accepted > 0
+    assert (a.n_keyframes, a.loops_proposed, a.loops_accepted, a.ate_after) == \
+        (b.n_keyframes, b.loops_proposed, b.loops_accepted, b.ate_after)
+    for name in ("corrected.tum", "loops.csv"):
+        assert (tmp_path / "unset" / name).read_bytes() == (tmp_path / "fits" / name).read_bytes(), name
