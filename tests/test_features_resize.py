@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import torch
 
-from slam_lcd.config import load_config
+from slam_lcd.config import load_config, preset_names
 from slam_lcd.errors import ConfigError
 from slam_lcd.features import FeatureCache, FeaturesConfig, SuperPoint, SuperPointExtractor, load_extractor
 from slam_lcd.features.resize import downscale, resized_shape, to_full_resolution
@@ -107,6 +107,16 @@ def test_resize_max_is_validated():
     for bad in ("10", "-1", "0.5", "big"):
         with pytest.raises(ConfigError, match="resize_max"):
             load_config("default", [f"features.resize_max={bad}"])
+
+
+def test_fast_and_accurate_presets_ship_and_load():
+    assert {"default", "fast", "accurate"} <= set(preset_names())
+    fast, accurate, default = load_config("fast"), load_config("accurate"), load_config("default")
+    assert fast.features.kind == accurate.features.kind == "superpoint"
+    assert fast.features.resize_max is not None and accurate.features.resize_max is None
+    # they change features only: the rest of a run is the default's
+    for section in ("frontend", "lcd", "backend", "vocab"):
+        assert getattr(fast, section) == getattr(default, section) == getattr(accurate, section)
 
 
 def _corners_image() -> tuple[np.ndarray, np.ndarray]:
