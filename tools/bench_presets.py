@@ -89,7 +89,7 @@ def part_forward(cfg, weights, reps: int) -> dict:
 
     conf = dataclasses.replace(cfg.features, kind="superpoint", feature_cache=False)
     ex = load_extractor(conf, weights=weights, device="cpu")
-    fwd, full, kps = [], [], []
+    fwd, cpu, full, kps = [], [], [], []
     for img in demo_frames():
         x = torch.from_numpy(downscale(to_gray_float(img), conf.resize_max))[None, None]
         if conf.cpu_channels_last:
@@ -97,15 +97,17 @@ def part_forward(cfg, weights, reps: int) -> dict:
         with torch.inference_mode():
             ex.model.forward_raw(x)  # one-off set-up
             for _ in range(reps):
-                t0 = time.perf_counter()
+                t0, c0 = time.perf_counter(), time.process_time()
                 ex.model.forward_raw(x)
                 fwd.append(time.perf_counter() - t0)
+                cpu.append(time.process_time() - c0)
         for _ in range(reps):
             t0 = time.perf_counter()
             f = ex.extract(img)
             full.append(time.perf_counter() - t0)
         kps.append(len(f.keypoints))
     return {"input": f"{x.shape[3]}x{x.shape[2]}", "forward_ms": 1e3 * float(np.median(fwd)),
+            "forward_cpu_ms": 1e3 * float(np.median(cpu)),
             "extract_ms": 1e3 * float(np.median(full)), "keypoints": float(np.mean(kps))}
 
 
@@ -127,18 +129,27 @@ def part_demo(name: str, work: Path, weights) -> dict:
     cmd = _cli("run", log, "-o", out, "--config", name, "--set", f"features.cache_dir={cache}", "--no-progress")
     if weights:
         cmd += ["--weights", weights]
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), _children_cpu()
     proc = subprocess.run(cmd, capture_output=True, text=True)
-    wall = time.perf_counter() - t0
+    wall, cpu = time.perf_counter() - t0, _children_cpu() - c0
     shutil.rmtree(cache, ignore_errors=True)
     if proc.returncode:
         raise SystemExit(f"{' '.join(map(str, cmd))}: {(proc.stderr.strip().splitlines() or ['?'])[-1]}")
     rep = json.loads((out / "report.json").read_text())
     ate = rep["eval"]["ate"]
     before, after = ate["before"]["translation_m"]["rmse"], ate["after"]["translation_m"]["rmse"]
-    return {"demo_wall_s": wall, "demo_log_s": rep["log_duration_s"], "demo_keyframes": rep["keyframes"],
+    return {"demo_wall_s": wall, "demo_cpu_s": cpu, "demo_log_s": rep["log_duration_s"], "demo_keyframes": rep["keyframes"],
             "demo_loops": rep["loops"]["accepted"], "demo_false": rep["loops"]["false_accepted"],
             "demo_ate_before": before, "demo_ate_after": after, "demo_ate_ratio": after / before}
+
+
+def _children_cpu() -> float:
+    """CPU seconds (user + system) of the finished child processes: on a shared machine the wall time
+    grows with the other users' load, the CPU time much less."""
+    import resource
+
+    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return ru.ru_utime + ru.ru_stime
 
 
 def part_corridor(name: str, cfg, work: Path, weights) -> dict:
@@ -213,8 +224,24 @@ def part_euroc(name: str, work: Path) -> dict:
             "euroc_loops": r["loops"], "euroc_false": r["false"]}
 
 
+TIMED = ("forward", "demo")
+TIMED_KEYS = ("forward_ms", "forward_cpu_ms", "extract_ms", "demo_wall_s", "demo_cpu_s")
+
+
+def measure(part: str, name: str, cfg, work: Path, args) -> dict:
+    if part == "forward":
+        return part_forward(cfg, args.weights, args.reps)
+    if part == "demo":
+        return part_demo(name, work, args.weights)
+    if part == "corridor":
+        return part_corridor(name, cfg, work, args.weights)
+    if part == "wide":
+        return part_wide(cfg, args.weights)
+    return part_euroc(name, work)
+
+
 COLUMNS = [  # (header, key, format)
-    ("resize_max", "resize_max", "{}"), ("input", "input", "{}"), ("fwd ms", "forward_ms", "{:.0f}"),
+    ("resize_max", "resize_max", "{}"), ("input", "input", "{}"), ("fwd ms (CPU ms)", "fwd", "{}"),
     ("extract ms", "extract_ms", "{:.0f}"), ("kpts", "keypoints", "{:.0f}"),
     ("demo wall/log", "demo_rt", "{}"), ("loops", "demo_loops", "{}"), ("false", "demo_false", "{}"),
     ("ATE after/before", "demo_ate_ratio", "{:.1%}"), ("corridor R@100P", "corridor_r100p", "{:.3f}"),
@@ -231,8 +258,11 @@ def print_table(rows: dict) -> None:
     print("|---" * (len(COLUMNS) + 1) + "|")
     for name, r in rows.items():
         r = dict(r)
+        if "forward_ms" in r:
+            r["fwd"] = f"{r['forward_ms']:.0f} ({r.get('forward_cpu_ms', float('nan')):.0f})"
         if "demo_wall_s" in r:
-            r["demo_rt"] = f"{r['demo_wall_s']:.1f} / {r['demo_log_s']:.1f} s = {r['demo_wall_s'] / r['demo_log_s']:.2f}x"
+            r["demo_rt"] = (f"{r['demo_wall_s']:.1f} / {r['demo_log_s']:.1f} s = {r['demo_wall_s'] / r['demo_log_s']:.2f}x"
+                            f" (CPU {r.get('demo_cpu_s', float('nan')):.0f} s)")
         if "wide_recall" in r:
             r["wide"] = f"{r['wide_recall']:.0%} ({r['wide_found']}/{r['wide_queries']}, false {r['wide_false']})"
         cells = [fmt.format(r[key]) if r.get(key) is not None or key == "resize_max" else "-" for _, key, fmt in COLUMNS]
@@ -247,12 +277,14 @@ def main(argv=None) -> int:
     ap.add_argument("--weights", default=os.environ.get("SLAM_LCD_SUPERPOINT_WEIGHTS"), help="SuperPoint weights")
     ap.add_argument("--work", default=None, help="folder for logs and outputs, reused by a rerun (default: temporary)")
     ap.add_argument("--reps", type=int, default=5, help="forward: timed repetitions per frame (median)")
+    ap.add_argument("--repeat", type=int, default=1, help="runs of the timed parts (forward, demo), presets in "
+                    "turn; medians are printed (default 1)")
     ap.add_argument("--json", default=None, help="file the rows are kept in (a rerun in parts adds to it)")
     args = ap.parse_args(argv)
     from slam_lcd.machine import machine_line
 
     machine = machine_line()
-    print(machine, flush=True)
+    print(f"{machine}; load average {os.getloadavg()[0]:.1f} at the start", flush=True)
     parts = [p for p in args.parts.split(",") if p and not (p == "euroc" and args.skip_euroc)]
     unknown = set(parts) - set(PARTS)
     if unknown:
@@ -260,29 +292,31 @@ def main(argv=None) -> int:
     if args.weights:  # the child processes (EuRoC's runs) find them too
         os.environ["SLAM_LCD_SUPERPOINT_WEIGHTS"] = str(Path(args.weights).resolve())
     rows = json.loads(Path(args.json).read_text()) if args.json and Path(args.json).exists() else {}
+    names = [p for p in args.presets.split(",") if p]
+    cfgs = {name: preset_config(name) for name in names}
+    for name in names:
+        rows.setdefault(Path(name).stem, {}).update(machine=machine, resize_max=cfgs[name].features.resize_max)
+    # timed parts repeated with the presets in turn, so that a change of the machine's load hits all alike
+    order = [(part, name) for part in parts for _ in range(args.repeat if part in TIMED else 1) for name in names]
+    runs: dict[tuple[str, str], list[dict]] = {}
     with tempfile.TemporaryDirectory(prefix="bench-presets-") as tmp:
         work = Path(args.work or tmp)
         work.mkdir(parents=True, exist_ok=True)
-        for name in [p for p in args.presets.split(",") if p]:
-            cfg = preset_config(name)
-            row = rows.setdefault(Path(name).stem, {})
-            row.update(machine=machine, resize_max=cfg.features.resize_max)
-            for part in parts:
-                t0 = time.perf_counter()
-                if part == "forward":
-                    row.update(part_forward(cfg, args.weights, args.reps))
-                elif part == "demo":
-                    row.update(part_demo(name, work, args.weights))
-                elif part == "corridor":
-                    row.update(part_corridor(name, cfg, work, args.weights))
-                elif part == "wide":
-                    row.update(part_wide(cfg, args.weights))
-                else:
-                    row.update(part_euroc(name, work))
-                shown = {k: (round(v, 4) if isinstance(v, float) else v) for k, v in row.items() if k != "machine"}
-                print(f"[{Path(name).stem}] {part} done in {time.perf_counter() - t0:.0f} s: {shown}", flush=True)
-                if args.json:
-                    Path(args.json).write_text(json.dumps(rows, indent=1))
+        for part, name in order:
+            t0 = time.perf_counter()
+            res = measure(part, name, cfgs[name], work, args)
+            done = runs.setdefault((name, part), [])
+            done.append(res)
+            row = rows[Path(name).stem]
+            row.update(res)
+            row.update({k: float(np.median([r[k] for r in done])) for k in TIMED_KEYS if k in res})
+            if part in TIMED:
+                row[f"{part}_runs"] = len(done)
+            shown = {k: (round(v, 3) if isinstance(v, float) else v) for k, v in res.items()}
+            print(f"[{Path(name).stem}] {part} ({time.perf_counter() - t0:.0f} s): {shown}", flush=True)
+            if args.json:
+                Path(args.json).write_text(json.dumps(rows, indent=1))
+    print(f"load average {os.getloadavg()[0]:.1f} at the end (above the core count: other processes shared the CPU)")
     print_table(rows)
     return 0
 
