@@ -1,8 +1,8 @@
 """``features.resize_max``: extraction on a smaller copy, keypoints in the full image's pixels.
 
-Unset, every output is bit for bit what the extractor gave before the knob (the network's own
-result on the full image, the same feature-cache key, the same pipeline result); set, the
-keypoints land on the full-resolution pixels of what they mark.
+Unset, every output is bit for bit the network's own result on the full image (the same
+feature-cache key, the same pipeline result); set, the keypoints land on the full-resolution
+pixels of what they mark.
 """
 from __future__ import annotations
 
@@ -63,7 +63,7 @@ def test_unset_is_bit_identical_to_the_network_on_the_full_image():
     img = textured()
     ex = random_extractor()
     f = ex.extract(img)
-    # what extraction was before the knob: the model on the full-resolution tensor, channels-last
+    # the model itself on the full-resolution tensor, channels-last as the extractor feeds it
     x = torch.from_numpy(to_gray_float(img)[None, None]).contiguous(memory_format=torch.channels_last)
     with torch.inference_mode():
         ref = ex.model({"image": x})
@@ -80,7 +80,7 @@ def test_unset_is_bit_identical_to_the_network_on_the_full_image():
 
 def test_feature_cache_is_keyed_on_resize_max(tmp_path):
     plain, small = random_extractor(), random_extractor(resize_max=80)
-    assert "resize_max" not in plain.identity()  # the key of every cache made before the knob
+    assert "resize_max" not in plain.identity()  # unset: existing caches keep their key
     assert small.identity()["resize_max"] == 80
     assert FeatureCache(plain, tmp_path).base != FeatureCache(small, tmp_path).base
     orb, orb_small = load_extractor(FeaturesConfig(kind="orb")), load_extractor(FeaturesConfig(kind="orb", resize_max=80))

@@ -108,7 +108,7 @@ class SuperPointExtractor(Extractor):
             del ident["backbone_precision"]
         if self._channels_last:  # a different summation order: results differ in the last digits
             ident["layout"] = "channels_last"
-        if self.conf.resize_max is not None:  # unset: the key of the caches made before the knob
+        if self.conf.resize_max is not None:  # unset: the key is unchanged, existing caches stay valid
             ident["resize_max"] = self.conf.resize_max
         return ident
 
