@@ -60,6 +60,7 @@ RANGES: dict[str, str] = {
     "features.keypoint_threshold": "[0, 1)",
     "features.remove_borders": "[0, inf)",
     "features.max_keypoints": "-1 or [1, inf)",
+    "features.resize_max": "[32, inf)",  # below that SuperPoint's 8-pixel cells and borders leave little image
     "features.batch_size": "[1, inf)",
     "features.orb_n_features": "[1, inf)",
     "features.orb_scale_factor": "(1, inf)",

@@ -90,6 +90,9 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--sphere", action="store_true", help="also run sphere2500 (batch LM and iSAM2 pose by pose; slow)")
     args = ap.parse_args(argv)
+    from slam_lcd.machine import machine_line
+
+    print(machine_line(), flush=True)  # figures are only comparable with the machine named
     data = shared_data()
     bench_kitti(data, args.false_fraction, args.stride, args.seed)
     if args.sphere:

@@ -67,6 +67,9 @@ def main() -> None:
     ap.add_argument("--ray", action="store_true", help="parallel arm on a local Ray instead of the process pool")
     ap.add_argument("--work-dir", default=None, help="where logs and outputs go (default: a temporary folder)")
     a = ap.parse_args()
+    from slam_lcd.machine import machine_line
+
+    print(machine_line(), flush=True)  # figures are only comparable with the machine named
     w, h = (int(v) for v in a.size.split("x"))
     cfg = load_config("default", [f"features.kind={a.features}", "features.feature_cache=false"])
     with tempfile.TemporaryDirectory(prefix="bench_batch.", dir=a.work_dir) as tmp:

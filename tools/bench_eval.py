@@ -63,6 +63,9 @@ def main() -> int:
     ap.add_argument("--shared", default=os.environ.get("SLAM_LCD_SHARED", str(REPO.parent / "shared")))
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args()
+    from slam_lcd.machine import machine_line
+
+    print(machine_line(), flush=True)  # figures are only comparable with the machine named
     d = Path(args.shared) / "data" / "trajectories"
     if not d.is_dir():
         print(f"no shared trajectories at {d}", file=sys.stderr)

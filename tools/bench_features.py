@@ -192,9 +192,10 @@ def main(argv=None) -> int:
     if args.compare_devices:
         return 0 if compare_devices(conf, weights, shared) else 1
 
+    from slam_lcd.machine import machine_line
+
+    print(machine_line("cuda" if "cuda" in devices else "cpu"))
     print(f"torch {torch.__version__}, {torch.get_num_threads()} CPU threads, OpenCV {cv2.__version__}")
-    if torch.cuda.is_available():
-        print(f"CUDA device: {torch.cuda.get_device_name(0)}")
     print(f"weights: {weights or 'random initialisation (no weights found; keypoint counts are not representative)'}")
     print(f"images: {'real frames from ' + str(shared / 'data/frames') if shared else 'synthetic texture'}; "
           f"reps {args.reps} (median), max_keypoints {args.max_keypoints}")

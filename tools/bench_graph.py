@@ -98,6 +98,9 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--resolution", default="1280x960", help="rendered image size (1000 true matches need 1280x960)")
     args = ap.parse_args(argv)
+    from slam_lcd.machine import machine_line
+
+    print(machine_line(), flush=True)  # figures are only comparable with the machine named
 
     t0 = time.perf_counter()
     width, height = (int(v) for v in args.resolution.lower().split("x"))

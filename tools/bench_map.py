@@ -26,8 +26,6 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
-import os
-import platform
 import shutil
 import subprocess
 import sys
@@ -36,25 +34,9 @@ from pathlib import Path
 
 import numpy as np
 
+from slam_lcd.machine import machine_line
+
 WORLD_OF = {1: 0, 2: 0, 3: 0, 4: 1000, 5: 0}
-
-
-def machine_line() -> str:
-    cpu = platform.processor() or ""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    try:
-        import torch
-
-        cap = torch.backends.cpu.get_cpu_capability()
-    except Exception:  # noqa: BLE001
-        cap = "?"
-    return f"machine: {cpu}, {os.cpu_count()} cores, torch CPU capability {cap}"
 
 
 def ensure_sessions(work: Path, frames: int | None) -> dict[int, Path]:

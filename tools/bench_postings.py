@@ -294,6 +294,9 @@ def main(argv=None) -> None:
                     help="with a trained vocabulary: whose idf (online mode: always the database's)")
     ap.add_argument("--window", type=int, default=200, help="keyframes before each checkpoint that are averaged")
     args = ap.parse_args(argv)
+    from slam_lcd.machine import machine_line
+
+    print(machine_line(), flush=True)  # figures are only comparable with the machine named
     from slam_lcd.vocab import Vocabulary
 
     path = Path(args.bags)

@@ -707,6 +707,9 @@ def main(argv=None) -> None:
                        help="demo: runs alternating with the bare forward; the median ratio is printed (default 1)")
         p.set_defaults(func=func)
     args = ap.parse_args(argv)
+    from slam_lcd.machine import machine_line
+
+    print(machine_line(), flush=True)  # figures are only comparable with the machine named
     args.func(args)
 
 

@@ -123,6 +123,9 @@ def main(argv=None) -> int:
     ap.add_argument("--direct", action="store_true", help="render in memory instead of writing and reading a demo MCAP log")
     ap.add_argument("--log", default=None, help="demo log path to write/reuse (default: a temporary file)")
     args = ap.parse_args(argv)
+    from slam_lcd.machine import machine_line
+
+    print(machine_line(), flush=True)  # figures are only comparable with the machine named
     if not args.direct:
         return run_on_log(args)
 

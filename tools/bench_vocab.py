@@ -135,7 +135,10 @@ def main():
         from threadpoolctl import threadpool_limits
 
         threadpool_limits(args.threads)
-    print(f"CPU cores visible: {os.cpu_count()}, load average: {os.getloadavg()[0]:.1f}")
+    from slam_lcd.machine import machine_line
+
+    print(machine_line(), flush=True)  # figures are only comparable with the machine named
+    print(f"load average: {os.getloadavg()[0]:.1f}")
     rng = np.random.default_rng(args.seed)
     bench_quantize(args, rng)
     bench_query(args, rng)

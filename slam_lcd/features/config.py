@@ -26,6 +26,11 @@ class FeaturesConfig:
     remove_borders: int = 4
     # keep the highest-scoring keypoints only; -1 keeps all
     max_keypoints: int = 1000
+    # extract on a copy whose longest side is at most this many pixels (aspect kept, area
+    # interpolation; hloc's resize_max); keypoints are reported in the full image's pixels, so
+    # geometry downstream is unchanged. SuperPoint's cost falls with the pixel count (a 640x480
+    # image at 320: about a quarter). None = the image as it is (docs/presets.md)
+    resize_max: int | None = None
     # interpolation of the 1/8-resolution descriptor map at keypoints
     descriptor_sampling: Literal["bilinear", "bicubic"] = "bilinear"
     # images per network forward in extract_batch

@@ -22,6 +22,7 @@ from ..errors import ConfigError
 from ..types import Features
 from ..vision.gray import to_gray_uint8
 from .config import FeaturesConfig
+from .resize import downscale, to_full_resolution
 
 
 class Extractor(ABC):
@@ -76,16 +77,18 @@ class OrbExtractor(Extractor):
             "n_levels": c.orb_n_levels,
             "fast_threshold": c.orb_fast_threshold,
             "opencv": cv2.__version__,
+            **({"resize_max": c.resize_max} if c.resize_max is not None else {}),
         }
 
     def extract(self, image: np.ndarray) -> Features:
-        gray = to_gray_uint8(image)
+        full = to_gray_uint8(image)
+        gray = downscale(full, self.conf.resize_max)
         kps, desc = self.orb.detectAndCompute(gray, None)
-        h, w = gray.shape
+        h, w = full.shape
         if desc is None or not kps:
             return Features(np.zeros((0, 2), np.float32), np.zeros(0, np.float32),
                             np.zeros((0, 32), np.uint8), (w, h), kind=self.kind)
-        xy = np.array([k.pt for k in kps], np.float32)
+        xy = to_full_resolution(np.array([k.pt for k in kps], np.float32), gray.shape[::-1], (w, h))
         scores = np.array([k.response for k in kps], np.float32)
         order = np.argsort(-scores, kind="stable")
         return Features(xy[order], scores[order], np.ascontiguousarray(desc[order]), (w, h), kind=self.kind)

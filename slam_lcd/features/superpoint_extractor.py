@@ -20,6 +20,7 @@ from ..vision.gray import to_gray_float
 from .allocator import retain_freed_memory, trim_when_fragmented
 from .config import FeaturesConfig
 from .extract import Extractor
+from .resize import downscale, to_full_resolution
 from .superpoint import SuperPoint
 from .weights import load_state_dict_checked, resolve_weights, sha256_of
 
@@ -107,10 +108,15 @@ class SuperPointExtractor(Extractor):
             del ident["backbone_precision"]
         if self._channels_last:  # a different summation order: results differ in the last digits
             ident["layout"] = "channels_last"
+        if self.conf.resize_max is not None:  # unset: the key is unchanged, existing caches stay valid
+            ident["resize_max"] = self.conf.resize_max
         return ident
 
-    def _run(self, grays: Sequence[np.ndarray]) -> list[Features]:
+    def _run(self, grays: Sequence[np.ndarray], full_sizes: Sequence[tuple[int, int]] | None = None) -> list[Features]:
+        """Features of same-sized gray images; ``full_sizes`` (w, h): the sizes they were downscaled from
+        (``features.resize_max``), whose pixels the keypoints are reported in."""
         h, w = grays[0].shape
+        full_sizes = full_sizes or [(w, h)] * len(grays)
         batch = torch.from_numpy(np.stack(grays)[:, None])
         if self._channels_last:
             batch = batch.contiguous(memory_format=torch.channels_last)
@@ -125,32 +131,38 @@ class SuperPointExtractor(Extractor):
                  zip(out["keypoints"], out["keypoint_scores"], out["descriptors"])]
             ).float().cpu().numpy()
         feats = []
-        for rows in np.split(packed, np.cumsum(counts)[:-1]):
+        for rows, full in zip(np.split(packed, np.cumsum(counts)[:-1]), full_sizes):
             feats.append(
                 Features(
-                    keypoints=np.ascontiguousarray(rows[:, :2]),
+                    keypoints=to_full_resolution(np.ascontiguousarray(rows[:, :2]), (w, h), full),
                     scores=np.ascontiguousarray(rows[:, 2]),
                     descriptors=np.ascontiguousarray(rows[:, 3:]),
-                    image_size=(int(w), int(h)),
+                    image_size=(int(full[0]), int(full[1])),
                     kind=self.kind,
                 )
             )
         return feats
 
+    def _gray(self, image: np.ndarray) -> tuple[np.ndarray, tuple[int, int]]:
+        """The network's input (downscaled to ``features.resize_max``) and the image's own size (w, h)."""
+        gray = to_gray_float(image)
+        return downscale(gray, self.conf.resize_max), (gray.shape[1], gray.shape[0])
+
     def extract(self, image: np.ndarray) -> Features:
-        return self._run([to_gray_float(image)])[0]
+        gray, full = self._gray(image)
+        return self._run([gray], [full])[0]
 
     def extract_batch(self, images: Iterable[np.ndarray]) -> list[Features]:
-        """Batched extraction; images of different sizes are grouped by size."""
-        grays = [to_gray_float(im) for im in images]
-        result: list[Features | None] = [None] * len(grays)
+        """Batched extraction; images of different (network input) sizes are grouped by size."""
+        pairs = [self._gray(im) for im in images]
+        result: list[Features | None] = [None] * len(pairs)
         by_shape: dict[tuple[int, int], list[int]] = {}
-        for i, g in enumerate(grays):
+        for i, (g, _) in enumerate(pairs):
             by_shape.setdefault(g.shape, []).append(i)
         bs = max(1, self.conf.batch_size)
         for idx in by_shape.values():
             for s in range(0, len(idx), bs):
                 chunk = idx[s : s + bs]
-                for i, f in zip(chunk, self._run([grays[i] for i in chunk])):
+                for i, f in zip(chunk, self._run([pairs[i][0] for i in chunk], [pairs[i][1] for i in chunk])):
                     result[i] = f
         return result  # type: ignore[return-value]
