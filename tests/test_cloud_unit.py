@@ -116,7 +116,8 @@ def test_the_builders_thread_gives_the_same_map_and_survives_a_failure(caplog):
             b.add_keyframe(kf)
         b.drain()
     assert b.failed and b.n_keyframes == 1 and not b.add_keyframe(_kf(3, depths[3]))
-    assert sum("not added to the map cloud" in r.getMessage() for r in caplog.records) == 1
+    assert b.skipped == {b.failed: 3} and "keyframe 1" in b.failed  # the failing one and the two after it
+    assert sum("failed from keyframe 1" in r.getMessage() for r in caplog.records) == 1
     b.close()
 
 
@@ -170,3 +171,33 @@ def test_voxels_seen_by_fewer_batches_than_asked_are_left_out():
     assert len(g.cloud()) == 2
     np.testing.assert_allclose(g.cloud(min_views=2).points, [[0.3, 0.3, 0.3]], atol=1e-6)
     assert len(g.cloud(min_views=3)) == 0
+
+
+def _stereo_square_before_a_wall():
+    """A rectified pair (blurred, as a lens blurs): a textured square 0.5 m away before a wall 2.5 m away."""
+    import cv2
+
+    rng = np.random.default_rng(0)
+    far, near = (cv2.GaussianBlur((rng.random((240, 400)) * 255).astype(np.uint8), (3, 3), 0)[:, 40:360]
+                 for _ in range(2))
+    d_far, d_near = 8, 40  # disparities (px) at fx 200, baseline 0.1 m: 2.5 m and 0.5 m
+    left = far.copy()
+    right = np.roll(far, -d_far, axis=1)
+    sq = np.zeros(left.shape, bool)
+    sq[80:160, 120:200] = True
+    left[sq] = near[sq]
+    ys, xs = np.nonzero(sq)
+    right[ys, xs - d_near] = near[ys, xs]
+    return cv2.GaussianBlur(left, (7, 7), 2), cv2.GaussianBlur(right, (7, 7), 2)
+
+
+def test_stereo_points_at_an_edge_floating_between_the_surfaces_are_dropped():
+    from slam_lcd.cloud import stereo_points
+
+    cam = CameraModel(width=320, height=240, fx=200.0, fy=200.0, cx=159.5, cy=119.5, baseline=0.1)
+    left, right = _stereo_square_before_a_wall()
+    kept, all_ = (stereo_points(cam, left, right, step=1, max_jump=j).points[:, 2] for j in (1.0, 0.0))
+    between = [int(((z > 0.6) & (z < 2.2)).sum()) for z in (kept, all_)]
+    assert between[0] == 0 < between[1], between  # the matching window's blend of square and wall
+    for z in (kept, all_):  # both surfaces are still there
+        assert (np.abs(z - 0.5) < 0.05).sum() > 4000 and (np.abs(z - 2.5) < 0.2).sum() > 30000

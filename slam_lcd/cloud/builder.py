@@ -123,6 +123,7 @@ class MapCloudBuilder:
             if self._queue is None:
                 return self._take(kf)
             if self.failed is not None:
+                self.skips.add(self.failed)
                 return False
             self._queue.put(_snapshot(kf))
             return True
@@ -150,17 +151,21 @@ class MapCloudBuilder:
                     return
                 if self.failed is None:
                     self._take(kf)
+                else:
+                    self.skips.add(self.failed)
             except Exception as e:  # noqa: BLE001 - the map is a view of the run: said once, never raised into it
-                self.failed = f"{e.__class__.__name__}: {e}"
-                log.warning("%skeyframe %d not added to the map cloud (%s); no more are added",
-                            f"{self.skips.source}: " if self.skips.source else "", kf.id, self.failed)
+                self.failed = f"failed from keyframe {kf.id} on ({e.__class__.__name__}: {e})"
+                self.skips.add(self.failed)
             finally:
                 self._queue.task_done()
 
     def drain(self) -> None:
-        """Wait until every keyframe handed over is taken (no-op without a thread)."""
+        """Wait until every keyframe handed over is taken (no-op without a thread); the wait counts as the
+        caller's (``wait_seconds``)."""
         if self._queue is not None and self._thread is not None and self._thread.is_alive():
+            t0 = time.perf_counter()
             self._queue.join()
+            self.wait_seconds += time.perf_counter() - t0
 
     @property
     def n_keyframes(self) -> int:

@@ -32,7 +32,7 @@ class MapCloudConfig:
     # the sharpness figures: neighbours within this radius (m) of a point give its covariance
     metric_radius_m: float = 0.3
     # ... evaluated at this many points drawn evenly (seeded) from the cloud, all points as neighbours
-    metric_points: int = 20000
+    metric_points: int = 5000
     # a neighbourhood needs this many points for a covariance
     metric_min_neighbours: int = 8
     # the entropy's floor per direction, in voxels: thinner than this is below the map's resolution
