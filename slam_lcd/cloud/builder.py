@@ -16,6 +16,7 @@ import logging
 import queue
 import threading
 import time
+
 import numpy as np
 
 from ..errors import InputError
