@@ -1,20 +1,24 @@
 """What the map cloud costs and what it shows, measured in one go on a demo log.
 
-    python tools/bench_map_cloud.py [--laps 2] [--size 640x480] [--features orb] [--layout demo|euroc]
+    python tools/bench_map_cloud.py [--laps 2] [--size 640x480] [--features orb|superpoint]
+                                    [--layout demo|euroc] [--repeats 3] [--weights PATH]
 
-Renders (or reuses, under /tmp) a demo log, then runs `slam-lcd run` on it twice in child
-processes, with the map cloud and without (``map_cloud.enabled=false``), and prints: the CPU
-(model, cores, torch's CPU capability), both runs' wall time and peak resident memory, their
-ratio and difference, the cloud's own seconds (per keyframe, merging, files, figures) as a share
-of the run's wall, and the figures (points, MME, plane variance, distance to the true surfaces,
-before -> after). Targets: the cloud adds <= 300 MB resident and <= 10 % of the run's wall.
+Renders (or reuses, under --work) a demo log, then runs `slam-lcd run` on it in child processes,
+with the map cloud and without it (``map_cloud.enabled=false``), ``--repeats`` pairs interleaved
+(off/on, then on/off, ...: a machine shared with other jobs slows both alike), and prints: the CPU
+(model, cores, torch's CPU capability); each run's wall time and peak resident memory (the child's
+own ``ru_maxrss``, from ``wait4``); the medians, the wall ratio with/without and the resident memory
+added; the cloud's own seconds in the run's thread (handing keyframes over, merging, files,
+figures) and in its own thread; and the figures (points, MME, plane variance, distance to the true
+surfaces, before -> after) of the last run with the cloud.
+Targets: the cloud adds <= 300 MB resident and <= 10 % of the run's wall.
 """
 from __future__ import annotations
 
 import argparse
 import json
 import os
-import resource
+import statistics
 import subprocess
 import sys
 import time
@@ -22,24 +26,37 @@ from pathlib import Path
 
 
 def cpu_line() -> str:
-    model = next((ln.split(":", 1)[1].strip() for ln in open("/proc/cpuinfo") if ln.startswith("model name")), "?")
+    with open("/proc/cpuinfo") as fh:
+        model = next((ln.split(":", 1)[1].strip() for ln in fh if ln.startswith("model name")), "?")
     try:
         import torch
 
         cap = torch.backends.cpu.get_cpu_capability()
     except Exception:  # noqa: BLE001 - only printed
         cap = "?"
-    return f"CPU: {model}, {os.cpu_count()} cores visible, torch CPU capability {cap}"
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return f"CPU: {model}, {cores} cores usable ({os.cpu_count()} online), torch CPU capability {cap}"
 
 
-def child(argv: list[str]) -> tuple[float, float]:
-    """(wall s, peak resident MB) of one child process."""
-    before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+def child(argv: list[str]) -> tuple[float, float, float]:
+    """(wall s, peak resident MB, CPU s) of one child process: its own peak, whatever ran before it."""
     t = time.perf_counter()
-    subprocess.run(argv, check=True, stdout=subprocess.DEVNULL)
+    p = subprocess.Popen(argv, stdout=subprocess.DEVNULL)
+    _, status, usage = os.wait4(p.pid, 0)
     wall = time.perf_counter() - t
-    peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
-    return wall, max(peak, before) / 1024.0
+    p.returncode = os.waitstatus_to_exitcode(status)
+    if p.returncode != 0:
+        raise SystemExit(f"{' '.join(argv)}: exit status {p.returncode}")
+    return wall, usage.ru_maxrss / 1024.0, usage.ru_utime + usage.ru_stime
+
+
+def make_log(py: list[str], a, work: Path) -> tuple[Path, str]:
+    name = f"{a.layout}-laps{a.laps:g}-{a.size}"
+    log = work / (f"{name}.bag" if a.layout == "euroc" else f"{name}.mcap")
+    if not log.exists():
+        subprocess.run([*py, "make-demo-log", str(log), "--laps", str(a.laps), "--size", a.size, "--layout", a.layout,
+                        "--no-progress"], check=True, stdout=subprocess.DEVNULL)
+    return log, name
 
 
 def main() -> int:
@@ -47,34 +64,59 @@ def main() -> int:
     ap.add_argument("--laps", type=float, default=2.0)
     ap.add_argument("--size", default="640x480")
     ap.add_argument("--features", default="orb", choices=["orb", "superpoint"])
+    ap.add_argument("--weights", default=None, help="SuperPoint weights (with --features superpoint)")
     ap.add_argument("--layout", default="demo", choices=["demo", "euroc"])
+    ap.add_argument("--repeats", type=int, default=3, help="pairs of runs (without / with the cloud), interleaved")
     ap.add_argument("--work", default="/tmp/bench_map_cloud")
     a = ap.parse_args()
     work = Path(a.work)
     work.mkdir(parents=True, exist_ok=True)
     py = [sys.executable, "-m", "slam_lcd"]
-    name = f"{a.layout}-laps{a.laps:g}-{a.size}"
-    log = work / (f"{name}.bag" if a.layout == "euroc" else f"{name}.mcap")
-    if not log.exists():
-        subprocess.run([*py, "make-demo-log", str(log), "--laps", str(a.laps), "--size", a.size, "--layout", a.layout,
-                        "--no-progress"], check=True, stdout=subprocess.DEVNULL)
-    run = [*py, "run", str(log), "--features", a.features, "--truth-world", "0", "--no-progress"]
+    log, name = make_log(py, a, work)
+    run = [*py, "run", str(log), "--features", a.features, "--truth-world", "0", "--no-progress", "--no-feature-cache"]
+    if a.weights:
+        run += ["--weights", a.weights]
     if a.layout == "euroc":
         run += ["--config", "euroc", "--calib", str(work / f"camchain-{name}.yaml")]
-    print(cpu_line())
-    # the run without the cloud first (RUSAGE_CHILDREN's peak only grows: the larger run last)
-    w0, m0 = child([*run, "--out", str(work / f"{name}-off"), "--set", "map_cloud.enabled=false"])
-    w1, m1 = child([*run, "--out", str(work / f"{name}-on")])
+    print(cpu_line(), flush=True)
+    walls: dict[str, list[float]] = {"off": [], "on": []}
+    peaks: dict[str, list[float]] = {"off": [], "on": []}
+    cpus: dict[str, list[float]] = {"off": [], "on": []}
+    own = []
+    for r in range(a.repeats):
+        for kind in (("off", "on") if r % 2 == 0 else ("on", "off")):
+            extra = ["--set", "map_cloud.enabled=false"] if kind == "off" else []
+            w, m, c = child([*run, "--out", str(work / f"{name}-{kind}"), *extra])
+            walls[kind].append(w)
+            peaks[kind].append(m)
+            cpus[kind].append(c)
+            line = f"  pair {r + 1} {kind:>3}: {w:6.1f} s wall, {c:6.1f} s CPU, peak {m:5.0f} MB"
+            if kind == "on":
+                rep = json.loads((work / f"{name}-on" / "report.json").read_text())
+                sec = rep["map_cloud"]["seconds"]
+                own.append((sum(v for k, v in sec.items() if k != "keyframes_thread"), rep["wall_s"]))
+                line += f" (the cloud's own time in the run's thread {own[-1][0]:.2f} s)"
+            print(line, flush=True)
+    med = {k: statistics.median(v) for k, v in walls.items()}
+    mem = {k: statistics.median(v) for k, v in peaks.items()}
+    pair_ratios = [b / a_ for a_, b in zip(walls["off"], walls["on"])]
     rep = json.loads((work / f"{name}-on" / "report.json").read_text())
     mc = rep["map_cloud"]
     sec = mc["seconds"]
-    own = sum(sec.values())
-    print(f"log: {log.name}: {rep['frames']} frames, {rep['keyframes']} keyframes; features {a.features}")
-    print(f"run without the cloud: {w0:.1f} s wall, peak {m0:.0f} MB;  with it: {w1:.1f} s wall, peak {m1:.0f} MB")
-    print(f"wall ratio with/without: {w1 / w0:.3f};  resident memory added: {m1 - m0:+.0f} MB (target <= 300 MB)")
-    print(f"cloud's own time: {own:.2f} s = {100 * own / rep['wall_s']:.1f} % of the run's wall {rep['wall_s']:.1f} s "
-          f"(per keyframe {sec['keyframes']:.2f}, merge {sec['merge']:.2f}, files {sec['files']:.2f}, "
-          f"figures {sec['figures']:.2f}; target <= 10 %); on-disk store {mc['store_mb']} MB")
+    print(f"log: {log.name}: {rep['frames']} frames, {rep['keyframes']} keyframes; features {a.features}; "
+          f"{a.repeats} interleaved pairs")
+    print(f"median wall without the cloud {med['off']:.1f} s, with it {med['on']:.1f} s: ratio {med['on'] / med['off']:.3f} "
+          f"(median of the pairs' ratios {statistics.median(pair_ratios):.3f}; target <= 1.10)")
+    cpu = {k: statistics.median(v) for k, v in cpus.items()}
+    print(f"median CPU time (user + system, all threads) without {cpu['off']:.1f} s, with {cpu['on']:.1f} s: "
+          f"ratio {cpu['on'] / cpu['off']:.3f} (less sensitive to other jobs on the machine than the wall)")
+    print(f"median peak resident without {mem['off']:.0f} MB, with {mem['on']:.0f} MB: added {mem['on'] - mem['off']:+.0f} MB "
+          f"(target <= 300 MB)")
+    shares = [100 * s / w for s, w in own]
+    print(f"the cloud's own time in the run's thread: median {statistics.median(shares):.1f} % of the run's wall "
+          f"(last run: handing keyframes over {sec['keyframes']:.2f} s, merge {sec['merge']:.2f}, files {sec['files']:.2f}, "
+          f"figures {sec['figures']:.2f}); in its own thread {sec['keyframes_thread']:.2f} s; "
+          f"on-disk store {mc['store_mb']} MB")
     s, t = mc["sharpness"], mc["truth"]
     print(f"points: {mc['points']['odometry']} -> {mc['points']['corrected']}")
     print(f"MME: {s['odometry']['mme']:.3f} -> {s['corrected']['mme']:.3f};  plane variance: "
@@ -84,7 +126,8 @@ def main() -> int:
               f"({100 * t['ratio_after_before']:.1f} %, target <= 35 %)")
     a_ = rep["eval"]["ate"] if rep["eval"] else None
     if a_:
-        print(f"ATE: {a_['before']['translation_m']['rmse']:.3f} -> {a_['after']['translation_m']['rmse']:.3f} m")
+        print(f"ATE: {a_['before']['translation_m']['rmse']:.3f} -> {a_['after']['translation_m']['rmse']:.3f} m; "
+              f"loops accepted {rep['loops']['accepted']}, false {rep['loops']['false_accepted']}")
     return 0
 
 

@@ -13,7 +13,10 @@ warning naming the source), never an error: the map is a view of the run, not pa
 from __future__ import annotations
 
 import logging
+import queue
+import threading
 import time
+
 import numpy as np
 
 from ..errors import InputError
@@ -21,7 +24,7 @@ from ..types import Keyframe
 from .config import MapCloudConfig
 from .sensor_points import SensorPoints, depth_points, stereo_points
 from .store import KeyframeCloudStore
-from .voxel_grid import Cloud, VoxelGrid
+from .voxel_grid import Cloud, VoxelGrid, voxel_means
 
 log = logging.getLogger(__name__)
 
@@ -36,18 +39,16 @@ def keyframe_points(kf: Keyframe, conf: MapCloudConfig) -> SensorPoints | None:
     if kf.depth is not None:
         return depth_points(cam, kf.depth, colour if colour is not None else kf.image, **kw)
     if kf.right_image is not None and kf.image is not None and cam.baseline:
-        return stereo_points(cam, kf.image, kf.right_image, colour, **kw)
+        return stereo_points(cam, kf.image, kf.right_image, colour, match_step=conf.stereo_match_step,
+                             max_jump=conf.stereo_max_jump_px, **kw)
     return None
 
 
 def _to_body(sp: SensorPoints, T_body_camera: np.ndarray, voxel: float) -> tuple[np.ndarray, np.ndarray]:
     """Points in the body frame, merged per voxel (a keyframe's many pixels per voxel become one point)."""
     T = np.asarray(T_body_camera, np.float64)
-    pts = sp.points.astype(np.float64) @ T[:3, :3].T + T[:3, 3]
-    grid = VoxelGrid(voxel)
-    grid.add(pts, sp.colours)
-    c = grid.cloud()
-    return c.points.astype(np.float64), c.colours
+    pts = sp.points @ T[:3, :3].T.astype(np.float32) + T[:3, 3].astype(np.float32)
+    return voxel_means(pts, sp.colours, voxel)
 
 
 class Skips:
@@ -78,22 +79,59 @@ class Skips:
         return sp
 
 
+def _snapshot(kf: Keyframe) -> Keyframe:
+    """What the cloud needs of a keyframe, kept apart from it (the pipeline drops the images once it is done)."""
+    return Keyframe(id=kf.id, stamp=kf.stamp, T_world_body=kf.T_world_body, image=kf.image, camera=kf.camera,
+                    T_body_camera=kf.T_body_camera, depth=kf.depth, right_image=kf.right_image,
+                    colour=getattr(kf, "colour", None))
+
+
 class MapCloudBuilder:
-    """See the module docstring. ``source``: the topic(s) named in warnings; ``folder``: where the store's file lives."""
+    """See the module docstring. ``source``: the topic(s) named in warnings; ``folder``: where the store's file lives.
+
+    With ``conf.queue_keyframes`` > 0 the keyframes are taken in a thread of the builder's own, through a
+    queue of that many (the caller waits only when it is full): back-projection, stereo matching and
+    the voxel merge run in numpy and OpenCV, which release the GIL, so on a second core the run does
+    not wait for them. One thread and a first-in-first-out queue: the store, and so the map, is the same
+    as when they are taken in the caller's thread. Whatever reads the builder's state waits for the queue.
+    """
 
     def __init__(self, conf: MapCloudConfig | None = None, *, source: str = "", folder=None):
         self.conf = conf or MapCloudConfig()
         self.store = KeyframeCloudStore(self.conf.voxel_m, folder)
         self.skips = Skips(source)
-        self.seconds = 0.0  # time spent taking keyframes in (the run's share of the cloud)
+        self.seconds = 0.0  # time spent taking keyframes in (in the builder's thread when it has one)
+        self.wait_seconds = 0.0  # the caller's time in add_keyframe (handing over, waiting on a full queue)
         self.points_in = 0
+        self.failed: str | None = None  # an unexpected error in the builder's thread: no more keyframes taken
+        self._queue: queue.Queue | None = None
+        self._thread: threading.Thread | None = None
+        if self.conf.queue_keyframes > 0:
+            self._queue = queue.Queue(maxsize=int(self.conf.queue_keyframes))
+            self._thread = threading.Thread(target=self._work, name="slam-lcd-map-cloud", daemon=True)
+            self._thread.start()
 
     @property
     def skipped(self) -> dict[str, int]:
+        self.drain()
         return self.skips.counts
 
     def add_keyframe(self, kf: Keyframe) -> bool:
-        """Keep the keyframe's points; False (counted, said once) when it has none to give."""
+        """Keep the keyframe's points. In the caller's thread: False (counted, said once) when it has none to
+        give; with a thread of its own: True once handed over (False after a failure there)."""
+        t0 = time.perf_counter()
+        try:
+            if self._queue is None:
+                return self._take(kf)
+            if self.failed is not None:
+                self.skips.add(self.failed)
+                return False
+            self._queue.put(_snapshot(kf))
+            return True
+        finally:
+            self.wait_seconds += time.perf_counter() - t0
+
+    def _take(self, kf: Keyframe) -> bool:
         t0 = time.perf_counter()
         try:
             sp = self.skips.points_of(kf, self.conf)
@@ -106,12 +144,38 @@ class MapCloudBuilder:
         finally:
             self.seconds += time.perf_counter() - t0
 
+    def _work(self) -> None:
+        while True:
+            kf = self._queue.get()
+            try:
+                if kf is None:
+                    return
+                if self.failed is None:
+                    self._take(kf)
+                else:
+                    self.skips.add(self.failed)
+            except Exception as e:  # noqa: BLE001 - the map is a view of the run: said once, never raised into it
+                self.failed = f"failed from keyframe {kf.id} on ({e.__class__.__name__}: {e})"
+                self.skips.add(self.failed)
+            finally:
+                self._queue.task_done()
+
+    def drain(self) -> None:
+        """Wait until every keyframe handed over is taken (no-op without a thread); the wait counts as the
+        caller's (``wait_seconds``)."""
+        if self._queue is not None and self._thread is not None and self._thread.is_alive():
+            t0 = time.perf_counter()
+            self._queue.join()
+            self.wait_seconds += time.perf_counter() - t0
+
     @property
     def n_keyframes(self) -> int:
+        self.drain()
         return len(self.store)
 
     def cloud(self, poses: dict[int, np.ndarray], voxel: float | None = None) -> Cloud:
         """The map with ``poses`` (keyframe id -> 4x4 ``T_world_body``); keyframes without a pose are left out."""
+        self.drain()
         grid = VoxelGrid(voxel or self.conf.voxel_m)
         for i, (kf_id, _, _, _) in enumerate(self.store.index):
             T = poses.get(kf_id)
@@ -119,7 +183,11 @@ class MapCloudBuilder:
                 continue
             pts, col = self.store.read(i)
             grid.add(pts @ T[:3, :3].T + T[:3, 3], col)
-        return grid.cloud()
+        return grid.cloud(self.conf.min_keyframes_per_voxel)
 
     def close(self) -> None:
+        """Stop the builder's thread (after the keyframes handed over) and remove the store's file."""
+        if self._thread is not None and self._thread.is_alive():
+            self._queue.put(None)
+            self._thread.join()
         self.store.close()

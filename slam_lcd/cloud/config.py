@@ -15,12 +15,24 @@ class MapCloudConfig:
     # depth range used (m): nearer or farther sensor points are dropped (stereo and depth noise grow as z^2)
     min_depth_m: float = 0.3
     max_depth_m: float = 5.0
-    # every this-many-th pixel in both directions is back-projected (the voxel merges them anyway)
-    pixel_step: int = 2
+    # every this-many-th pixel in both directions is back-projected: pixel_step * max_depth_m / fx <= voxel_m
+    # still puts a pixel in every voxel of a wall facing the camera (640x480, fx ~460: 4 at 5 m and 5 cm)
+    pixel_step: int = 4
+    # a voxel is kept when this many keyframe points fall in it (each keyframe gives at most one per voxel of
+    # its own frame): a point seen by one keyframe only is more often a stereo or depth outlier than a surface
+    min_keyframes_per_voxel: int = 2
+    # stereo: semi-global matching on the pair scaled down by this (1: full resolution)
+    stereo_match_step: int = 2
+    # stereo: drop disparities whose 3x3 neighbourhood spreads over more than this many pixels of the matched
+    # image (an object's edge: the matching window gives depths between foreground and background; 0: keep)
+    stereo_max_jump_px: float = 1.0
+    # keyframes waiting for the cloud's own thread, which takes them in while the run goes on (0: taken in
+    # the thread that hands them over, the run waiting for each)
+    queue_keyframes: int = 4
     # the sharpness figures: neighbours within this radius (m) of a point give its covariance
     metric_radius_m: float = 0.3
     # ... evaluated at this many points drawn evenly (seeded) from the cloud, all points as neighbours
-    metric_points: int = 20000
+    metric_points: int = 5000
     # a neighbourhood needs this many points for a covariance
     metric_min_neighbours: int = 8
     # the entropy's floor per direction, in voxels: thinner than this is below the map's resolution

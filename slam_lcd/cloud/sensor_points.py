@@ -91,28 +91,44 @@ def depth_points(camera: CameraModel, depth: np.ndarray, image: np.ndarray | Non
     return SensorPoints(pts.astype(np.float32), _colours_at(image, u[ok], v[ok]))
 
 
+def _drop_disparity_jumps(disp: np.ndarray, max_jump: float) -> None:
+    """Zero (in place) the disparities whose 3x3 neighbourhood spreads over more than ``max_jump`` (units of
+    ``disp``): at an object's edge the matching window straddles foreground and background and gives
+    depths between the two (points floating in free space, seen by no other keyframe in the same place)."""
+    valid = disp > 0.5
+    k = np.ones((3, 3), np.uint8)
+    hi = cv2.dilate(np.where(valid, disp, np.float32(0)), k)
+    lo = cv2.erode(np.where(valid, disp, np.float32(np.inf)), k)
+    disp[(hi - lo) > max_jump] = 0
+
+
 def stereo_points(camera: CameraModel, left: np.ndarray, right: np.ndarray, image: np.ndarray | None = None, *,
-                  step: int = 2, min_depth: float = 0.3, max_depth: float = 5.0) -> SensorPoints:
-    """Points of a rectified pair (``camera.baseline`` m apart) by semi-global matching at 1/``step`` scale."""
+                  step: int = 2, min_depth: float = 0.3, max_depth: float = 5.0, match_step: int = 2,
+                  max_jump: float = 0.0) -> SensorPoints:
+    """Points of a rectified pair (``camera.baseline`` m apart) by semi-global matching on the pair scaled down
+    by ``match_step``, every ``step``-th pixel kept; ``max_jump`` > 0: disparities at a jump of more than that
+    many pixels of the matched image are dropped (:func:`_drop_disparity_jumps`)."""
     if not camera.baseline:
         raise InputError("stereo pair without a baseline")
     L, R = to_gray_uint8(np.asarray(left)), to_gray_uint8(np.asarray(right))
     _check_size(L, camera, "left image")
     _check_size(R, camera, "right image")
-    step = max(1, int(step))
+    step, ms = max(1, int(step)), max(1, int(match_step))
     h, w = L.shape
-    if step > 1:
-        size = ((w + step - 1) // step, (h + step - 1) // step)
+    if ms > 1:
+        size = ((w + ms - 1) // ms, (h + ms - 1) // ms)
         L, R = cv2.resize(L, size, interpolation=cv2.INTER_AREA), cv2.resize(R, size, interpolation=cv2.INTER_AREA)
     # disparities up to the one of min_depth, in the scaled image (a multiple of 16, as SGBM wants)
-    need = camera.fx * abs(camera.baseline) / max(min_depth, 1e-3) / step
+    need = camera.fx * abs(camera.baseline) / max(min_depth, 1e-3) / ms
     n_disp = int(min(max(16, 16 * np.ceil(need / 16)), 16 * max(1, (L.shape[1] // 2) // 16)))
     sgbm = cv2.StereoSGBM_create(minDisparity=0, numDisparities=n_disp, blockSize=5, P1=8 * 25, P2=32 * 25,
                                  uniquenessRatio=10, speckleWindowSize=100, speckleRange=2,
                                  mode=cv2.STEREO_SGBM_MODE_SGBM_3WAY)
-    disp = sgbm.compute(L, R).astype(np.float32) / 16.0 * step  # full-resolution pixels
+    disp = sgbm.compute(L, R).astype(np.float32) / 16.0  # pixels of the matched image
+    if max_jump > 0:
+        _drop_disparity_jumps(disp, max_jump)
     u, v = _grid((h, w), step)
-    d = disp[v // step, u // step]
+    d = disp[np.minimum(v // ms, disp.shape[0] - 1), np.minimum(u // ms, disp.shape[1] - 1)] * ms  # full resolution
     with np.errstate(divide="ignore", invalid="ignore"):
         z = np.where(d > 0.5, np.float32(camera.fx * abs(camera.baseline)) / d, np.nan)
         ok = np.isfinite(z) & (z >= min_depth) & (z <= max_depth)

@@ -6,7 +6,9 @@ keyframe's tens of thousands of points become a few thousand), and batches are m
 the grid's sorted arrays only when they add up to as many entries as the grid holds, so the
 merging costs O(n log n) in all (amortised) and the memory is the grid's plus at most as much
 again. Voxel keys pack three 21-bit signed indices into one int64 (+-1,048,575 voxels per
-axis: +-52 km at 5 cm); points beyond that are dropped, never wrapped.
+axis: +-52 km at 5 cm); points beyond that are dropped, never wrapped. Each voxel also counts
+the batches that reached it (the map adds one batch per keyframe), so that a voxel seen by a
+single keyframe (more often a sensor outlier than a surface) can be left out of the cloud.
 """
 from __future__ import annotations
 
@@ -37,8 +39,10 @@ class Cloud:
 def voxel_keys(points: np.ndarray, voxel: float) -> tuple[np.ndarray, np.ndarray]:
     """``(keys, inside)``: one int64 key per point of ``inside`` (points outside the key range are dropped)."""
     idx = np.floor(np.asarray(points, np.float64) / voxel).astype(np.int64)
-    inside = np.all((idx >= -_HALF) & (idx < _HALF), axis=1) if len(idx) else np.zeros(0, bool)
-    idx = idx[inside] + _HALF
+    idx += _HALF
+    inside = (idx.min(axis=1) >= 0) & (idx.max(axis=1) <= _MASK) if len(idx) else np.zeros(0, bool)
+    if not inside.all():
+        idx = idx[inside]
     keys = (idx[:, 0] << (2 * _BITS)) | (idx[:, 1] << _BITS) | idx[:, 2]
     return keys, inside
 
@@ -49,13 +53,30 @@ def key_centres(keys: np.ndarray, voxel: float) -> np.ndarray:
     return (idx + 0.5) * voxel
 
 
-def _reduce(keys: np.ndarray, sums: np.ndarray, csums: np.ndarray, counts: np.ndarray):
-    """Entries of equal key summed; keys sorted."""
-    uk, inv = np.unique(keys, return_inverse=True)
-    n = len(uk)
-    s = np.column_stack([np.bincount(inv, sums[:, i], n) for i in range(3)])
-    c = np.column_stack([np.bincount(inv, csums[:, i], n) for i in range(3)]).astype(np.float32)
-    return uk, s, c, np.bincount(inv, counts, n).astype(np.int64)
+def _reduce(keys: np.ndarray, *values: np.ndarray) -> tuple:
+    """``(sorted unique keys, *values summed per key)``. A stable sort and one ``reduceat`` per array: the sums
+    add up in input order (the same result for the same input, whatever the platform's sort)."""
+    order = np.argsort(keys, kind="stable")
+    k = keys[order]
+    if len(k) == 0:
+        return (k, *(v[:0] for v in values))
+    start = np.flatnonzero(np.concatenate(([True], k[1:] != k[:-1])))
+    return (k[start], *(np.add.reduceat(v[order], start, axis=0) for v in values))
+
+
+def voxel_means(points: np.ndarray, colours: np.ndarray, voxel: float) -> tuple[np.ndarray, np.ndarray]:
+    """One batch of points merged at once: ``(centroids (M, 3) float64, mean colours (M, 3) uint8)``, one per
+    occupied voxel, in key order (what :meth:`VoxelGrid.cloud` gives for one :meth:`VoxelGrid.add`)."""
+    points = np.asarray(points).reshape(-1, 3)
+    keys, inside = voxel_keys(points, voxel)
+    if not inside.all():
+        points, colours = points[inside], np.asarray(colours)[inside]
+    if len(keys) == 0:
+        return np.zeros((0, 3)), np.zeros((0, 3), np.uint8)
+    _, s, c, n = _reduce(keys, points.astype(np.float64), np.asarray(colours, np.float32),
+                         np.ones(len(keys), np.int32))
+    n = n[:, None]
+    return s / n, np.clip(np.rint(c / n), 0, 255).astype(np.uint8)
 
 
 class VoxelGrid:
@@ -68,7 +89,8 @@ class VoxelGrid:
         self._keys = np.zeros(0, np.int64)
         self._sums = np.zeros((0, 3))
         self._csums = np.zeros((0, 3), np.float32)
-        self._counts = np.zeros(0, np.int64)
+        self._counts = np.zeros(0, np.int32)  # points merged into the voxel
+        self._views = np.zeros(0, np.int32)  # batches (keyframes) that put a point into it
         self._pending: list[tuple] = []
         self._n_pending = 0
         self.points_in = 0
@@ -86,8 +108,8 @@ class VoxelGrid:
         if len(keys) == 0:
             return
         self.points_in += len(keys)
-        batch = _reduce(keys, points, np.asarray(colours, np.float32), np.ones(len(keys), np.int64))
-        self._pending.append(batch)
+        batch = _reduce(keys, points, np.asarray(colours, np.float32), np.ones(len(keys), np.int32))
+        self._pending.append((*batch, np.ones(len(batch[0]), np.int32)))
         self._n_pending += len(batch[0])
         if self._n_pending >= max(len(self._keys), 1 << 16):
             self._merge()
@@ -95,9 +117,10 @@ class VoxelGrid:
     def _merge(self) -> None:
         if not self._pending:
             return
-        parts = [(self._keys, self._sums, self._csums, self._counts), *self._pending]
+        parts = [(self._keys, self._sums, self._csums, self._counts, self._views), *self._pending]
         self._pending, self._n_pending = [], 0
-        self._keys, self._sums, self._csums, self._counts = _reduce(*(np.concatenate(p) for p in zip(*parts)))
+        self._keys, self._sums, self._csums, self._counts, self._views = _reduce(
+            *(np.concatenate(p) for p in zip(*parts)))
 
     def __len__(self) -> int:
         self._merge()
@@ -106,15 +129,17 @@ class VoxelGrid:
     @property
     def nbytes(self) -> int:
         """Bytes the grid's arrays hold (pending batches included)."""
-        arrays = [self._keys, self._sums, self._csums, self._counts] + [a for b in self._pending for a in b]
+        arrays = [self._keys, self._sums, self._csums, self._counts, self._views] + [a for b in self._pending for a in b]
         return int(sum(a.nbytes for a in arrays))
 
-    def cloud(self) -> Cloud:
-        """One point per voxel: the centroid of its points, coloured by their mean colour."""
+    def cloud(self, min_views: int = 1) -> Cloud:
+        """One point per voxel that at least ``min_views`` batches (:meth:`add` calls: keyframes) put points into:
+        the centroid of its points, coloured by their mean colour."""
         self._merge()
-        if len(self._keys) == 0:
+        keep = self._views >= min_views
+        if not keep.any():
             return Cloud.empty()
-        n = self._counts[:, None]
-        pts = (self._sums / n).astype(np.float32)
-        col = np.clip(np.rint(self._csums / n), 0, 255).astype(np.uint8)
+        n = self._counts[keep, None]
+        pts = (self._sums[keep] / n).astype(np.float32)
+        col = np.clip(np.rint(self._csums[keep] / n), 0, 255).astype(np.uint8)
         return Cloud(pts, col)
