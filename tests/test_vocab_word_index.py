@@ -95,24 +95,6 @@ def test_index_agrees_with_exhaustive_search_on_real_superpoint(real_sequences):
     assert agree >= 0.98 and recall >= 0.95
 
 
-def test_rounded_products_match_like_float32_on_real_superpoint(real_sequences):
-    # every consecutive pair of the real sequences: the bfloat16 and int8 products select candidates,
-    # the decisions are float32's (vocab/bf16_match.py); real rows have a largest component ~0.33
-    from slam_lcd.vocab.bf16_match import int8_available, mutual_nn_unit_bf16, mutual_nn_unit_int8
-
-    matches = [mutual_nn_unit_bf16] + ([mutual_nn_unit_int8] if int8_available() else [])
-    pairs = 0
-    for _, seq in real_sequences:
-        units = [as_unit_vectors(d) for d in seq]
-        for a, b in zip(units[:-1], units[1:]):
-            m32, d32 = mutual_nn_unit(a, b, 0.9, 0.8, return_distances=True)
-            for match in matches:
-                m, d = match(a, b, 0.9, 0.8)
-                assert np.array_equal(m, m32) and np.allclose(d, d32, atol=1e-5)
-            pairs += 1
-    assert pairs == 121
-
-
 def test_a_query_holds_the_words_its_keyframe_is_inserted_with(real_sequences):
     """With the index active a feature tracked from the previous image queries with its track's word,
     the word its insertion gives it (IncrementalWords.query_words), instead of a nearest word re-ranked

@@ -233,8 +233,7 @@ def grow(stream: PlaceStream, n: int, conf, checkpoints: list[int], label: str, 
     from slam_lcd.vocab.descriptors import as_unit_vectors
 
     # the libraries of a SuperPoint run are loaded before the baseline, so that memory per keyframe is
-    # what the keyframes add: faiss (the graph, loaded on first use) and torch (~190 MB once per
-    # process; with torch loaded, ``match_product: auto`` takes the bfloat16 match, as in such a run)
+    # what the keyframes add: faiss (the graph, loaded on first use) and torch (~190 MB once per process)
     import faiss  # noqa: F401
     import torch  # noqa: F401
     reference = MachineReference()

@@ -13,12 +13,6 @@ class VocabConfig:
     # max descriptor distance of a match on unit vectors (None: 0.8 for float descriptors,
     # 1.0 for binary ones, which is Hamming 64 of 256 bits)
     match_max_distance: float | None = None
-    # similarity product of that match: "float32"; "bfloat16" or "int8" (candidates from a rounded
-    # product, every decision on float32 values: the same matches, docs/vocab_online.md); "auto": int8 where
-    # the CPU multiplies it in hardware (VNNI, AMX) and torch has the product, else bfloat16 where the
-    # CPU multiplies that (AMX, AVX512-BF16), when torch is loaded (SuperPoint runs; an ORB run stays
-    # free of torch); float32 elsewhere
-    match_product: Literal["auto", "float32", "bfloat16", "int8"] = "auto"
     # --- tree over the words ---
     # 'dp': Dirichlet-process mixture level by level up to a root; 'hkmeans': DBoW2-style k^L
     tree: Literal["dp", "hkmeans"] = "dp"

@@ -380,8 +380,7 @@ class BowDatabase:
             if self.words is None:
                 self.words = IncrementalWords(u.shape[1], self.conf.match_ratio, self.conf.match_max_distance,
                                               self._desc_kind, radius=self.conf.online_word_radius,
-                                              index=WordIndex.from_config(u.shape[1], self.conf),
-                                              product=self.conf.match_product)
+                                              index=WordIndex.from_config(u.shape[1], self.conf))
             bow = BowVector.from_word_ids(self.words.add_image(u, self._pool()))
         self._insert(kf_id, stamp_ns, bow)
         self._pool_at, self._query_best = self._query_best, None
@@ -610,7 +609,7 @@ def restore_words(state: dict[str, np.ndarray], conf: VocabConfig | None = None)
             and len(state["counts"]) == n and len(state["images"]) == n):
         raise ValueError("the word arrays do not fit together")
     w = IncrementalWords(dim, conf.match_ratio, conf.match_max_distance, kind, radius=conf.online_word_radius,
-                         index=WordIndex.from_config(dim, conf), product=conf.match_product)
+                         index=WordIndex.from_config(dim, conf))
     w._grow(n)
     for a in range(0, n, 65536):  # straight into the words' array, a block at a time (no full-size temporaries)
         b = min(n, a + 65536)

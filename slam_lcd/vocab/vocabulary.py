@@ -146,8 +146,7 @@ def train_vocabulary(descriptor_sets: Iterable[np.ndarray], conf: VocabConfig | 
     conf = conf or VocabConfig()
     sets, kind, dim = _check_sets(descriptor_sets)
     units = [as_unit_vectors(d) for d in sets]
-    words = IncrementalWords(units[0].shape[1], conf.match_ratio, conf.match_max_distance, kind,
-                             product=conf.match_product)
+    words = IncrementalWords(units[0].shape[1], conf.match_ratio, conf.match_max_distance, kind)
     with blas_limit(1):  # thousands of tiny products: thread start-up costs more than it saves
         for u in units:
             words.add_image(u)

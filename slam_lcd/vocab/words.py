@@ -21,8 +21,6 @@ import numpy as np
 from ..column_best import first_in_column
 from ..errors import ConfigError
 from .arrays import grow_in_place
-from .bf16_match import (MAX_DISTANCE, ProductBuffers, auto_product, int8_available, mutual_nn_unit_bf16,
-                         mutual_nn_unit_int8, to_bf16, to_int8)
 from .descriptors import default_match_distance, group_sums, normalise_rows, unit_distance
 from .word_index import WordIndex, exact_nearest
 
@@ -34,8 +32,6 @@ _GROW_STEP = 16384
 _POOL_MIN_YIELD = 0.2
 _POOL_JUDGED = 32
 _POOL_PAUSE = 3
-# how an image's descriptors are multiplied with the previous image's (vocab.match_product)
-_PRODUCTS = ("auto", "float32", "bfloat16", "int8")
 
 
 def mutual_nn_unit(d1: np.ndarray, d2: np.ndarray, ratio: float | None, max_distance: float | None,
@@ -45,6 +41,9 @@ def mutual_nn_unit(d1: np.ndarray, d2: np.ndarray, ratio: float | None, max_dist
     Same rule (mutual nearest neighbours, ``best < ratio * second``, ``best < max_distance``)
     with the distance ``sqrt(2 - 2 s)`` of unit vectors; no full distance matrix is formed
     (the product is most of the cost of growing the words, so the passes over it are few).
+    Why float32 only: candidates from a bfloat16 or int8 product, decided in float32, saved less than
+    15 % of a keyframe's database time at 10,000 keyframes even on a CPU with VNNI and BF16, and
+    both are emulated (slower) on AVX2-only CPUs (docs/vocab_online.md).
     """
     n1, n2 = len(d1), len(d2)
     if n1 == 0 or n2 == 0:
@@ -99,28 +98,13 @@ class IncrementalWords:
     than this joins that word instead of founding a new one (so a revisited place reuses its
     old words); ``None`` is the paper's training rule (unmatched always founds a word).
     ``index``: the nearest-word search used with ``radius`` (default: exact search).
-    ``product``: the similarity product of the match to the previous image: ``float32``, or
-    ``bfloat16`` / ``int8`` candidates scored in float32 (:mod:`slam_lcd.vocab.bf16_match`: the same
-    matches, ~2-5x less time where the CPU multiplies bfloat16 in hardware, and int8 (VNNI) in about
-    half the bfloat16 time); ``auto`` takes ``int8`` where the CPU and torch multiply it fast, else
-    ``bfloat16`` there, when torch is loaded already (:func:`~slam_lcd.vocab.bf16_match.auto_product`).
     """
 
     def __init__(self, dim: int, ratio: float | None = 0.9, max_distance: float | None = None,
-                 kind: str = "float", radius: float | None = None, index: WordIndex | None = None,
-                 product: str = "auto"):
-        if product not in _PRODUCTS:
-            raise ConfigError(f"vocab.match_product: {product!r} is not one of {', '.join(_PRODUCTS)}")
+                 kind: str = "float", radius: float | None = None, index: WordIndex | None = None):
         self.dim = dim
         self.ratio = ratio
         self.max_distance = default_match_distance(kind) if max_distance is None else max_distance
-        if product == "auto":
-            product = auto_product()
-        elif product == "int8" and not int8_available():
-            raise ConfigError("vocab.match_product: int8 needs torch's int8 CPU product (torch._int_mm); "
-                              "use auto, bfloat16 or float32")
-        # the rounded products need a positive similarity bound (a match distance below MAX_DISTANCE)
-        self.product = product if product == "float32" or self.max_distance < MAX_DISTANCE else "float32"
         self.radius = radius
         self.index = index
         self.version = 0  # bumped whenever words move or are founded (invalidates cached searches)
@@ -133,8 +117,6 @@ class IncrementalWords:
         self.n_words = 0
         self.n_images = 0
         self._prev_desc: np.ndarray | None = None
-        self._prev_rounded = None  # bfloat16 / int8 product: the previous descriptors rounded (to_bf16 / to_int8)
-        self._buffers = ProductBuffers() if self.product != "float32" else None
         self._prev_words: np.ndarray | None = None
         self._prev_cands: np.ndarray | None = None  # each previous feature's candidate words (index mode)
         self._prev_age: np.ndarray | None = None  # images since that feature's candidates came from the index
@@ -143,7 +125,7 @@ class IncrementalWords:
         self._gap: tuple | None = None
         self._pool_pause = 0  # images left that search without the pool (see _pool_hints)
         self._pool_missed = False  # this image's pool decided few of the rows it scored
-        self._match_cache: tuple | None = None  # (n_images, descriptors, matches, distances, rounded rows)
+        self._match_cache: tuple | None = None  # (n_images, descriptors, matches, distances)
         self._search_cache: tuple | None = None  # (version, descriptors, pool, ids, sims, candidates, age)
 
     # ------------------------------------------------------------------ state
@@ -183,25 +165,16 @@ class IncrementalWords:
     def _same_pool(cls, cached: np.ndarray | None, pool: np.ndarray | None) -> bool:
         return cached is pool or (cached is not None and pool is not None and cls._same(cached, pool))
 
-    def _rounded(self, desc: np.ndarray):
-        return to_int8(desc) if self.product == "int8" else to_bf16(desc)
-
     def _match(self, desc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Matches (row, previous row) of ``desc`` to the previous image and their distances (kept for the same image)."""
         c = self._match_cache
         if c is not None and c[0] == self.n_images and self._same(c[1], desc):
             return c[2], c[3]
-        h = None
         if len(desc) and self._prev_desc is not None and len(self._prev_desc):
-            if self.product != "float32":
-                h = self._rounded(desc)
-                match = mutual_nn_unit_int8 if self.product == "int8" else mutual_nn_unit_bf16
-                m, dist = match(desc, self._prev_desc, self.ratio, self.max_distance, h, self._prev_rounded, self._buffers)
-            else:
-                m, dist = mutual_nn_unit(desc, self._prev_desc, self.ratio, self.max_distance, return_distances=True)
+            m, dist = mutual_nn_unit(desc, self._prev_desc, self.ratio, self.max_distance, return_distances=True)
         else:
             m, dist = np.zeros((0, 2), dtype=np.int64), np.zeros(0, np.float32)
-        self._match_cache = (self.n_images, desc, m, dist, h)
+        self._match_cache = (self.n_images, desc, m, dist)
         return m, dist
 
     def nearest(self, desc: np.ndarray, pool: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -397,9 +370,6 @@ class IncrementalWords:
             lost = np.ones(len(self._prev_desc), dtype=bool)
             lost[m[:, 1]] = False
             self._gap = (self._prev_desc[lost], self._prev_cands[lost], self._prev_words[lost], self._prev_age[lost])
-        if self.product != "float32":
-            h = self._match_cache[4] if self._match_cache is not None else None
-            self._prev_rounded = self._rounded(desc) if h is None else h
         self._prev_desc, self._prev_words = desc, words
         self._prev_cands, self._prev_age = cands, age
         self._match_cache = self._search_cache = None
