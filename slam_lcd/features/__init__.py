@@ -10,7 +10,6 @@ that needs no network (``slam-lcd info``), must not pay torch's import time.
 from __future__ import annotations
 
 from ..lazy_names import lazy_getattr
-
 from .config import FeaturesConfig
 
 _LAZY = {
@@ -18,7 +17,7 @@ _LAZY = {
     "Extractor": ".extract",
     "OrbExtractor": ".extract",
     "SuperPointExtractor": ".superpoint_extractor",
-    "load_extractor": ".extract",
+    "load_extractor": ".loading",
     "SuperPoint": ".superpoint",
     "resolve_weights": ".weights",
 }

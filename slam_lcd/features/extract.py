@@ -8,17 +8,14 @@ logs) does not pay torch's import (~3 s on a 2-core machine) in each process.
 """
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import json
 from abc import ABC, abstractmethod
-from pathlib import Path
 from typing import Iterable
 
 import cv2
 import numpy as np
 
-from ..errors import ConfigError
 from ..types import Features
 from ..vision.gray import to_gray_uint8
 from .config import FeaturesConfig
@@ -92,23 +89,3 @@ class OrbExtractor(Extractor):
         scores = np.array([k.response for k in kps], np.float32)
         order = np.argsort(-scores, kind="stable")
         return Features(xy[order], scores[order], np.ascontiguousarray(desc[order]), (w, h), kind=self.kind)
-
-
-def load_extractor(conf: FeaturesConfig | None = None, *, weights: str | Path | None = None,
-                   device: str = "auto") -> Extractor:
-    """Build the extractor named by ``conf.kind``.
-
-    ``weights`` overrides ``conf.weights``; ``device`` overrides ``conf.device`` unless it is 'auto'.
-    """
-    conf = conf or FeaturesConfig()
-    if conf.kind == "orb":
-        return OrbExtractor(conf)
-    if conf.kind == "superpoint":
-        from .superpoint_extractor import SuperPointExtractor
-
-        return SuperPointExtractor(conf, weights=weights, device=device if device != "auto" else conf.device)
-    raise ConfigError(f"features.kind must be 'superpoint' or 'orb', got {conf.kind!r}")
-
-
-def with_overrides(conf: FeaturesConfig, **changes) -> FeaturesConfig:
-    return dataclasses.replace(conf, **changes)

@@ -1,7 +1,7 @@
 """SuperPoint as an :class:`~slam_lcd.features.extract.Extractor`: numpy images in, Features out.
 
 Why a module of its own: it is the only extractor that needs torch, and importing torch costs
-~3 s on a 2-core machine; :func:`slam_lcd.features.extract.load_extractor` imports this module
+~3 s on a 2-core machine; :func:`slam_lcd.features.loading.load_extractor` imports this module
 only for ``features.kind: superpoint``.
 """
 from __future__ import annotations

@@ -25,7 +25,6 @@ import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
 
-
 from ..atomic import atomic_path
 from ..errors import DownloadError, WeightsError
 from .config import SUPERPOINT_SHA256, SUPERPOINT_URL
