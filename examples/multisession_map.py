@@ -18,9 +18,8 @@ import sys
 import tempfile
 from pathlib import Path
 
-import numpy as np
-
 import gtsam
+import numpy as np
 from gtsam.symbol_shorthand import X
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))

@@ -16,7 +16,7 @@ def _forget_caught_keyboard_interrupt() -> None:
     exec("None", {})  # noqa: S102 - a constant; the call itself is what clears the flag
 
 
-from .interrupts import STOP_SIGNALS, Terminated, exit_status, install_stop_signals, interrupt_behind
+from .runtime.interrupts import STOP_SIGNALS, Terminated, exit_status, install_stop_signals, interrupt_behind
 
 install_stop_signals()  # SIGTERM / SIGHUP while the command line loads: one line too
 try:

@@ -36,10 +36,10 @@ from .backend import PoseGraph, correct_full_rate
 from .backend.pose_graph import ACCEPTED
 from .config import Config
 from .frontend import KeyframeSelector
+from .frontend.odometry_buffer import OdometryBuffer
 from .lcd import LoopDetector
-from .odometry_buffer import OdometryBuffer
-from .stage_timer import StageTimer, resident_kb
-from .thread_limits import limited_threads
+from .runtime.stage_timer import StageTimer, resident_kb
+from .runtime.thread_limits import limited_threads
 from .types import CameraModel, Keyframe, LoopClosure, Trajectory
 
 log = logging.getLogger(__name__)

@@ -21,7 +21,6 @@ from collections import deque
 from pathlib import Path
 
 from .config import Config, validate_config
-from .interrupts import interrupted_word
 from .errors import DamagedImageError, FileMissingError, PipelineError, stamp_text
 from .io import open_log
 from .io.prefetch import prefetched
@@ -31,13 +30,33 @@ from .outputs.corrected_log import copied_topics
 from .outputs.output_set import OutputSet
 from .outputs.result import RunResult
 from .outputs.write import RUN_OUTPUTS, write_set
-from .progress import progress_bar
-from .sensors.messages import (at_message, check_first_messages, check_image_sizes, decode_any_image,
-                               decode_camera_of, decode_depth, decode_gray, decode_pose_of)
+from .runtime.interrupts import interrupted_word
+from .runtime.progress import progress_bar
+from .sensors.ground_truth import (
+    POSITION_ONLY_NOTE,
+    decode_ground_truth,
+    ground_truth_from_messages,
+    ground_truth_from_tf,
+)
+from .sensors.messages import (
+    at_message,
+    check_first_messages,
+    check_image_sizes,
+    decode_any_image,
+    decode_camera_of,
+    decode_depth,
+    decode_gray,
+    decode_pose_of,
+)
 from .sensors.mounting import body_frame_of, calibrated_mounting, mounting_from_camera_info, static_transforms
-from .sensors.ground_truth import (POSITION_ONLY_NOTE, decode_ground_truth, ground_truth_from_messages,
-                                   ground_truth_from_tf)
-from .sensors.topics import Topics, choose_right_topic, choose_topics, configured_topics, copyable_topics, static_tf_topics
+from .sensors.topics import (
+    Topics,
+    choose_right_topic,
+    choose_topics,
+    configured_topics,
+    copyable_topics,
+    static_tf_topics,
+)
 from .types import Trajectory
 from .vision.gray import image_to_gray
 
@@ -203,7 +222,7 @@ def run_log(
         except KeyboardInterrupt:  # Ctrl-C (maybe a second one): skip the back end's final re-check
             log.warning("%s%s: the back end's final re-check is skipped", interrupted_word(),
                         " again" if result.interrupted else "")
-            from .interrupts import signal_name
+            from .runtime.interrupts import signal_name
 
             notes.append(f"The back end's final re-check (GNC) was interrupted ({signal_name()}) and skipped.")
             result.interrupted = True

@@ -35,7 +35,7 @@ def sha256_tree(*paths) -> dict[str, str]:
     return out
 
 
-# tqdm redraws, and the one line per stage printed when stderr is not a terminal (slam_lcd.progress)
+# tqdm redraws, and the one line per stage printed when stderr is not a terminal (slam_lcd.runtime.progress)
 _BAR = re.compile(r"\d+%\||\d+/\d+ \[|it/s|frame/s|img/s|: (?:done|\d+(?:/\d+)? \S+) in \d+\.\d s")
 
 

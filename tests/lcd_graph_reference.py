@@ -41,7 +41,6 @@ from scipy.spatial import Delaunay, QhullError
 from slam_lcd.lcd.config import LcdConfig
 from slam_lcd.lcd.graph import GraphVerdict
 
-
 # ----------------------------------------------------------------------------- graph building
 
 

@@ -3,10 +3,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from support.scenario import ScenarioConfig, ate_rmse, make_scenario, run_scenario
 
 from slam_lcd.backend import correct_full_rate
 from slam_lcd.backend.config import BackendConfig
-from support.scenario import ScenarioConfig, ate_rmse, make_scenario, run_scenario
 from slam_lcd.errors import InputError, UnsortedStampsError
 from slam_lcd.types import Trajectory
 

@@ -1,10 +1,10 @@
 """g2o import/export: formats, information order, round trip (real GTSAM example graphs)."""
 from __future__ import annotations
 
+import gtsam
 import numpy as np
 import pytest
 
-import gtsam
 from slam_lcd.backend.g2o import G2oEdge, chain_initial_estimate, read_g2o, write_g2o
 from slam_lcd.errors import FileMissingError, TrajectoryFormatError, UnsupportedFormatError
 

@@ -1,11 +1,11 @@
 """The standalone loop gate and loop factors, on numpy arrays and small GTSAM graphs."""
 from __future__ import annotations
 
+import gtsam
 import numpy as np
 import pytest
-
-import gtsam
 from gtsam.symbol_shorthand import X
+
 from slam_lcd.backend import PoseGraph
 from slam_lcd.backend.config import BackendConfig
 from slam_lcd.backend.gate import ArrayRelatives, Chi2Gate, GateLoop, PcmGate, default_gate, relative_from_marginals

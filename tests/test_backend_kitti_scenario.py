@@ -8,11 +8,11 @@ five keyframes, to keep the suite fast; tools/bench_backend.py runs all 4541.
 from __future__ import annotations
 
 import pytest
+from support.scenario import ScenarioConfig, ate_rmse, make_scenario, run_scenario
+from support.solve import solve_lm
 
 from slam_lcd.backend.config import BackendConfig
 from slam_lcd.backend.pose_graph import values_to_array
-from support.scenario import ScenarioConfig, ate_rmse, make_scenario, run_scenario
-from support.solve import solve_lm
 
 STRIDE = 4
 

@@ -1,15 +1,15 @@
 """PoseGraph behaviour on a real trajectory (KITTI-00 ground truth, drifting odometry)."""
 from __future__ import annotations
 
+import gtsam
 import numpy as np
 import pytest
+from support.scenario import ScenarioConfig, ate_rmse, make_scenario, run_scenario
 
-import gtsam
 from slam_lcd.backend import PoseGraph
 from slam_lcd.backend.config import BackendConfig
 from slam_lcd.backend.g2o import read_g2o
 from slam_lcd.backend.pose_graph import robust_kernel
-from support.scenario import ScenarioConfig, ate_rmse, make_scenario, run_scenario
 from slam_lcd.errors import InputError, InvalidPoseError
 from slam_lcd.types import LoopClosure
 

@@ -3,10 +3,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from support.solve import batch_graph, from_values, isam2_edge_by_edge, solve_lm, to_values, translation_rmse
 
 from slam_lcd.backend.config import BackendConfig
 from slam_lcd.backend.g2o import chain_initial_estimate, read_g2o
-from support.solve import batch_graph, from_values, isam2_edge_by_edge, solve_lm, to_values, translation_rmse
 
 
 @pytest.fixture(scope="module")

@@ -14,10 +14,24 @@ import shutil
 
 import numpy as np
 import pytest
-
-from bad_input_files import (Mounts, add_undefined_topic, assert_one_line, assert_set_state, damage_zstd_chunk,
-                             empty_log, fill_disk, leftovers, message_lines, pickled_weights, rewrite_log, run_cli,
-                             run_subprocess, sha256_tree, truncated_copy, tum_lines)
+from bad_input_files import (
+    Mounts,
+    add_undefined_topic,
+    assert_one_line,
+    assert_set_state,
+    damage_zstd_chunk,
+    empty_log,
+    fill_disk,
+    leftovers,
+    message_lines,
+    pickled_weights,
+    rewrite_log,
+    run_cli,
+    run_subprocess,
+    sha256_tree,
+    truncated_copy,
+    tum_lines,
+)
 
 ORB = ["--set", "features.kind=orb", "--set", "features.feature_cache=false", "--no-progress"]
 # many keyframes and loops between them on a 3-second log: every back-end step runs early
@@ -305,8 +319,8 @@ def test_pipeline_stays_consistent_when_interrupted_inside_the_back_end(demo, mo
     from slam_lcd.backend.pose_graph import PoseGraph
     from slam_lcd.config import load_config
     from slam_lcd.io import open_log
-    from slam_lcd.pipeline import Pipeline
     from slam_lcd.io.decode import decode_camera_info
+    from slam_lcd.pipeline import Pipeline
     from slam_lcd.sensors.messages import decode_depth as _decode_depth
     from slam_lcd.sensors.messages import decode_gray as _decode_gray
     from slam_lcd.sensors.messages import decode_pose_of
@@ -403,7 +417,7 @@ def test_ctrl_c_lost_in_a_finaliser_still_stops_the_command(demo, tmp_path):
 
 def test_atomic_writers_leave_no_temporary_files_when_interrupted(demo, tmp_path):
     """Item 3: an interrupted atomic write (file or log) leaves nothing beside its target."""
-    from slam_lcd.atomic import atomic_write
+    from slam_lcd.files.atomic import atomic_write
     from slam_lcd.io import open_log
     from slam_lcd.io.writers import copy_topics, open_writer
 
@@ -424,8 +438,8 @@ def test_real_ctrl_c_waits_for_a_critical_step(tmp_path, monkeypatch):
     first, then the interrupt is raised; the folder then holds the complete new set."""
     import signal
 
-    from slam_lcd.interrupts import defer_sigint
     from slam_lcd.outputs.output_set import OutputSet
+    from slam_lcd.runtime.interrupts import defer_sigint
 
     # as in a terminal: Python's own Ctrl-C handler (a shell that starts the tests in the
     # background hands them SIGINT ignored, and Python then keeps it ignored)
@@ -779,12 +793,12 @@ def test_ate_warns_on_repeated_stamp_and_non_unit_quaternion(tum_pair, tmp_path,
 
 
 def test_every_numeric_config_key_has_a_range():
-    """Item 12: every int/float key of every section has an entry in slam_lcd.config_ranges."""
+    """Item 12: every int/float key of every section has an entry in slam_lcd.config.ranges."""
     import dataclasses
     import typing
 
     from slam_lcd.config import Config
-    from slam_lcd.config_ranges import RANGES
+    from slam_lcd.config.ranges import RANGES
 
     numeric = set()
     for section in dataclasses.fields(Config):
@@ -799,7 +813,7 @@ def test_every_numeric_config_key_has_a_range():
 
 def _outside(spec: str, is_int: bool):
     """A value outside ``spec`` (None when the whole number line is allowed)."""
-    from slam_lcd.config_ranges import _alternatives
+    from slam_lcd.config.ranges import _alternatives
 
     alts = _alternatives(spec)
     lo = min(a[0] for a in alts)
@@ -815,11 +829,11 @@ def _outside(spec: str, is_int: bool):
 
 def test_every_numeric_config_key_is_range_checked_naming_the_key():
     """Item 12: for every key, a value out of its range is a one-line ConfigError naming it."""
-    from slam_lcd.config import Config, load_config
-    from slam_lcd.config_ranges import RANGES
-    from slam_lcd.errors import ConfigError
-
     import typing
+
+    from slam_lcd.config import Config, load_config
+    from slam_lcd.config.ranges import RANGES
+    from slam_lcd.errors import ConfigError
 
     load_config("default")  # the defaults are in range
     for key, spec in RANGES.items():

@@ -10,11 +10,9 @@ line (or the one warning) and what it names.
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
-
 from bad_input_files import assert_one_line, message_lines, rewrite_log, run_cli, tum_lines
 
 ORB = ["--set", "features.kind=orb", "--set", "features.feature_cache=false", "--no-progress",

@@ -14,7 +14,6 @@ import shutil
 from pathlib import Path
 
 import pytest
-
 from bad_input_files import assert_one_line, run_cli, sha256_tree
 
 ORB = ["--features", "orb", "--no-feature-cache", "--no-progress"]
@@ -144,8 +143,8 @@ def test_no_command_writes_onto_an_input_or_two_outputs_on_one_path(logs, tmp_pa
 
 def test_clash_rule_in_the_library():
     """``check_no_clash``: outputs against inputs and against each other; merged folders keep other names."""
-    from slam_lcd.atomic import check_no_clash
     from slam_lcd.errors import InputError
+    from slam_lcd.files.atomic import check_no_clash
 
     root = Path(os.environ.get("TMPDIR", "/tmp"))
     check_no_clash({"OUT": root / "a", "--x": root / "b"}, {"IN": root / "c"})

@@ -126,7 +126,7 @@ def test_near_miss_for_set_keys(shared_data, tmp_path, capsys):
 
 # ----------------------------------------------------------------------------- progress
 def test_progress_bar_modes(monkeypatch):
-    import slam_lcd.progress as progress
+    import slam_lcd.runtime.progress as progress
 
     err = io.StringIO()
     monkeypatch.setattr(progress.sys, "stderr", err)

@@ -6,8 +6,17 @@ import logging
 import numpy as np
 import pytest
 
-from slam_lcd.cloud import (Cloud, MapCloudBuilder, MapCloudConfig, VoxelGrid, depth_points, read_cloud, sharpness,
-                            surface_distances, write_cloud)
+from slam_lcd.cloud import (
+    Cloud,
+    MapCloudBuilder,
+    MapCloudConfig,
+    VoxelGrid,
+    depth_points,
+    read_cloud,
+    sharpness,
+    surface_distances,
+    write_cloud,
+)
 from slam_lcd.errors import InputError, UnsupportedFormatError
 from slam_lcd.types import CameraModel, Keyframe, Rectangles
 

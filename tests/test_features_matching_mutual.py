@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from slam_lcd.column_best import first_in_column
 from slam_lcd.features.matching import mutual_nn_match_bf, mutual_nn_match_symmetric
+from slam_lcd.vision.column_best import first_in_column
 
 
 def _unit(x):

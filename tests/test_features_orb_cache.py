@@ -5,7 +5,14 @@ import numpy as np
 import pytest
 import torch
 
-from slam_lcd.features import FeatureCache, FeaturesConfig, OrbExtractor, SuperPoint, SuperPointExtractor, load_extractor
+from slam_lcd.features import (
+    FeatureCache,
+    FeaturesConfig,
+    OrbExtractor,
+    SuperPoint,
+    SuperPointExtractor,
+    load_extractor,
+)
 from slam_lcd.features.cache import log_key
 from slam_lcd.features.matching import mutual_nn_match
 

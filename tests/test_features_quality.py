@@ -11,9 +11,9 @@ import cv2
 import numpy as np
 import pytest
 import torch
+from support.feature_quality import fundamental_inliers, homography_scores, random_homography, warp_image
 
 from slam_lcd.features import FeaturesConfig, SuperPoint, SuperPointExtractor, load_extractor
-from support.feature_quality import fundamental_inliers, homography_scores, random_homography, warp_image
 
 MIN_REPEATABILITY = 0.60  # 3 px; trained ~0.77-0.86, random weights ~0.33-0.40
 MIN_PRECISION = 0.80  # mutual-NN, 3 px; trained ~0.93-0.96, random weights ~0.10-0.16

@@ -6,8 +6,6 @@ pixels of what they mark.
 """
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 import torch

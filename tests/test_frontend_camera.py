@@ -6,11 +6,11 @@ import pytest
 
 from slam_lcd.errors import ConfigError, MessageEncodingError
 from slam_lcd.frontend import FrontendConfig
-from slam_lcd.sensors.messages import camera_from_camera_info
 from slam_lcd.geometry import pose_from_list
+from slam_lcd.sensors.messages import camera_from_camera_info
 from slam_lcd.sensors.mounting import camera_mounting
-from slam_lcd.vision.camera import undistort_points
 from slam_lcd.types import CameraModel
+from slam_lcd.vision.camera import undistort_points
 
 
 def _info(model: str, D):

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 from slam_lcd.frontend import two_view_geometry
-from slam_lcd.vision.camera import undistort_points
 from slam_lcd.geometry import inv, rotation_angle, se3_exp, se3_log
 from slam_lcd.types import CameraModel
+from slam_lcd.vision.camera import undistort_points
 
 TUM_FR2 = CameraModel(640, 480, 520.9, 521.0, 325.1, 249.7, "plumb_bob",
                       np.array([0.2312, -0.7849, -0.0033, -0.0001, 0.9172]))

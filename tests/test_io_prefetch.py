@@ -118,7 +118,7 @@ def test_reading_ahead_starts_only_once_loop_detection_hardly_waits_for_features
     from types import SimpleNamespace
 
     import slam_lcd.runner as runner
-    from slam_lcd.stage_timer import StageTimer
+    from slam_lcd.runtime.stage_timer import StageTimer
 
     clock = {"t": 0.0}
     monkeypatch.setattr(runner.time, "perf_counter", lambda: clock["t"])

@@ -8,13 +8,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from lcd_corridor_cache import corridor_features  # tests/ is on sys.path (pytest rootdir import)
 
 from slam_lcd.lcd import LcdConfig, LoopDetector
-from slam_lcd.lcd.evaluation import (format_retrieval, format_table, load_loop_matrix, precision_recall,
-                                     retrieval_recall)
+from slam_lcd.lcd.evaluation import format_retrieval, format_table, load_loop_matrix, precision_recall, retrieval_recall
 from slam_lcd.types import Keyframe
-
-from lcd_corridor_cache import corridor_features  # tests/ is on sys.path (pytest rootdir import)
 
 MODES = ("none", "ransac", "graph", "graph+ransac")
 pytestmark = pytest.mark.slow

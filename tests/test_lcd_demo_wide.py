@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from support.demo_world_loops import detect_on_rendered_keyframes, relative_error
 
 pytestmark = pytest.mark.slow

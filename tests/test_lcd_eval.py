@@ -11,8 +11,15 @@ import pytest
 from slam_lcd.cli.main import main
 from slam_lcd.errors import InputError
 from slam_lcd.lcd import CandidateRecord, TemporalConsistency
-from slam_lcd.lcd.evaluation import (average_precision, load_loop_matrix, loops_from_poses, place_recall,
-                                     precision_recall, retrieval_recall, revisit_places)
+from slam_lcd.lcd.evaluation import (
+    average_precision,
+    load_loop_matrix,
+    loops_from_poses,
+    place_recall,
+    precision_recall,
+    retrieval_recall,
+    revisit_places,
+)
 
 
 def test_gt_formats_agree(tmp_path, shared_data):

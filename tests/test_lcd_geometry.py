@@ -3,10 +3,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from slam_lcd.lcd import LcdConfig, estimate_loop_pose, verify_epipolar
 from slam_lcd.geometry import adjoint, inv, se3_exp
-from slam_lcd.vision.pnp import _residuals_and_jacobian
+from slam_lcd.lcd import LcdConfig, estimate_loop_pose, verify_epipolar
 from slam_lcd.types import CameraModel, Features, Keyframe
+from slam_lcd.vision.pnp import _residuals_and_jacobian
 
 CAM = CameraModel(width=640, height=480, fx=500.0, fy=500.0, cx=320.0, cy=240.0)
 

@@ -4,9 +4,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from slam_lcd.features.matching import mutual_nn_match_bf
 from slam_lcd.lcd import LcdConfig, planar_graph, verify_graph
 from slam_lcd.lcd.graph import crossing_edges
-from slam_lcd.features.matching import mutual_nn_match_bf
 
 
 def _scene(n=80, seed=0):

@@ -6,10 +6,10 @@ as the reference implementation kept in ``lcd_graph_reference.py``.
 """
 from __future__ import annotations
 
+import lcd_graph_reference as ref  # tests/ is on sys.path (pytest rootdir import)
 import numpy as np
 import pytest
 
-import lcd_graph_reference as ref  # tests/ is on sys.path (pytest rootdir import)
 from slam_lcd.features.matching import mutual_nn_match_bf
 from slam_lcd.lcd import LcdConfig, planar_graph, verify_graph
 from slam_lcd.lcd.budget import select_matches

@@ -6,9 +6,9 @@ import pytest
 
 from slam_lcd.geometry import inv, se3_exp, se3_log
 from slam_lcd.lcd.config import LcdConfig
-from slam_lcd.vision.pnp import refine_pose_reprojection
 from slam_lcd.lcd.information import InformationModel, coverage, loop_information
 from slam_lcd.types import CameraModel
+from slam_lcd.vision.pnp import refine_pose_reprojection
 
 CAM = CameraModel(640, 480, 457.0, 457.0, 319.5, 239.5)
 STEREO = CameraModel(640, 480, 457.0, 457.0, 319.5, 239.5, baseline=0.12)

@@ -5,12 +5,11 @@ from dataclasses import dataclass
 
 import numpy as np
 import pytest
+from lcd_corridor_cache import corridor_features  # tests/ is on sys.path (pytest rootdir import)
 
 from slam_lcd.lcd import LcdConfig, LoopDetector
 from slam_lcd.lcd.islands import group_islands
 from slam_lcd.types import Keyframe
-
-from lcd_corridor_cache import corridor_features  # tests/ is on sys.path (pytest rootdir import)
 
 
 @dataclass

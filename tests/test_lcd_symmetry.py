@@ -6,6 +6,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from lcd_corridor_cache import corridor_features  # tests/ is on sys.path (pytest rootdir import)
 
 from slam_lcd.features.matching import mutual_nn_match_symmetric
 from slam_lcd.lcd import LcdConfig, LoopDetector
@@ -13,8 +14,6 @@ from slam_lcd.lcd.pair import check_pair
 from slam_lcd.lcd.store import compact_descriptors
 from slam_lcd.types import Keyframe
 from slam_lcd.vision.camera import default_camera
-
-from lcd_corridor_cache import corridor_features  # tests/ is on sys.path (pytest rootdir import)
 
 
 @pytest.mark.parametrize("binary", [False, True])

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from slam_lcd.machine import machine_line
+from slam_lcd.runtime.machine import machine_line
 
 TOOLS = Path(__file__).resolve().parent.parent / "tools"
 

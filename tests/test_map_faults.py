@@ -28,7 +28,6 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-
 from bad_input_files import REPO, assert_one_line, run_cli
 
 ORB = ["--features", "orb", "--no-mcap", "--no-progress", "--set", "run.plots=false",

@@ -128,8 +128,7 @@ def test_many_loops_each_get_a_picture_in_order_and_the_contact_sheet_keeps_at_m
     from types import SimpleNamespace
 
     from slam_lcd.config import load_config
-    from slam_lcd.outputs.loop_pictures import (CONTACT_SHEET_MAX, KeyframeAlbum, _pictured,
-                                                write_loop_pictures)
+    from slam_lcd.outputs.loop_pictures import CONTACT_SHEET_MAX, KeyframeAlbum, _pictured, write_loop_pictures
 
     rng = np.random.default_rng(0)
     album = KeyframeAlbum(tmp_path / "album")

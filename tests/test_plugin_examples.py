@@ -5,10 +5,10 @@ import importlib.util
 import sys
 from pathlib import Path
 
+import gtsam
 import numpy as np
 import pytest
 
-import gtsam
 from slam_lcd.backend.g2o import read_g2o
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"

@@ -40,8 +40,8 @@ def _variant(src, dst, drop=(), write=None):
 
 
 def _log_camera_and_mounting(log):
-    from slam_lcd.sensors.messages import camera_from_camera_info
     from slam_lcd.io.tf import TfBuffer
+    from slam_lcd.sensors.messages import camera_from_camera_info
 
     with open_log(log) as r:
         m = next(iter(r.messages(["/camera/camera_info"])))
@@ -306,10 +306,10 @@ def test_raw_calibrated_stereo_pair_is_rectified_for_the_vo(tiny_log, tmp_path, 
 
 def test_raw_pair_without_rectification_tracks_worse(tiny_log, tmp_path):
     """The same raw pair given as if rectified (CameraInfo-style): the check that rectification matters."""
+    from slam_lcd.eval.metrics import ate
     from slam_lcd.sensors.calibration import load_calibration
     from slam_lcd.sensors.log_vo import visual_odometry_from_log
     from slam_lcd.sensors.rectify import stereo_rectifier
-    from slam_lcd.eval.metrics import ate
 
     log, calib_path, T_b_raw0 = _raw_stereo(tiny_log, tmp_path)
     calib = load_calibration(calib_path)

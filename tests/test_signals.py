@@ -18,7 +18,6 @@ import uuid
 from pathlib import Path
 
 import pytest
-
 from bad_input_files import REPO, leftovers, sha256_tree
 
 ORB = ["--features", "orb", "--no-feature-cache", "--no-progress", "--set", "run.plots=false"]
@@ -157,8 +156,8 @@ def test_a_later_run_removes_stale_staging_folders_of_ours_only(small_log, tmp_p
 STORM_CHILD = r"""
 import signal, sys, time
 from pathlib import Path
-from slam_lcd.interrupts import install_stop_signals
-from slam_lcd.atomic import atomic_write
+from slam_lcd.runtime.interrupts import install_stop_signals
+from slam_lcd.files.atomic import atomic_write
 from slam_lcd.io.writers import open_writer
 from slam_lcd.io import messages as M
 

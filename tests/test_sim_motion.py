@@ -4,8 +4,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from slam_lcd.sim import (T_body_camera, build_world, end_drift, gt_loop_pairs, make_path, make_trajectory,
-                          read_loop_pairs, simulate_odometry, write_loop_pairs)
+from slam_lcd.sim import (
+    T_body_camera,
+    build_world,
+    end_drift,
+    gt_loop_pairs,
+    make_path,
+    make_trajectory,
+    read_loop_pairs,
+    simulate_odometry,
+    write_loop_pairs,
+)
 
 
 @pytest.mark.parametrize("kind", ["laps", "figure8"])

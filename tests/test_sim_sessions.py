@@ -10,8 +10,19 @@ import pytest
 from slam_lcd.cli.main import main
 from slam_lcd.io import open_log
 from slam_lcd.io.decode import decode_pose
-from slam_lcd.sim import (SESSIONS, T_body_camera, build_world, gt_cross_pairs, gt_loop_pairs, keyframe_indices,
-                          make_demo_log, make_path, render, session_start_ns, shared_place_fraction)
+from slam_lcd.sim import (
+    SESSIONS,
+    T_body_camera,
+    build_world,
+    gt_cross_pairs,
+    gt_loop_pairs,
+    keyframe_indices,
+    make_demo_log,
+    make_path,
+    render,
+    session_start_ns,
+    shared_place_fraction,
+)
 from slam_lcd.sim.demo_log import session_scenario
 from slam_lcd.sim.trajectory import START_NS
 from slam_lcd.types import Trajectory

@@ -6,7 +6,7 @@ import threading
 import faiss
 from threadpoolctl import threadpool_info
 
-from slam_lcd.thread_limits import limited_threads
+from slam_lcd.runtime.thread_limits import limited_threads
 
 
 def _blas_threads() -> list[int]:

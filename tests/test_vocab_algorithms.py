@@ -5,8 +5,17 @@ import numpy as np
 import pytest
 
 from slam_lcd.errors import InputError, VocabularyError
-from slam_lcd.vocab import (BowDatabase, BowVector, IncrementalWords, VocabConfig, Vocabulary, as_unit_vectors,
-                            bow_similarity, train_hkmeans, train_vocabulary)
+from slam_lcd.vocab import (
+    BowDatabase,
+    BowVector,
+    IncrementalWords,
+    VocabConfig,
+    Vocabulary,
+    as_unit_vectors,
+    bow_similarity,
+    train_hkmeans,
+    train_vocabulary,
+)
 from slam_lcd.vocab.tree import VocabTree
 
 

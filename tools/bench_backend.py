@@ -66,8 +66,9 @@ def bench_kitti(data: Path, false_fraction: float, stride: int, seed: int) -> No
 
 
 def bench_sphere(data: Path) -> None:
-    from slam_lcd.backend.g2o import chain_initial_estimate, read_g2o
     from support.solve import batch_graph, from_values, isam2_edge_by_edge, to_values, translation_rmse
+
+    from slam_lcd.backend.g2o import chain_initial_estimate, read_g2o
 
     d = data / "posegraphs"
     _, edges = read_g2o(d / "sphere2500.txt", edge3_matrix="sqrt_information")
@@ -90,7 +91,7 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--sphere", action="store_true", help="also run sphere2500 (batch LM and iSAM2 pose by pose; slow)")
     args = ap.parse_args(argv)
-    from slam_lcd.machine import machine_line
+    from slam_lcd.runtime.machine import machine_line
 
     print(machine_line(), flush=True)  # figures are only comparable with the machine named
     data = shared_data()

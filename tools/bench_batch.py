@@ -67,7 +67,7 @@ def main() -> None:
     ap.add_argument("--ray", action="store_true", help="parallel arm on a local Ray instead of the process pool")
     ap.add_argument("--work-dir", default=None, help="where logs and outputs go (default: a temporary folder)")
     a = ap.parse_args()
-    from slam_lcd.machine import machine_line
+    from slam_lcd.runtime.machine import machine_line
 
     print(machine_line(), flush=True)  # figures are only comparable with the machine named
     w, h = (int(v) for v in a.size.split("x"))

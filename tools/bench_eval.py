@@ -63,7 +63,7 @@ def main() -> int:
     ap.add_argument("--shared", default=os.environ.get("SLAM_LCD_SHARED", str(REPO.parent / "shared")))
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args()
-    from slam_lcd.machine import machine_line
+    from slam_lcd.runtime.machine import machine_line
 
     print(machine_line(), flush=True)  # figures are only comparable with the machine named
     d = Path(args.shared) / "data" / "trajectories"

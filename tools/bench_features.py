@@ -192,7 +192,7 @@ def main(argv=None) -> int:
     if args.compare_devices:
         return 0 if compare_devices(conf, weights, shared) else 1
 
-    from slam_lcd.machine import machine_line
+    from slam_lcd.runtime.machine import machine_line
 
     print(machine_line("cuda" if "cuda" in devices else "cpu"))
     print(f"torch {torch.__version__}, {torch.get_num_threads()} CPU threads, OpenCV {cv2.__version__}")

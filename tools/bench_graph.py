@@ -25,6 +25,7 @@ sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "tests"))
 
 import lcd_graph_reference as ref  # noqa: E402
+
 from slam_lcd import sim  # noqa: E402
 from slam_lcd.features import FeaturesConfig, load_extractor  # noqa: E402
 from slam_lcd.features.matching import mutual_nn_match_bf  # noqa: E402
@@ -98,7 +99,7 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--resolution", default="1280x960", help="rendered image size (1000 true matches need 1280x960)")
     args = ap.parse_args(argv)
-    from slam_lcd.machine import machine_line
+    from slam_lcd.runtime.machine import machine_line
 
     print(machine_line(), flush=True)  # figures are only comparable with the machine named
 

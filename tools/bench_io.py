@@ -106,7 +106,7 @@ def main(argv=None) -> int:
     ap.add_argument("--formats", nargs="+", default=["mcap", "rosbag2", "rosbag1"], choices=["mcap", "rosbag2", "rosbag1"])
     ap.add_argument("--wall", action="store_true", help="measure wall-clock instead of CPU time")
     args = ap.parse_args(argv)
-    from slam_lcd.machine import machine_line
+    from slam_lcd.runtime.machine import machine_line
 
     print(machine_line(), flush=True)  # figures are only comparable with the machine named
     global CLOCK

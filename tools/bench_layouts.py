@@ -91,7 +91,7 @@ def main() -> int:
     ap.add_argument("--work", default=None, help="folder for logs and outputs (default: a temporary one)")
     ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE")
     args = ap.parse_args()
-    from slam_lcd.machine import machine_line
+    from slam_lcd.runtime.machine import machine_line
 
     print(machine_line(), flush=True)  # figures are only comparable with the machine named
     layouts = [x for x in args.layouts.split(",") if x]

@@ -61,7 +61,7 @@ def main(argv=None) -> None:
     p.add_argument("--skip", type=int, default=40, help="keyframes not timed at the start (no candidates yet)")
     args = p.parse_args(argv)
     sys.path.insert(0, str(REPO))
-    from slam_lcd.machine import machine_line
+    from slam_lcd.runtime.machine import machine_line
 
     print(machine_line(), flush=True)  # figures are only comparable with the machine named
     import slam_lcd

@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from slam_lcd.machine import machine_line
+from slam_lcd.runtime.machine import machine_line
 
 WORLD_OF = {1: 0, 2: 0, 3: 0, 4: 1000, 5: 0}
 
@@ -196,9 +196,10 @@ def _source_vocab(src: Path) -> dict:
 def _replicated_vocab(v: dict, src_ids: np.ndarray, pieces: list[tuple[int, np.ndarray]]) -> dict:
     """A snapshot for the repeated map: the source's words once per repetition (word ids offset), each
     keyframe's bag of words from its source keyframe; the word index's graph built over all of them."""
+    import faiss
+
     from slam_lcd.vocab import VocabConfig
     from slam_lcd.vocab.word_index import WordIndex
-    import faiss
 
     W = len(v["lengths"])
     at = {int(k): i for i, k in enumerate(v["kf_ids"])}

@@ -24,18 +24,7 @@ import sys
 import time
 from pathlib import Path
 
-
-def cpu_line() -> str:
-    with open("/proc/cpuinfo") as fh:
-        model = next((ln.split(":", 1)[1].strip() for ln in fh if ln.startswith("model name")), "?")
-    try:
-        import torch
-
-        cap = torch.backends.cpu.get_cpu_capability()
-    except Exception:  # noqa: BLE001 - only printed
-        cap = "?"
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    return f"CPU: {model}, {cores} cores usable ({os.cpu_count()} online), torch CPU capability {cap}"
+from slam_lcd.runtime.machine import machine_line
 
 
 def child(argv: list[str]) -> tuple[float, float, float]:
@@ -78,7 +67,7 @@ def main() -> int:
         run += ["--weights", a.weights]
     if a.layout == "euroc":
         run += ["--config", "euroc", "--calib", str(work / f"camchain-{name}.yaml")]
-    print(cpu_line(), flush=True)
+    print(machine_line(), flush=True)
     walls: dict[str, list[float]] = {"off": [], "on": []}
     peaks: dict[str, list[float]] = {"off": [], "on": []}
     cpus: dict[str, list[float]] = {"off": [], "on": []}

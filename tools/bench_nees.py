@@ -33,7 +33,7 @@ def main(argv=None) -> int:
     ap.add_argument("--run-dir", help="output folder of `slam-lcd demo` / `slam-lcd run`")
     ap.add_argument("--log", help="the log of that run (for its ground-truth topic)")
     args = ap.parse_args(argv)
-    from slam_lcd.machine import machine_line
+    from slam_lcd.runtime.machine import machine_line
 
     print(machine_line(), flush=True)  # figures are only comparable with the machine named
     if args.run_dir:

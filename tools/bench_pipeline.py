@@ -21,13 +21,13 @@ def main() -> None:
     ap.add_argument("--no-cache", action="store_true", help="do not use (or fill) the on-disk feature cache")
     ap.add_argument("--set", dest="overrides", action="append", default=[])
     args = ap.parse_args()
-    from slam_lcd.machine import machine_line
+    from slam_lcd.runtime.machine import machine_line
 
     print(machine_line(), flush=True)  # figures are only comparable with the machine named
 
     from slam_lcd.config import load_config
-    from slam_lcd.demo import ensure_demo_log
     from slam_lcd.runner import run_log
+    from slam_lcd.sim.demo_cache import ensure_demo_log
 
     overrides = [f"features.kind={args.features}", *args.overrides]
     if args.weights:

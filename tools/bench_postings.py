@@ -182,7 +182,7 @@ def make_bags(n: int, trained: int, seed: int, path: Path) -> None:
     database grown as the loop detector does; per keyframe the query's bag (nearest existing words),
     the inserted one (with the words it founds) and the word count after the insert.
     """
-    from slam_lcd.atomic import atomic_write
+    from slam_lcd.files.atomic import atomic_write
     from slam_lcd.vocab import BowDatabase, BowVector, VocabConfig, train_vocabulary
 
     stream = PlaceStream(n, seed, landmarks=LandmarkTable(seed))
@@ -294,7 +294,7 @@ def main(argv=None) -> None:
                     help="with a trained vocabulary: whose idf (online mode: always the database's)")
     ap.add_argument("--window", type=int, default=200, help="keyframes before each checkpoint that are averaged")
     args = ap.parse_args(argv)
-    from slam_lcd.machine import machine_line
+    from slam_lcd.runtime.machine import machine_line
 
     print(machine_line(), flush=True)  # figures are only comparable with the machine named
     from slam_lcd.vocab import Vocabulary

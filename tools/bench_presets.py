@@ -281,7 +281,7 @@ def main(argv=None) -> int:
                     "turn; medians are printed (default 1)")
     ap.add_argument("--json", default=None, help="file the rows are kept in (a rerun in parts adds to it)")
     args = ap.parse_args(argv)
-    from slam_lcd.machine import machine_line
+    from slam_lcd.runtime.machine import machine_line
 
     machine = machine_line()
     print(f"{machine}; load average {os.getloadavg()[0]:.1f} at the start", flush=True)

@@ -32,7 +32,7 @@ def main() -> int:
     ap.add_argument("--frames", type=int, default=120)
     ap.add_argument("--size", default="640x480")
     args = ap.parse_args()
-    from slam_lcd.machine import machine_line
+    from slam_lcd.runtime.machine import machine_line
 
     print(machine_line(), flush=True)  # figures are only comparable with the machine named
     w, h = (int(v) for v in args.size.split("x"))

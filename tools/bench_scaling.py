@@ -228,14 +228,14 @@ def grow(stream: PlaceStream, n: int, conf, checkpoints: list[int], label: str, 
     Times are wall clock; ``cpu`` adds the calling thread's CPU time and that of the graph insertions,
     which run on a worker thread beside the next keyframe (``vocab.ann_background_insert``).
     """
-    from slam_lcd.thread_limits import blas_limit, limited_threads
-    from slam_lcd.vocab import BowDatabase
-    from slam_lcd.vocab.descriptors import as_unit_vectors
-
     # the libraries of a SuperPoint run are loaded before the baseline, so that memory per keyframe is
     # what the keyframes add: faiss (the graph, loaded on first use) and torch (~190 MB once per process)
     import faiss  # noqa: F401
     import torch  # noqa: F401
+
+    from slam_lcd.runtime.thread_limits import blas_limit, limited_threads
+    from slam_lcd.vocab import BowDatabase
+    from slam_lcd.vocab.descriptors import as_unit_vectors
     reference = MachineReference()
     rss0 = rss_prev = rss_bytes()
     kf_prev = 0
@@ -427,7 +427,7 @@ def _print_reference(rows: list[dict]) -> None:
     """The machine reference over the run: a slow moment shows as a larger reference at that checkpoint."""
     refs = [r["reference_ms"] for r in rows]
     late = rows[-1]
-    print(f"machine reference (fixed workload, ms): " + ", ".join(f"{r['keyframes']}: {r['reference_ms']:.2f}" for r in rows)
+    print("machine reference (fixed workload, ms): " + ", ".join(f"{r['keyframes']}: {r['reference_ms']:.2f}" for r in rows)
           + f"; at the last checkpoint x{late['reference_ms'] / min(refs):.2f} the run's fastest (the window's total, "
           f"mean {late['total']:.1f} / median {late['total_median']:.1f} ms, is measured at that moment)")
 
@@ -494,9 +494,9 @@ def _bare_forward_seconds(log: Path, stamps: np.ndarray, weights, sample: int, f
     import torch
 
     from slam_lcd.features import load_extractor
-    from slam_lcd.vision.gray import image_to_gray, to_gray_float
     from slam_lcd.io import open_log
     from slam_lcd.io.decode import decode_image
+    from slam_lcd.vision.gray import image_to_gray, to_gray_float
 
     conf = dataclasses.replace(features_conf, kind="superpoint", feature_cache=False)
     ex = load_extractor(conf, weights=weights, device="cpu")
@@ -706,7 +706,7 @@ def main(argv=None) -> None:
                        help="demo: runs alternating with the bare forward; the median ratio is printed (default 1)")
         p.set_defaults(func=func)
     args = ap.parse_args(argv)
-    from slam_lcd.machine import machine_line
+    from slam_lcd.runtime.machine import machine_line
 
     print(machine_line(), flush=True)  # figures are only comparable with the machine named
     args.func(args)

@@ -17,8 +17,8 @@ import time
 
 import numpy as np
 
-from slam_lcd.frontend import FrontendConfig, RgbdOdometry, StereoOdometry
 from slam_lcd.eval.align import umeyama
+from slam_lcd.frontend import FrontendConfig, RgbdOdometry, StereoOdometry
 from slam_lcd.geometry import inv, rotation_angle, se3_log
 from slam_lcd.sim.render import render
 from slam_lcd.sim.rig import STEREO_BASELINE, T_body_camera, T_left_right, demo_camera
@@ -68,8 +68,8 @@ def run_on_log(args) -> int:
     import tempfile
     from pathlib import Path
 
-    from slam_lcd.sensors.log_vo import visual_odometry_from_log
     from slam_lcd.io import read_trajectory_from_log
+    from slam_lcd.sensors.log_vo import visual_odometry_from_log
     from slam_lcd.sim.demo_log import make_demo_log
 
     tmp = None
@@ -123,7 +123,7 @@ def main(argv=None) -> int:
     ap.add_argument("--direct", action="store_true", help="render in memory instead of writing and reading a demo MCAP log")
     ap.add_argument("--log", default=None, help="demo log path to write/reuse (default: a temporary file)")
     args = ap.parse_args(argv)
-    from slam_lcd.machine import machine_line
+    from slam_lcd.runtime.machine import machine_line
 
     print(machine_line(), flush=True)  # figures are only comparable with the machine named
     if not args.direct:

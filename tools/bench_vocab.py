@@ -135,7 +135,7 @@ def main():
         from threadpoolctl import threadpool_limits
 
         threadpool_limits(args.threads)
-    from slam_lcd.machine import machine_line
+    from slam_lcd.runtime.machine import machine_line
 
     print(machine_line(), flush=True)  # figures are only comparable with the machine named
     print(f"load average: {os.getloadavg()[0]:.1f}")

@@ -14,8 +14,16 @@ import argparse
 import cv2
 import numpy as np
 
-from slam_lcd.sim import (T_body_camera, build_world, demo_camera, gt_loop_pairs, make_path, make_trajectory,
-                          render, simulate_odometry)
+from slam_lcd.sim import (
+    T_body_camera,
+    build_world,
+    demo_camera,
+    gt_loop_pairs,
+    make_path,
+    make_trajectory,
+    render,
+    simulate_odometry,
+)
 from slam_lcd.sim.trajectory import START_NS
 from slam_lcd.sim.world import BLOCKS, OUTER
 from slam_lcd.vision.gray import to_gray_uint8

@@ -14,7 +14,7 @@ Names are imported lazily so that ``slam_lcd.config`` (which imports
 """
 from __future__ import annotations
 
-from ..lazy_names import lazy_getattr
+from ..runtime.lazy_names import lazy_getattr
 
 _EXPORTS = {
     "PoseGraph": ".pose_graph",

@@ -22,8 +22,8 @@ from typing import Literal
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ..atomic import atomic_write
 from ..errors import FileMissingError, TrajectoryFormatError, UnsupportedFormatError
+from ..files.atomic import atomic_write
 from ..geometry import quat_to_rot, rot_to_quat
 
 # g2o [t, r] <-> GTSAM [r, t]: the permutation is its own inverse.

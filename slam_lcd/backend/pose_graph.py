@@ -34,7 +34,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..geometry import inv
-from ..interrupts import defer_sigint
+from ..runtime.interrupts import defer_sigint
 from ..types import LoopClosure
 from .config import BackendConfig, gnc_due
 from .g2o import G2oEdge

@@ -10,7 +10,7 @@ module, which must not pull in the runner (and torch) with it.
 """
 from __future__ import annotations
 
-from ..lazy_names import lazy_getattr
+from ..runtime.lazy_names import lazy_getattr
 from .config import BatchConfig
 
 _LAZY = {

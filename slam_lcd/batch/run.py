@@ -26,10 +26,10 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..atomic import check_no_clash
 from ..config import Config, validate_config
 from ..errors import FileMissingError, InputError
-from ..interrupts import defer_sigint
+from ..files.atomic import check_no_clash
+from ..runtime.interrupts import defer_sigint
 from .config import gpus_per_task
 from .discovery import LogEntry, discover_logs, ground_truth_in
 from .done import completed_report
@@ -184,7 +184,7 @@ def run_batch(
 
     rows: dict[str, dict] = {}
     stream = status_stream if status_stream is not None else sys.stdout
-    from ..progress import progress_bar
+    from ..runtime.progress import progress_bar
 
     bar = None
 

@@ -16,7 +16,7 @@ import io
 from collections.abc import Sequence
 from pathlib import Path
 
-from ..atomic import write_text
+from ..files.atomic import write_text
 from ..outputs.output_set import OutputSet
 from .rows import COLUMNS
 
@@ -62,7 +62,7 @@ def summary_md(rows: Sequence[dict], *, engine: str, wall_s: float, interrupted:
     counts = {s: sum(1 for r in rows if r["status"] == s) for s in dict.fromkeys(r["status"] for r in rows)}
     lines = ["# slam-lcd batch summary", ""]
     if interrupted:
-        from ..interrupts import signal_name
+        from ..runtime.interrupts import signal_name
 
         lines += [f"**Interrupted ({signal_name()}): a partial summary.** "
                   "Logs marked `interrupted` hold a result marked",
@@ -130,7 +130,7 @@ def write_summary(out_dir: str | Path, rows: Sequence[dict], *, engine: str, wal
     try:
         if interrupted:
             not_done = [r["name"] for r in rows if r["status"] in ("interrupted", "cancelled")]
-            from ..interrupts import signal_name
+            from ..runtime.interrupts import signal_name
 
             outputs.mark_partial(f"This batch was interrupted ({signal_name()}): the summary lists every log, "
                                  "but these did "

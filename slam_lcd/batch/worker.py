@@ -12,7 +12,7 @@ Work shared by the tasks of one worker process:
 - every task uses the driver's cache folder (``$SLAM_LCD_CACHE_DIR``, passed in
   :attr:`SharedWork.env`), so all logs share one feature cache. The cache is safe for
   concurrent writers: each entry is written under a temporary name and renamed into place
-  (:func:`slam_lcd.atomic.atomic_path`), and entries are keyed by content (extractor
+  (:func:`slam_lcd.files.atomic.atomic_path`), and entries are keyed by content (extractor
   fingerprint, log identity, topic, stamp), so two writers of one key write the same bytes.
 
 Ctrl-C in a local pool: the driver sets a shared event; each worker's watcher thread then
@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import SlamLcdError
-from ..interrupts import keep_lost_interrupts
+from ..runtime.interrupts import keep_lost_interrupts
 from .rows import cancelled_row, error_row, interrupted_row, row_from_report, row_from_result
 
 
@@ -133,7 +133,7 @@ def pool_worker_init(stop_event, threads: int | None, driver_pid: int | None = N
     When the driver (``driver_pid``) is gone, whatever killed it, the worker stops its running
     log (a partial set), runs nothing more and exits.
     """
-    from ..interrupts import STOP_SIGNALS
+    from ..runtime.interrupts import STOP_SIGNALS
 
     try:
         os.setpgrp()
@@ -176,7 +176,7 @@ def _watch_driver(driver_pid: int) -> None:
 # --------------------------------------------------------------------------- one log
 def run_task(task: LogTask, shared: SharedWork) -> dict:
     """Run one log and return its summary row; never raises for a failing log (an error row)."""
-    from ..interrupts import STOP_SIGNALS, _terminate
+    from ..runtime.interrupts import STOP_SIGNALS, _terminate
 
     stop = _POOL["stop"]
     if stop is None:

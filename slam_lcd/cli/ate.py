@@ -17,9 +17,9 @@ import json
 import math
 from pathlib import Path
 
-from ..atomic import write_text
 from ..errors import InputError
 from ..eval.relations import APE_RELATIONS, RPE_RELATIONS
+from ..files.atomic import write_text
 from ..io.trajectory_files import FORMATS
 from .util import check_outputs, write_guard
 

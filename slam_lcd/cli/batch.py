@@ -73,7 +73,7 @@ def run(args) -> int:
         if rc:
             return rc
     if res.interrupted:
-        from ..interrupts import exit_status
+        from ..runtime.interrupts import exit_status
 
         return exit_status()  # 130 Ctrl-C, 143 SIGTERM, 129 SIGHUP
     return 2 if res.failed else 0
@@ -83,10 +83,10 @@ def _append_to_map(args, cfg, res) -> int:
     """``batch --map``: the logs that ran (ok or skipped) appended one by one, by output name."""
     from ..batch.discovery import LogEntry, ground_truth_in
     from ..features import load_extractor
-    from ..interrupts import exit_status
     from ..map.session_map import Map, extractor_meta
     from ..map.summary import summary_lines
     from ..runner import run_log
+    from ..runtime.interrupts import exit_status
 
     rows = sorted((r for r in res.rows if r["status"] in ("ok", "skipped")), key=lambda r: r["name"])
     if not rows:

@@ -85,11 +85,9 @@ def load_demo_extractor(args):
 
 
 def run(args) -> int:
-    from ..demo import ensure_demo_log
+    from ..files.atomic import check_no_clash
     from ..runner import run_log
-
-    from ..atomic import check_no_clash
-    from ..demo import demo_log_path
+    from ..sim.demo_cache import demo_log_path, ensure_demo_log
 
     width, height = args.size
     # the demo log (written into the cache) and --out are two outputs: never one path
@@ -115,18 +113,18 @@ def run(args) -> int:
     for line in res.summary_lines():
         print(f"  {line}")
     print(f"outputs in {res.out_dir}/ (corrected.tum, loops.csv, report.md, trajectory.png, ...)")
-    from ..interrupts import exit_status
+    from ..runtime.interrupts import exit_status
 
     return exit_status() if res.interrupted else 0  # 130 Ctrl-C, 143 SIGTERM, 129 SIGHUP
 
 
 def _run_sessions(args, cfg, extractor, notice) -> int:
     """``demo --sessions N``: the first N session logs of the demo world, appended one by one to OUT/map."""
-    from ..demo import ensure_demo_log
-    from ..interrupts import exit_status
     from ..map.session_map import Map, extractor_meta
     from ..map.summary import summary_lines
     from ..runner import run_log
+    from ..runtime.interrupts import exit_status
+    from ..sim.demo_cache import ensure_demo_log
 
     width, height = args.size
     out = Path(args.out)

@@ -65,11 +65,18 @@ def register(sub) -> None:
 def run(args) -> int:
     from ..config import validate_config
     from ..lcd import LoopDetector
-    from ..lcd.evaluation import (format_retrieval, format_table, load_loop_matrix, place_recall, precision_recall,
-                                  retrieval_recall, revisit_places)
+    from ..lcd.evaluation import (
+        format_retrieval,
+        format_table,
+        load_loop_matrix,
+        place_recall,
+        precision_recall,
+        retrieval_recall,
+        revisit_places,
+    )
     from ..outputs.output_set import OutputSet
+    from ..runtime.progress import progress_bar
     from ..sensors.frames import folder_frames, frame_to_keyframe, log_frames
-    from ..progress import progress_bar
 
     cfg = config_from_args(args)
     lcd = cfg.lcd
@@ -156,8 +163,8 @@ def run(args) -> int:
 
 
 def _write_set(outputs, cfg, det, gt, names, results, src, args, kind, elapsed, recall_at, places) -> None:
-    from ..atomic import write_text
     from ..config import save_config
+    from ..files.atomic import write_text
     from ..lcd.evaluation import plot_pr, write_candidates_csv, write_pr_csv
 
     out = outputs.staging

@@ -9,9 +9,9 @@ The output is written atomically and never onto the input.
 from __future__ import annotations
 
 from ..errors import InputError
+from ..io.trajectory_files import FORMATS
 from .run import add_alias
 from .util import check_outputs, write_guard
-from ..io.trajectory_files import FORMATS
 
 LOG_TARGETS = ("mcap", "rosbag1", "rosbag2")
 TARGETS = (*FORMATS, *LOG_TARGETS)

@@ -2,7 +2,7 @@
 
 The run's own settings (``map_cloud`` in its resolved config) are the defaults; the flags
 change the voxel size, the depth range and the pixel step. Reads the run's log again
-(:mod:`slam_lcd.map_export`); a folder that is not a run or a run whose log is gone is one
+(:mod:`slam_lcd.outputs.cloud_export`); a folder that is not a run or a run whose log is gone is one
 line and exit status 2, with nothing written.
 """
 from __future__ import annotations
@@ -36,8 +36,8 @@ def register(sub) -> None:
 
 def _settings(run_dir: Path, args):
     """The run's ``map_cloud`` section with the flags applied, range-checked like any config."""
-    from ..config import Config, apply_override, validate_config
     from ..cloud import MapCloudConfig
+    from ..config import Config, apply_override, validate_config
     from ..errors import InputError
 
     cfg = Config()
@@ -59,7 +59,7 @@ def _settings(run_dir: Path, args):
 
 
 def run(args) -> int:
-    from ..map_export import export_map
+    from ..outputs.cloud_export import export_map
 
     run_dir = Path(args.run_dir)
     conf = _settings(run_dir, args)

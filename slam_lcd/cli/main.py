@@ -74,13 +74,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 def stopped_line(prefix: str, exc: BaseException) -> str:
     """``slam-lcd run: interrupted`` (Ctrl-C) or ``slam-lcd run: terminated (SIGTERM)``."""
-    from ..interrupts import Terminated, signal_name
+    from ..runtime.interrupts import Terminated, signal_name
 
     return f"{prefix}: terminated ({signal_name(exc)})" if isinstance(exc, Terminated) else f"{prefix}: interrupted"
 
 
 def main(argv: list[str] | None = None) -> int:
-    from ..interrupts import exit_status, install_stop_signals, interrupt_behind, keep_lost_interrupts
+    from ..runtime.interrupts import exit_status, install_stop_signals, interrupt_behind, keep_lost_interrupts
 
     install_stop_signals()  # SIGTERM and SIGHUP take Ctrl-C's path (exit 143 / 129)
     keep_lost_interrupts()  # a Ctrl-C that lands in a finaliser still stops the command

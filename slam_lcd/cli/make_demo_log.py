@@ -80,11 +80,11 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from ..errors import InputError
+    from ..io.writers import format_for_path
     from ..sim import make_demo_log
     from ..sim.demo_log import loops_path_for
     from ..sim.layouts import camchain_path_for
     from .util import check_outputs, write_guard
-    from ..io.writers import format_for_path
 
     w, h = args.size
     if args.out and args.out_opt and args.out != args.out_opt:

@@ -58,7 +58,7 @@ def info(args) -> int:
 
 
 def export(args) -> int:
-    from ..atomic import atomic_path, check_no_clash
+    from ..files.atomic import atomic_path, check_no_clash
     from ..io.trajectory_files import write_trajectory
     from ..map.store import MANIFEST
     from ..outputs.map_outputs import session_file_stem

@@ -194,6 +194,6 @@ def _print_result(res) -> int:
             print(line)
     print(f"outputs in {res.out_dir}/ ({', '.join(res.outputs)})"
           + (" -- a partial set, see PARTIAL.txt" if res.interrupted else ""))
-    from ..interrupts import exit_status
+    from ..runtime.interrupts import exit_status
 
     return exit_status() if res.interrupted else 0  # 130 Ctrl-C, 143 SIGTERM, 129 SIGHUP

@@ -89,10 +89,10 @@ def check_outputs(outputs: dict, inputs: dict, *, folders=()) -> None:
     ``outputs`` and ``inputs`` map a flag (``'OUT'``, ``'--times-out'``, ``'TRAJ'`` ...) to a
     path (None: not given; ``LOG:TOPIC`` inputs name their log). No output may land on or inside
     an input, hold an input, or share its path with another output
-    (:func:`slam_lcd.atomic.check_no_clash`); then each output must be writable
-    (:func:`slam_lcd.atomic.check_writable_target`; ``folders``: the flags whose output is a folder).
+    (:func:`slam_lcd.files.atomic.check_no_clash`); then each output must be writable
+    (:func:`slam_lcd.files.atomic.check_writable_target`; ``folders``: the flags whose output is a folder).
     """
-    from ..atomic import check_no_clash, check_writable_target
+    from ..files.atomic import check_no_clash, check_writable_target
 
     outs = {w: o for w, o in outputs.items() if o is not None}
     check_no_clash(outs, {w: _input_path(p) for w, p in inputs.items()})

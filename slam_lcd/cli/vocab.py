@@ -123,10 +123,10 @@ def iter_source_images(source: Path, topic: str | None, every: int = 1, max_imag
 
 
 def run_train(args) -> int:
-    from ..atomic import check_no_clash, check_writable_target
     from ..config import validate_config
     from ..features import load_extractor
-    from ..progress import progress_bar, stage
+    from ..files.atomic import check_no_clash, check_writable_target
+    from ..runtime.progress import progress_bar, stage
     from ..vocab import train_hkmeans, train_vocabulary
     from .util import write_guard
 

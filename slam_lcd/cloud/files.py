@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_path
 from ..errors import InputError, UnsupportedFormatError
+from ..files.atomic import atomic_path
 from .voxel_grid import Cloud
 
 SUFFIXES = (".ply", ".pcd")

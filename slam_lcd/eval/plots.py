@@ -15,7 +15,7 @@ matplotlib.use("Agg", force=False)
 import numpy as np  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
-from ..atomic import atomic_path  # noqa: E402
+from ..files.atomic import atomic_path  # noqa: E402
 from ..types import Trajectory  # noqa: E402
 from .metrics import AteResult  # noqa: E402
 

@@ -9,7 +9,7 @@ that needs no network (``slam-lcd info``), must not pay torch's import time.
 """
 from __future__ import annotations
 
-from ..lazy_names import lazy_getattr
+from ..runtime.lazy_names import lazy_getattr
 from .config import FeaturesConfig
 
 _LAZY = {

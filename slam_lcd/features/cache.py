@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_path
+from ..files.atomic import atomic_path
 from ..types import Features
 from .extract import Extractor
 from .weights import cache_dir

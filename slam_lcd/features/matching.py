@@ -14,7 +14,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from ..column_best import first_in_column
+from ..vision.column_best import first_in_column
 
 _POPCOUNT = np.array([bin(i).count("1") for i in range(256)], dtype=np.uint8)
 
@@ -74,7 +74,7 @@ def _nearest_two(d1: np.ndarray, d2: np.ndarray, k: int, column_second: bool = F
     BLAS product, ``|a|^2 + |b|^2 - 2 a.b``, then arg-minima (first index wins); it differs
     from OpenCV's direct sum of squares only by rounding (~1e-7 on unit descriptors) and
     takes ~4 ms instead of ~34 ms for 1000 x 1000 SuperPoint descriptors on one core. The
-    mutual check reads the column minima (:mod:`slam_lcd.column_best`, the same answer as a
+    mutual check reads the column minima (:mod:`slam_lcd.vision.column_best`, the same answer as a
     column argmin in a fifth of the time), and the columns' second distances come from the
     same product (a symmetric ratio needs them; they cost one more reduction, not a product).
     """

@@ -25,8 +25,8 @@ import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..atomic import atomic_path
 from ..errors import DownloadError, WeightsError
+from ..files.atomic import atomic_path
 from .config import SUPERPOINT_SHA256, SUPERPOINT_URL
 
 ENV_WEIGHTS = "SLAM_LCD_SUPERPOINT_WEIGHTS"
@@ -181,7 +181,7 @@ def load_state_dict_checked(model: "torch.nn.Module", path: str | Path) -> None:
     try:
         obj = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as e:  # corrupt zip/pickle, truncated file, not a torch file
-        from ..quiet import one_line
+        from ..runtime.quiet import one_line
 
         if "weights only load failed" in str(e).lower():  # torch's long, ANSI-coloured advice: ours instead
             raise WeightsError("holds pickled Python objects besides tensors, which slam-lcd refuses to load "

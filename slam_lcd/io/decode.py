@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 
 from ..errors import DamagedImageError, InvalidPoseError, MessageEncodingError
-from ..quiet import native_stderr, one_line, quiet_opencv
+from ..runtime.quiet import native_stderr, one_line, quiet_opencv
 from ..types import CameraModel
 from .transforms import pose_from_tq, ros_cov_to_gtsam
 

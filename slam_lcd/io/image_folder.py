@@ -16,7 +16,7 @@ from collections.abc import Iterable
 from pathlib import Path
 
 from ..errors import FileMissingError, InputError
-from ..image_files import IMAGE_SUFFIXES, read_image
+from ..files.image_files import IMAGE_SUFFIXES, read_image
 
 # a 'GT' word in the stem (samples_GT, gt, loops-gt, GT_matrix), case-insensitive, or
 # 'groundtruth' / 'ground_truth' / 'ground-truth' anywhere
@@ -58,7 +58,7 @@ def list_image_files(folder: str | Path, exclude: Iterable[str | Path | None] = 
 def read_frame(path: str | Path):
     """One frame as eval-lcd's folder reader gives it (:func:`slam_lcd.sensors.frames.folder_frames`):
     the file's own channels, colour as RGB. Unreadable → InputError, damaged → DamagedImageError
-    (:func:`slam_lcd.image_files.read_image`), each naming the file."""
+    (:func:`slam_lcd.files.image_files.read_image`), each naming the file."""
     import cv2
 
     img = read_image(path, cv2.IMREAD_UNCHANGED)

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_path
+from ..files.atomic import atomic_path
 from ..types import Trajectory
 from .trajectory_files import write_tum
 

@@ -32,7 +32,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_write
 from ..errors import (
     FileMissingError,
     InvalidPoseError,
@@ -40,6 +39,7 @@ from ..errors import (
     UnsortedStampsError,
     UnsupportedFormatError,
 )
+from ..files.atomic import atomic_write
 from ..geometry import nearest_rotation, quat_to_rot, rot_to_quat
 from ..geometry import rot_to_quat as rotation_to_quat  # noqa: F401  (public name kept for callers)
 from ..types import Trajectory

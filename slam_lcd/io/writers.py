@@ -23,9 +23,9 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from ..atomic import guard_not_input
 from ..errors import InputError, InvalidPoseError, UnsupportedFormatError
-from ..interrupts import defer_sigint, finish
+from ..files.atomic import guard_not_input
+from ..runtime.interrupts import defer_sigint, finish
 from ..types import Trajectory
 from . import messages as M
 from .config import IOConfig

@@ -28,9 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_path, write_text
 from ..errors import FileMissingError, InputError, UnsupportedFormatError
-from ..image_files import IMAGE_SUFFIXES
+from ..files.atomic import atomic_path, write_text
+from ..files.image_files import IMAGE_SUFFIXES
 from .detector import CandidateRecord
 
 # ----------------------------------------------------------------------------- ground truth
@@ -51,7 +51,7 @@ def load_loop_matrix(path: str | Path, names: Sequence[str]) -> np.ndarray:
     if suffix in IMAGE_SUFFIXES:
         import cv2
 
-        from ..image_files import read_image
+        from ..files.image_files import read_image
 
         try:
             img = read_image(path, cv2.IMREAD_GRAYSCALE)

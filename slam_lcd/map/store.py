@@ -35,7 +35,7 @@ from typing import BinaryIO
 import numpy as np
 
 from ..features.weights import sha256_of
-from ..interrupts import defer_sigint
+from ..runtime.interrupts import defer_sigint
 from .contents import (  # noqa: F401 - the folder's names, read and written here
     FORMAT_NAME,
     LOCK,

@@ -19,8 +19,8 @@ from pathlib import Path
 
 import cv2
 
-from ..atomic import write_text
 from ..backend.pose_graph import ACCEPTED
+from ..files.atomic import write_text
 from .loop_pictures import LOOPS_DIR, picture_name
 from .report import command_text
 

@@ -26,8 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import write_text
 from ..backend.records import ACCEPTED, REJECTED
+from ..files.atomic import write_text
 from ..geometry import interpolate_poses, inv, rotation_angle_deg
 from ..types import Trajectory
 

@@ -18,11 +18,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_write
 from ..cloud import sharpness, write_cloud
 from ..cloud.topview import common_bounds, height_band, top_view_png
 from ..cloud.truth import aligned, truth_figures
 from ..eval.metrics import ratio_or_none
+from ..files.atomic import atomic_write
 
 log = logging.getLogger(__name__)
 

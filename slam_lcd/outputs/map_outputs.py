@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import write_text
 from ..backend import correct_full_rate
+from ..files.atomic import write_text
 from ..types import Trajectory
 
 MAP_DIR = "map"

@@ -38,9 +38,9 @@ import time
 from pathlib import Path
 from typing import Iterable, Mapping
 
-from ..atomic import check_no_clash, check_writable_target
 from ..errors import InputError
-from ..interrupts import defer_sigint, finish
+from ..files.atomic import check_no_clash, check_writable_target
+from ..runtime.interrupts import defer_sigint, finish
 
 PARTIAL_MARKER = "PARTIAL.txt"
 STAGING_PREFIX = ".slam-lcd-staging."

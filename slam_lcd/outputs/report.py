@@ -12,9 +12,9 @@ import shlex
 from pathlib import Path
 
 from .. import __version__
-from ..atomic import write_text
 from ..backend.pose_graph import ACCEPTED
 from ..eval.metrics import ratio_or_none
+from ..files.atomic import write_text
 from ..sensors.ground_truth import POSITION_ONLY_REASON
 from .report_schema import REPORT_SCHEMA_VERSION
 from .result import RunResult

@@ -15,7 +15,7 @@ import numpy as np
 from ..backend.pose_graph import ACCEPTED
 from ..config import save_config
 from ..errors import InputError, SlamLcdError
-from ..interrupts import defer_sigint
+from ..runtime.interrupts import defer_sigint
 from ..types import Trajectory
 from .figures import write_plots
 from .loop_pictures import LOOPS_DIR
@@ -38,13 +38,13 @@ def partial_text(result: RunResult, notes=(), *, read_to_end: bool, while_writin
     """What PARTIAL.txt says: why the set is incomplete, and what is missing from it."""
     lines = []
     if not read_to_end:
-        from ..interrupts import signal_name
+        from ..runtime.interrupts import signal_name
 
         lines += [f"This run was interrupted ({signal_name()}) after {result.n_frames} frames: the files here hold the",
                   "result up to that point and agree with each other, but the log was not processed to its end."]
     lines += list(notes)
     if while_writing:
-        from ..interrupts import interrupted_word
+        from ..runtime.interrupts import interrupted_word
 
         lines.append(f"This run was {interrupted_word()}{' again' if lines else ''} while the outputs were written: "
                      "only the files present here were written.")
@@ -80,7 +80,7 @@ def write_set(outputs: OutputSet, pipe, result: RunResult, gt, mcap_source, copy
         except OSError as e:
             outputs.discard()
             raise _write_error(e, outputs) from None
-        from ..interrupts import interrupted_word
+        from ..runtime.interrupts import interrupted_word
 
         log.warning(f"{interrupted_word()} while writing the outputs: %s holds a partial set (see %s)",
                     outputs.target, PARTIAL_MARKER)

@@ -37,8 +37,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ..atomic import atomic_path
 from ..errors import InputError
+from ..files.atomic import atomic_path
 from ..types import CameraModel, Trajectory
 from . import rig
 from .image_noise import NOISE_BANK, add_noise, noise_bank
@@ -356,7 +356,7 @@ def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int |
     frames_iter = render_frames(sc, color=color, depth=depth, stereo=stereo, seed=seed, workers=workers,
                                 render_one=render_one)
     if progress:
-        from ..progress import progress_bar
+        from ..runtime.progress import progress_bar
 
         frames_iter = progress_bar(frames_iter, total=len(sc.cam_stamps), unit="frame", desc="rendering")
     try:

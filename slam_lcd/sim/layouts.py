@@ -116,7 +116,7 @@ def render_raw(world, raw: RawCamera, T_world_raw: np.ndarray, epoch: float, gai
 
 def write_camchain(path: Path, er: EurocRig) -> None:
     """A Kalibr ``camchain.yaml`` of the rig: body = the IMU (here the demo body, base_link)."""
-    from ..atomic import write_text
+    from ..files.atomic import write_text
 
     def block(T):
         return "\n".join("  - [" + ", ".join(f"{x:.12f}" for x in row) + "]" for row in T)

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..atomic import atomic_write
+from ..files.atomic import atomic_write
 from ..types import Trajectory
 
 CSV_HEADER = "query_index,match_index,query_stamp_ns,match_stamp_ns,distance_m,angle_deg"

@@ -29,7 +29,7 @@ from ..errors import InputError
 from ..types import LoopCandidate
 from .arrays import grow_in_place
 from .config import VocabConfig
-from .descriptors import as_unit_vectors, descriptor_kind, unit_distance
+from .descriptors import as_unit_vectors, descriptor_kind
 from .vocabulary import Vocabulary
 from .word_index import WordIndex
 from .words import IncrementalWords

@@ -14,10 +14,10 @@ from typing import Iterable
 
 import numpy as np
 
-from ..atomic import atomic_write
 from ..errors import InputError, VocabularyError
+from ..files.atomic import atomic_write
+from ..runtime.thread_limits import blas_limit
 from .config import VocabConfig
-from ..thread_limits import blas_limit
 from .descriptors import as_unit_vectors, descriptor_kind
 from .dp_tree import build_dp_tree
 from .hkmeans import build_hkmeans_tree

@@ -18,12 +18,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..column_best import first_in_column
 from ..errors import ConfigError
+from ..vision.column_best import first_in_column
 from .arrays import grow_in_place
 from .descriptors import default_match_distance, group_sums, normalise_rows, unit_distance
 from .word_index import WordIndex, exact_nearest
-
 
 # most words the per-word arrays grow by at once (see IncrementalWords._grow)
 _GROW_STEP = 16384

@@ -19,9 +19,9 @@ def detect_on_rendered_keyframes(weights, trajectory: str, laps: float, **gt_pai
     The keyframes carry the demo's simulated wheel odometry (2-4.5 % drift), not the ground truth,
     so the detector's odometry check of tight-rule loops (lcd/odometry_check.py) sees real drift."""
     from slam_lcd import sim
-    from slam_lcd.sim.odometry import simulate_odometry
     from slam_lcd.features import FeaturesConfig, load_extractor
     from slam_lcd.lcd import LcdConfig, LoopDetector
+    from slam_lcd.sim.odometry import simulate_odometry
     from slam_lcd.types import Keyframe
 
     world = sim.build_world(0)

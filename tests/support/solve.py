@@ -6,9 +6,8 @@ from __future__ import annotations
 
 import time
 
-import numpy as np
-
 import gtsam
+import numpy as np
 
 from slam_lcd.backend.config import BackendConfig
 from slam_lcd.backend.g2o import G2oEdge, chain_initial_estimate

@@ -2,7 +2,7 @@
 
 Each stage owns its section (``slam_lcd/<stage>/config.py``); this module composes them.
 Unknown keys are errors, values are type-checked and range-checked
-(:mod:`slam_lcd.config_ranges`), and :func:`save_config` writes the resolved
+(:mod:`slam_lcd.config.ranges`), and :func:`save_config` writes the resolved
 configuration next to a run's outputs.
 """
 from __future__ import annotations
@@ -18,19 +18,19 @@ from typing import Any, Literal
 
 import yaml
 
-from .atomic import write_text
-from .backend.config import BackendConfig
-from .batch.config import BatchConfig
-from .cloud.config import MapCloudConfig
-from .errors import ConfigError, FileMissingError
-from .eval.config import EvalConfig
-from .features.config import FeaturesConfig
-from .frontend.config import FrontendConfig
-from .io.config import IOConfig
-from .lcd.config import LcdConfig
-from .map.config import MapConfig
-from .sensors.config import SensorsConfig
-from .vocab.config import VocabConfig
+from ..backend.config import BackendConfig
+from ..batch.config import BatchConfig
+from ..cloud.config import MapCloudConfig
+from ..errors import ConfigError, FileMissingError
+from ..eval.config import EvalConfig
+from ..features.config import FeaturesConfig
+from ..files.atomic import write_text
+from ..frontend.config import FrontendConfig
+from ..io.config import IOConfig
+from ..lcd.config import LcdConfig
+from ..map.config import MapConfig
+from ..sensors.config import SensorsConfig
+from ..vocab.config import VocabConfig
 
 # presets are package data (slam_lcd/data/configs/*.yaml): found through importlib.resources,
 # so they are there in a wheel install as in a source checkout
@@ -93,7 +93,7 @@ class RunConfig:
     extract_ahead: int = 2
     # with extract_ahead > 0: BLAS and faiss threads of the loop-detection thread while a
     # keyframe's features are being extracted in the background, so that the extraction keeps a
-    # core (slam_lcd/thread_limits.py); 0 = the libraries' defaults
+    # core (slam_lcd/runtime/thread_limits.py); 0 = the libraries' defaults
     lcd_threads: int = 1
     # with extract_ahead > 0: keyframes extracted side by side (SuperPoint on the CPU; one on a GPU).
     # 1: one keyframe at a time on all of torch's threads. N > 1: N at once, torch's threads shared
@@ -251,8 +251,8 @@ def _near_miss(data: dict, key: str) -> str:
 
 
 def validate_config(cfg: Config, path: str | Path | None = None) -> Config:
-    """Range-check every numeric key (:mod:`slam_lcd.config_ranges`); one-line ConfigError naming the key."""
-    from .config_ranges import ORDERED, RANGES, describe, in_range
+    """Range-check every numeric key (:mod:`slam_lcd.config.ranges`); one-line ConfigError naming the key."""
+    from .ranges import ORDERED, RANGES, describe, in_range
 
     data = config_to_dict(cfg)
     for key, spec in RANGES.items():
@@ -267,7 +267,7 @@ def validate_config(cfg: Config, path: str | Path | None = None) -> Config:
         if data[s1][k1] >= data[s2][k2]:
             raise ConfigError(f"{small} = {data[s1][k1]!r} must be below {large} = {data[s2][k2]!r}", path)
     if cfg.frontend.T_body_camera is not None:
-        from .geometry import pose_from_list
+        from ..geometry import pose_from_list
 
         try:
             pose_from_list(cfg.frontend.T_body_camera)

@@ -10,9 +10,9 @@ import bisect
 
 import numpy as np
 
-from .errors import InvalidPoseError, UnsortedStampsError
-from .geometry import interpolate_poses
-from .types import Trajectory
+from ..errors import InvalidPoseError, UnsortedStampsError
+from ..geometry import interpolate_poses
+from ..types import Trajectory
 
 
 class OdometryBuffer:

@@ -19,11 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import check_no_clash, check_writable_target
-from .cloud import MapCloudBuilder, MapCloudConfig, write_cloud
-from .cloud.files import cloud_suffix
-from .errors import FileMissingError, InputError
-from .types import CameraModel, Keyframe
+from ..cloud import MapCloudBuilder, MapCloudConfig, write_cloud
+from ..cloud.files import cloud_suffix
+from ..errors import FileMissingError, InputError
+from ..files.atomic import check_no_clash, check_writable_target
+from ..types import CameraModel, Keyframe
 
 log = logging.getLogger(__name__)
 
@@ -32,7 +32,7 @@ STAMP_TOLERANCE_NS = 1_000_000  # TUM files keep stamps to the microsecond or so
 
 def read_run(run_dir: Path, odometry: bool = False) -> tuple[dict, np.ndarray, np.ndarray]:
     """``(report, keyframe stamps, keyframe poses)`` of a run folder (typed errors naming the file)."""
-    from .io.trajectory_files import read_trajectory
+    from ..io.trajectory_files import read_trajectory
 
     report_path = run_dir / "report.json"
     if not run_dir.is_dir():
@@ -54,7 +54,7 @@ def read_run(run_dir: Path, odometry: bool = False) -> tuple[dict, np.ndarray, n
     kf = read_trajectory(kf_path, "tum")
     poses = kf.poses
     if odometry:
-        from .geometry import interpolate_poses
+        from ..geometry import interpolate_poses
 
         odo_path = run_dir / "odometry.tum"
         if not odo_path.is_file():
@@ -81,14 +81,14 @@ def _near(stamps: np.ndarray, s: int) -> int | None:
 
 def keyframe_frames(log_path: Path, sensor: dict, stamps: np.ndarray, io_conf=None):
     """``(keyframe index, grey, colour | None, depth | None, right | None)`` for each keyframe found in the log."""
-    from .io import open_log
-    from .sensors.messages import decode_any_image, decode_depth, decode_gray
-    from .vision.gray import image_to_gray
+    from ..io import open_log
+    from ..sensors.messages import decode_any_image, decode_depth, decode_gray
+    from ..vision.gray import image_to_gray
 
     image_t, depth_t, right_t = sensor["image_topic"], sensor.get("depth_topic"), sensor.get("right_topic")
     stereo = None
     if depth_t is None and right_t:
-        from .sensors.stereo_pairs import StereoFrames
+        from ..sensors.stereo_pairs import StereoFrames
 
         stereo = StereoFrames(right_t, baseline=float(sensor["camera"]["baseline"] or 0.0),
                               rectifier=_rectifier(sensor, log_path) if sensor.get("rectified") else None)
@@ -127,8 +127,8 @@ def keyframe_frames(log_path: Path, sensor: dict, stamps: np.ndarray, io_conf=No
 
 def _rectifier(sensor: dict, log_path: Path):
     """The rectification of the run's raw pair, from the calibration files it named."""
-    from .sensors.calibration import load_calibration
-    from .sensors.rectify import stereo_rectifier
+    from ..sensors.calibration import load_calibration
+    from ..sensors.rectify import stereo_rectifier
 
     files = sensor.get("calibration") or []
     gone = [f for f in files if not Path(f).is_file()]

@@ -3,7 +3,7 @@
 ``cv2.imread`` returns None for an unreadable file and decodes a truncated JPEG with a
 grey bottom (libjpeg only prints a warning). :func:`read_image` reports both as typed
 errors naming the file, with the decoder's own words in the message instead of on the
-terminal (:mod:`slam_lcd.quiet`).
+terminal (:mod:`slam_lcd.runtime.quiet`).
 """
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import DamagedImageError, InputError
-from .quiet import native_stderr, one_line, quiet_opencv
+from ..errors import DamagedImageError, InputError
+from ..runtime.quiet import native_stderr, one_line, quiet_opencv
 
 # file endings read as images (frames of an image folder, ground-truth loop images)
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".pgm", ".ppm", ".tif", ".tiff")

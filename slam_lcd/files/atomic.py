@@ -2,8 +2,8 @@
 
 A Ctrl-C, SIGTERM or SIGHUP never leaves a half-written output under the final name, nor a
 temporary folder beside it (creating the temporary folder and the final rename run with
-those signals held back, :func:`slam_lcd.interrupts.defer_sigint`; removing it runs to its
-end whatever arrives, :func:`slam_lcd.interrupts.finish`), and an input can never be
+those signals held back, :func:`slam_lcd.runtime.interrupts.defer_sigint`; removing it runs to its
+end whatever arrives, :func:`slam_lcd.runtime.interrupts.finish`), and an input can never be
 overwritten by accident (``guard_not_input``, :func:`check_no_clash`).
 """
 from __future__ import annotations
@@ -15,7 +15,7 @@ import tempfile
 from pathlib import Path
 from typing import Iterable, Iterator, Mapping
 
-from .interrupts import defer_sigint, finish
+from ..runtime.interrupts import defer_sigint, finish
 
 
 @contextlib.contextmanager
@@ -114,7 +114,7 @@ def check_no_clash(outputs: Iterable[str | Path] | Mapping[str, str | Path | Non
     them (inputs, other outputs) are left alone, so only their own names count.
     The error names the output, its flag and the other path.
     """
-    from .errors import InputError
+    from ..errors import InputError
 
     if isinstance(outputs, Mapping):
         outs = [(str(w), Path(o)) for w, o in outputs.items() if o is not None and str(o) != ""]
@@ -158,7 +158,7 @@ def check_no_clash(outputs: Iterable[str | Path] | Mapping[str, str | Path | Non
 
 def guard_not_input(out: str | Path, *inputs: str | Path) -> None:
     """Refuse to write an output onto one of the inputs."""
-    from .errors import InputError
+    from ..errors import InputError
 
     for inp in inputs:
         if inp is not None and Path(inp).exists() and same_path(out, inp):
@@ -173,7 +173,7 @@ def check_writable_target(out: str | Path, *, folder: bool = False) -> None:
     folder is created and removed): read-only mounts, ``/proc`` and missing permissions
     are reported here rather than after the work.
     """
-    from .errors import InputError
+    from ..errors import InputError
 
     out = Path(out)
     if folder and out.exists() and not out.is_dir():

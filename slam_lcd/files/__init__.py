@@ -1,0 +1,1 @@
+"""Files every stage writes or reads the same way: atomic writes and the clash rule, image-file listing."""
