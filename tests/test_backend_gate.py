@@ -163,7 +163,7 @@ def test_gnc_on_a_users_graph_removes_only_its_own_loops():
     g.finalize()
     verdicts = [r.verdict == "accepted" for r in g.loop_records]
     assert verdicts == truth
-    assert all(r.stage == "gnc" for r, t in zip(g.loop_records, truth) if not t)
+    assert all(r.stage == "gnc" for r, t in zip(g.loop_records, truth, strict=True) if not t)
     _user_factors_untouched(isam, user, g)
     # the user's factors are the same factors: same error as before at the same values
     v0 = isam.calculateEstimate()

@@ -58,7 +58,7 @@ def test_gate_explains_rejections_and_gnc_only_mode_removes_outliers(kitti, tmp_
     print("\n" + res.line("GNC only, 30% false loops, every 8th frame"))
     assert res.false_rejected_frac >= 0.95 and res.true_kept_frac >= 0.9
     assert res.ate < 0.25 * res.ate_odometry
-    rej = [r for r, t in zip(g.loop_records, kitti.is_true) if not t]
+    rej = [r for r, t in zip(g.loop_records, kitti.is_true, strict=True) if not t]
     assert all(r.stage == "gnc" and r.gnc_weight < 0.5 and "GNC" in r.reason for r in rej)
     assert all(len(r.history) >= 2 for r in rej)  # accepted first, then removed
     # iSAM2 (after removeFactorIndices) agrees with a batch solve of the inlier graph, up to

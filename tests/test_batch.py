@@ -38,7 +38,7 @@ def batch_inputs(tmp_path_factory):
     logs = root / "logs"
     logs.mkdir()
     for (name, fmt, suffix), seed in zip((("demo_mcap", "mcap", ".mcap"), ("demo_ros1", "rosbag1", ".bag"),
-                                          ("demo_ros2", "rosbag2", "")), (1, 2, 3)):
+                                          ("demo_ros2", "rosbag2", "")), (1, 2, 3), strict=True):
         make_demo_log(logs / f"{name}{suffix}", fmt, frames=30, seed=seed, width=160, height=120)
     data = (logs / "demo_ros1.bag").read_bytes()
     (logs / "corrupt.bag").write_bytes(data[: int(len(data) * 0.4)])

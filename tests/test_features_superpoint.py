@@ -127,7 +127,7 @@ def test_nms_keeps_only_window_maxima():
     s = torch.rand(1, 40, 50)
     keep = max_pool_nms(s, 4)
     ys, xs = torch.nonzero(keep[0], as_tuple=True)
-    for y, x in zip(ys.tolist(), xs.tolist()):
+    for y, x in zip(ys.tolist(), xs.tolist(), strict=True):
         win = s[0, max(0, y - 4) : y + 5, max(0, x - 4) : x + 5]
         assert s[0, y, x] == win.max()
     # every window maximum survives
@@ -170,7 +170,7 @@ def test_deterministic_batch_equals_single_and_input_types_agree():
     singles = [ex.extract(im) for im in imgs]
     again = [ex.extract(im) for im in imgs]
     batch = ex.extract_batch(imgs)
-    for a, b, c in zip(singles, again, batch):
+    for a, b, c in zip(singles, again, batch, strict=True):
         # the same call twice: bit-identical
         np.testing.assert_array_equal(a.keypoints, b.keypoints)
         np.testing.assert_array_equal(a.descriptors, b.descriptors)

@@ -132,7 +132,7 @@ def _writer_of(kind, gt):
     def write(_r, w):
         if kind == "tf":
             w.write("/tf_static", M.tf_message([(T_WORLD_MOCAP, int(gt.stamps[0]), "world", "mocap")]), int(gt.stamps[0]))
-        for s, T in zip(gt.stamps.tolist(), gt.poses):
+        for s, T in zip(gt.stamps.tolist(), gt.poses, strict=True):
             if kind == "PoseWithCovarianceStamped":
                 msg, topic = M.pose_with_covariance_stamped_msg(T, np.eye(6) * 1e-4, s, "world"), "/gt"
             elif kind == "Odometry":

@@ -107,8 +107,8 @@ def bench_superpoint(extractor: SuperPointExtractor, imgs, batch: int, reps: int
     f_ms = statistics.median(tf) * 1e3 / batch
     x_ms = statistics.median(tx) * 1e3 / batch
     # ratio of each interleaved (forward, full) pair, then the median: robust to load drifts
-    ratio = statistics.median(b / a for a, b in zip(tf, tx))
-    cpu_ratio = statistics.median(b / max(a, 1e-9) for a, b in zip(cf, cx))
+    ratio = statistics.median(b / a for a, b in zip(tf, tx, strict=True))
+    cpu_ratio = statistics.median(b / max(a, 1e-9) for a, b in zip(cf, cx, strict=True))
     return {"forward_ms": f_ms, "full_ms": x_ms, "ratio": ratio, "cpu_time_ratio": cpu_ratio, "keypoints": n_kp}
 
 
@@ -139,11 +139,11 @@ def compare_devices(conf: FeaturesConfig, weights, shared: Path | None) -> bool:
     imgs = test_images((640, 480), 3, shared) + test_images((1241, 376), 3, shared)
     imgs.append(imgs[0][:473, :629])  # a size not divisible by 8
     ok = True
-    for i, (a, b) in enumerate(zip(cpu.extract_batch(imgs), gpu.extract_batch(imgs))):
+    for i, (a, b) in enumerate(zip(cpu.extract_batch(imgs), gpu.extract_batch(imgs), strict=True)):
         ka = {tuple(k): j for j, k in enumerate(a.keypoints.tolist())}
         common = [(ka[tuple(k)], j) for j, k in enumerate(b.keypoints.tolist()) if tuple(k) in ka]
         same = len(common) / max(len(a), len(b), 1)
-        ia, ib = (np.array(x, int) for x in zip(*common)) if common else (np.zeros(0, int),) * 2
+        ia, ib = (np.array(x, int) for x in zip(*common, strict=True)) if common else (np.zeros(0, int),) * 2
         dd = float(np.abs(a.descriptors[ia] - b.descriptors[ib]).max()) if common else float("nan")
         ds = float(np.abs(a.scores[ia] - b.scores[ib]).max()) if common else float("nan")
         good = same >= 0.97 and dd < 2e-2 and ds < 1e-3

@@ -242,7 +242,7 @@ def _replicated(src: Path, dst: Path, keyframes: int, vocab: bool = False) -> No
     new, table, next_id, total, rep = [], [], 0, 0, 0
     pieces = []  # (repetition, source keyframe ids) per repeated session
     while total < keyframes:
-        for meta, s in zip(man.sessions, sess):
+        for meta, s in zip(man.sessions, sess, strict=True):
             n = min(len(s), keyframes - total)
             if n <= 0:
                 break

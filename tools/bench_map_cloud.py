@@ -88,7 +88,7 @@ def main() -> int:
             print(line, flush=True)
     med = {k: statistics.median(v) for k, v in walls.items()}
     mem = {k: statistics.median(v) for k, v in peaks.items()}
-    pair_ratios = [b / a_ for a_, b in zip(walls["off"], walls["on"])]
+    pair_ratios = [b / a_ for a_, b in zip(walls["off"], walls["on"], strict=True)]
     rep = json.loads((work / f"{name}-on" / "report.json").read_text())
     mc = rep["map_cloud"]
     sec = mc["seconds"]

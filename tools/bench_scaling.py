@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import itertools
 import tempfile
 import time
 from pathlib import Path
@@ -652,7 +653,7 @@ def bench_log(args) -> None:
     head = "".join(f"{p:>9s}" for p in parts)
     print(f"  keyframes    LCD mean  median     max  backend {head}   RSS MB   (ms per keyframe)")
     edges = sorted(set([0, 100, 200] + list(range(300, n - 100, max(100, n // 8))) + [max(n - 100, 0), n]))
-    for a, b in zip(edges[:-1], edges[1:]):
+    for a, b in itertools.pairwise(edges):
         if b <= a or a >= n:
             continue
         seg = ks[a:b]

@@ -83,7 +83,7 @@ def run_on_log(args) -> int:
                              laps=args.laps, width=args.width, height=args.height, camera_rate=args.rate)
         print(info.summary().splitlines()[0], f"[{time.perf_counter() - t0:.0f} s]")
     gt_all = read_trajectory_from_log(path, "/ground_truth/pose")
-    gtd = {int(s): p for s, p in zip(gt_all.stamps, gt_all.poses)}
+    gtd = {int(s): p for s, p in zip(gt_all.stamps, gt_all.poses, strict=True)}
     for mode in args.modes.split(","):
         t0 = time.perf_counter()
         kw = {"depth_topic": "/camera/depth"} if mode == "rgbd" else {"right_topic": "/camera/right/image_raw"}
@@ -145,12 +145,12 @@ def main(argv=None) -> int:
             right, _ = render(world, cam, T_wc @ T_lr, with_depth=False)
         frames.append((img, depth, right))
     print(f"rendering: {(time.perf_counter() - t0) / len(gt) * 1e3:.1f} ms/frame")
-    gtd = {int(s): p for s, p in zip(gt.stamps, gt.poses)}
+    gtd = {int(s): p for s, p in zip(gt.stamps, gt.poses, strict=True)}
     conf = FrontendConfig()
     for mode in args.modes.split(","):
         vo = RgbdOdometry(cam, conf, T_bc) if mode == "rgbd" else StereoOdometry(cam, conf, T_bc)
         t0 = time.perf_counter()
-        for s, (img, depth, right) in zip(gt.stamps, frames):
+        for s, (img, depth, right) in zip(gt.stamps, frames, strict=True):
             vo.process(int(s), img, depth if mode == "rgbd" else right)
         dt = (time.perf_counter() - t0) / len(gt)
         res = vo.result()

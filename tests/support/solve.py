@@ -32,7 +32,7 @@ def to_values(poses: dict[int, np.ndarray]) -> gtsam.Values:
 def from_values(values: gtsam.Values) -> dict[int, np.ndarray]:
     flat = np.asarray(gtsam.utilities.extractPose3(values))
     out = {}
-    for row, k in zip(flat, values.keys()):
+    for row, k in zip(flat, values.keys(), strict=True):
         T = np.eye(4)
         T[:3, :3] = row[:9].reshape(3, 3)
         T[:3, 3] = row[9:12]
