@@ -189,7 +189,7 @@ def test_tf_dynamic_chain_interpolates(bags):
     ob = sorted(dynamic[("odom", "base_link")], key=lambda x: x[0])
     mo_st = np.array([s for s, _ in mo])
     # an odom sample strictly between two distinct map->odom samples, in the middle of the log
-    for s, T_ob in ob[len(ob) // 2 :]:
+    for s, T_ob in ob[len(ob) // 2 :]:  # noqa: B007  T_ob is the sample found, used after the loop
         i = int(np.searchsorted(mo_st, s))
         if 0 < i < len(mo) and mo_st[i - 1] < s < mo_st[i]:
             break

@@ -18,7 +18,9 @@ def _project(T_world_cam, X):
     return uv, P[:, 2]
 
 
-def _rgbd_pair(seed=0, noise_px=0.3, T_body_camera=np.eye(4)):
+def _rgbd_pair(seed=0, noise_px=0.3, T_body_camera=None):
+    if T_body_camera is None:
+        T_body_camera = np.eye(4)
     rng = np.random.default_rng(seed)
     T_wb_m = np.eye(4)
     T_wb_q = T_body_camera @ se3_exp(np.array([0.02, -0.1, 0.03, 0.4, -0.1, 0.3])) @ inv(T_body_camera)

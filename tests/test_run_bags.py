@@ -265,7 +265,7 @@ def _raw_stereo(tiny_log, tmp_path):
         return "\n".join("  - [" + ", ".join(f"{x:.12f}" for x in row) + "]" for row in T)
 
     cams = []
-    for k, (topic, (R, D)) in enumerate(rigs.items()):
+    for k, (topic, (_R, D)) in enumerate(rigs.items()):
         cams.append(f"""cam{k}:
   T_cam_imu:
 {block(inv(T_b_raw[topic]))}
@@ -333,7 +333,7 @@ def test_stereo_log_with_odometry_gives_the_loop_detector_the_pair(tiny_log, tmp
     log = _variant(tiny_log, tmp_path / "stereo_odom.mcap", drop=("/camera/depth",))
     calls = []
     real = lcd_geometry.dense_disparity
-    monkeypatch.setattr(lcd_geometry, "dense_disparity", lambda l, r: calls.append(r.shape) or real(l, r))
+    monkeypatch.setattr(lcd_geometry, "dense_disparity", lambda left, right: calls.append(right.shape) or real(left, right))
     res = run_log(log, tmp_path / "out", _orb_config(), progress=False, write_mcap=False)
     assert res.topics["odom"] == "/odom" and res.topics["right"] == "/camera/right/image_raw"
     assert len(calls) == res.n_keyframes >= 2

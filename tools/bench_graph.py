@@ -14,6 +14,7 @@ checks that the verdicts are identical (the reference is tests/lcd_graph_referen
 from __future__ import annotations
 
 import argparse
+import functools
 import sys
 import time
 from pathlib import Path
@@ -120,10 +121,10 @@ def main(argv=None) -> int:
             print(f"{s:>7}  no match set this large (more --pairs, or ORB)")
             continue
         t_ref, t_new, t_exit, rounds, same = [], [], [], [], True
-        for label, kq, km, m in sets[s]:
-            a, v = timed(lambda: ref.verify_graph(kq, km, m, exact), args.repeat)
-            b, w = timed(lambda: verify_graph(kq, km, m, exact), args.repeat)
-            c, x = timed(lambda: verify_graph(kq, km, m, fast), args.repeat)
+        for _label, kq, km, m in sets[s]:
+            a, v = timed(functools.partial(ref.verify_graph, kq, km, m, exact), args.repeat)
+            b, w = timed(functools.partial(verify_graph, kq, km, m, exact), args.repeat)
+            c, x = timed(functools.partial(verify_graph, kq, km, m, fast), args.repeat)
             same &= (v.accepted, v.reason, v.score, v.n_nodes, v.iterations) == \
                 (w.accepted, w.reason, w.score, w.n_nodes, w.iterations) and np.array_equal(v.kept, w.kept)
             same &= x.accepted == v.accepted

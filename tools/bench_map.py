@@ -139,7 +139,7 @@ def section_sessions(args) -> None:
     # cost: interleaved pairs (plain run, then the same log appended to a copy of the map it met),
     # repeated, medians: a busy neighbour then slows both sides of a pair alike
     times = {k: {"plain": [plain[k][1]], "append": [appended[k][1]]} for k in (1, 2, 3)}
-    for r in range(args.cost_repeats - 1):
+    for _ in range(args.cost_repeats - 1):
         for k in (1, 2, 3):
             times[k]["plain"].append(run_session(logs[k], runs / "cost_plain", cfg, extractor)[1])
             dst = runs / "cost_map"
@@ -206,7 +206,7 @@ def _replicated_vocab(v: dict, src_ids: np.ndarray, pieces: list[tuple[int, np.n
     off = v["bow_offsets"]
     reps = max(r for r, _ in pieces) + 1
     words, counts, lens = [], [], []
-    for r, (rep, src_kf) in enumerate(pieces):
+    for rep, src_kf in pieces:
         for k in src_kf:
             i = at[int(k)]
             words.append(v["bow_words"][off[i]:off[i + 1]] + rep * W)

@@ -13,6 +13,7 @@ Zipf-like word distribution (~500 features per keyframe).
 from __future__ import annotations
 
 import argparse
+import functools
 import os
 import statistics
 import time
@@ -66,8 +67,8 @@ def bench_quantize(args, rng):
         tree = synthetic_tree(rng, lo, hi, args.words, args.dim)
         words = tree.words
         x = normalise_rows(words[rng.integers(0, len(words), 1000)] + 0.15 * rng.normal(size=(1000, args.dim)) / np.sqrt(args.dim))
-        t_greedy = timed(lambda: tree.quantize(x), args.repeat)
-        t_brute = timed(lambda: tree.quantize_exhaustive(x, chunk=1000), max(2, args.repeat // 10))
+        t_greedy = timed(functools.partial(tree.quantize, x), args.repeat)
+        t_brute = timed(functools.partial(tree.quantize_exhaustive, x, chunk=1000), max(2, args.repeat // 10))
         agree = float((tree.quantize(x) == tree.quantize_exhaustive(x)).mean())
         widths = [int(b.max()) for b in tree.branching()]
         print(f"{name:28s} words={tree.n_words:7d} depth={tree.depth} max-branching/level={widths}")
@@ -109,7 +110,7 @@ def bench_query(args, rng):
         t_build = time.perf_counter() - t0
         queries = [random_bow() for _ in range(args.repeat)]
         it = iter(queries * 3)
-        t_q = timed(lambda: db.query(next(it), top_k=5, exclude_recent_n=50), args.repeat - 1)
+        t_q = timed(lambda db=db, it=it: db.query(next(it), top_k=5, exclude_recent_n=50), args.repeat - 1)
         q = queries[0]
         cur_idf = db.idf()
         n_brute = min(1000, args.keyframes)
