@@ -17,7 +17,8 @@ from slam_lcd.types import LoopClosure
 @pytest.fixture(scope="module")
 def kitti(shared_data):
     d = shared_data / "trajectories"
-    return make_scenario(d / "KITTI_00_gt.txt", ScenarioConfig(stride=8, false_fraction=0.3, seed=3), d / "KITTI_00_gt_times.txt")
+    return make_scenario(d / "KITTI_00_gt.txt", ScenarioConfig(stride=8, false_fraction=0.3, seed=3),
+                         d / "KITTI_00_gt_times.txt")
 
 
 def test_odometry_only_estimate_is_the_odometry(kitti):

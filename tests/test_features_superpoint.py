@@ -247,7 +247,8 @@ def test_heap_holes_are_returned_once_they_grow_past_the_limit():
 
     out = subprocess.run([sys.executable, "-c", _TRIM_SCRIPT], capture_output=True, text=True, check=True)
     free, before, held, after, early, first, again = map(int, out.stdout.split())
-    print(f"\n300 MB of holes: {free} MB free in the heap; RSS {before} -> {held} (freed, kept) -> {after} MB (trimmed)")
+    print(f"\n300 MB of holes: {free} MB free in the heap; "
+          f"RSS {before} -> {held} (freed, kept) -> {after} MB (trimmed)")
     assert free >= 290 and held > before - 30  # kept resident: 'retain'
     assert early == 0 and first == 1 and again == 0  # spaced out; then only once the holes grow again
     assert after < held - 250

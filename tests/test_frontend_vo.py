@@ -33,11 +33,13 @@ def demo(demo_log):
     imgs, depths, rights = {}, {}, {}
     cam = None
     with open_log(demo_log) as r:
-        for m in r.messages(["/camera/image_raw", "/camera/depth", "/camera/right/image_raw", "/camera/right/camera_info"]):
+        topics = ["/camera/image_raw", "/camera/depth", "/camera/right/image_raw", "/camera/right/camera_info"]
+        for m in r.messages(topics):
             if m.topic == "/camera/right/camera_info":
                 cam = cam or decode_camera_info(m.msg)
                 continue
-            {"/camera/image_raw": imgs, "/camera/depth": depths, "/camera/right/image_raw": rights}[m.topic][m.stamp] = decode_image(m.msg)
+            by_topic = {"/camera/image_raw": imgs, "/camera/depth": depths, "/camera/right/image_raw": rights}
+            by_topic[m.topic][m.stamp] = decode_image(m.msg)
     stamps = np.array(sorted(imgs), np.int64)
     T_bc = TfBuffer.from_log(demo_log).lookup("base_link", "camera_optical_frame", int(stamps[0]))
     gt_all = read_trajectory_from_log(demo_log, "/ground_truth/pose")

@@ -84,7 +84,8 @@ def test_truncated_mcap_cli_stderr_is_one_warning_line(truncated):
     import subprocess
     import sys
 
-    p = subprocess.run([sys.executable, "-m", "slam_lcd", "info", str(truncated)], capture_output=True, text=True, timeout=120)
+    p = subprocess.run([sys.executable, "-m", "slam_lcd", "info", str(truncated)], capture_output=True, text=True,
+                       timeout=120)
     assert p.returncode == 0, p.stderr
     err = [ln for ln in p.stderr.splitlines() if ln.strip()]
     assert len(err) == 1, p.stderr

@@ -123,8 +123,8 @@ def small_corridor(tmp_path, shared_data):
 def test_cli_eval_lcd_writes_outputs(small_corridor, tmp_path, capsys):
     folder, gt = small_corridor
     out = tmp_path / "out"
-    rc = main(["eval-lcd", str(folder), "--gt", str(gt), "--features", "orb", "--exclude-recent", "5", "--no-feature-cache",
-               "--out", str(out)])
+    rc = main(["eval-lcd", str(folder), "--gt", str(gt), "--features", "orb", "--exclude-recent", "5",
+               "--no-feature-cache", "--out", str(out)])
     assert rc == 0
     text = capsys.readouterr().out
     assert "BoW+graph+ransac" in text

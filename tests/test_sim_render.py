@@ -116,11 +116,13 @@ def test_sampled_world_points_reproject_within_half_a_pixel(world):
     # (lightly blurred: the two views resample the texture at different scales and mip levels)
     ia = _bilinear(cv2.GaussianBlur(img_a, (0, 0), 1.0).astype(np.float64), uv_a)
     ib = _bilinear(cv2.GaussianBlur(img_b, (0, 0), 1.0).astype(np.float64), uv_b)
-    print(f"photometric consistency: corr {np.corrcoef(ia, ib)[0, 1]:.3f}, median |diff| {np.median(np.abs(ia - ib)):.2f}")
+    print(f"photometric consistency: corr {np.corrcoef(ia, ib)[0, 1]:.3f}, "
+          f"median |diff| {np.median(np.abs(ia - ib)):.2f}")
     assert np.corrcoef(ia, ib)[0, 1] > 0.9
     assert np.median(np.abs(ia - ib)) < 8.0
     # control: a 4-pixel misregistration is clearly visible to this check
-    ic = _bilinear(cv2.GaussianBlur(img_b, (0, 0), 1.0).astype(np.float64), np.clip(uv_b + (4.0, 0.0), 0, cam.width - 2))
+    ic = _bilinear(cv2.GaussianBlur(img_b, (0, 0), 1.0).astype(np.float64),
+                   np.clip(uv_b + (4.0, 0.0), 0, cam.width - 2))
     assert np.corrcoef(ia, ic)[0, 1] < np.corrcoef(ia, ib)[0, 1] - 0.1
 
 

@@ -139,7 +139,8 @@ def test_same_input_gives_the_same_words(real_sequences):
         runs.append((db, bows))
     (a, bows_a), (b, bows_b) = runs
     assert a.words.index.active and a.n_words == b.n_words
-    assert all(np.array_equal(x.words, y.words) and np.array_equal(x.counts, y.counts) for x, y in zip(bows_a, bows_b, strict=True))
+    assert all(np.array_equal(x.words, y.words) and np.array_equal(x.counts, y.counts)
+               for x, y in zip(bows_a, bows_b, strict=True))
     assert np.array_equal(a.words.centres, b.words.centres)
     q = as_unit_vectors(sets[3])
     assert np.array_equal(a.words.nearest(q)[0], b.words.nearest(q)[0])
@@ -305,7 +306,8 @@ def test_a_forked_child_inserts_on_its_own_worker_thread():
         ok = False
         try:
             ix.update(centres, np.zeros(0, np.int64))
-            ok = ix.graph.ntotal == 1300 and ix.nearest(centres, centres[1250:1260])[0].tolist() == list(range(1250, 1260))
+            ok = (ix.graph.ntotal == 1300
+                  and ix.nearest(centres, centres[1250:1260])[0].tolist() == list(range(1250, 1260)))
         finally:
             os._exit(0 if ok else 1)
     _, status = os.waitpid(pid, 0)
