@@ -11,8 +11,8 @@ For each image size (320x240, 640x480, 1241x376) and device (CPU, and CUDA when 
 - batch 1 and batch 8; ORB (OpenCV, CPU) on the same images in the same run.
 
 Forward and full runs are interleaved; the medians are reported, and the ratio is the
-median of the per-pair ratios, so background load affects both sides alike. The acceptance figure is printed last: full / forward at 640x480,
-batch 1, CPU (target <= 1.15).
+median of the per-pair ratios, so background load affects both sides alike. The acceptance figure is printed last:
+full / forward at 640x480, batch 1, CPU (target <= 1.15).
 
     python tools/bench_features.py [--weights PATH] [--device cpu|cuda|all] [--reps 3]
 """
@@ -53,7 +53,8 @@ def test_images(size, n, shared: Path | None) -> list[np.ndarray]:
             imgs.append(cv2.resize(im, (w, h), interpolation=cv2.INTER_AREA))
         else:
             rng = np.random.default_rng(i)
-            im = cv2.resize(rng.integers(0, 256, (h // 8, w // 8), dtype=np.uint8), (w, h), interpolation=cv2.INTER_NEAREST)
+            im = cv2.resize(rng.integers(0, 256, (h // 8, w // 8), dtype=np.uint8), (w, h),
+                            interpolation=cv2.INTER_NEAREST)
             imgs.append(cv2.GaussianBlur(im, (3, 3), 0))
     return imgs
 
@@ -149,7 +150,8 @@ def compare_devices(conf: FeaturesConfig, weights, shared: Path | None) -> bool:
         good = same >= 0.97 and dd < 2e-2 and ds < 1e-3
         ok &= good
         print(f"compare-devices image {i} {a.image_size}: cpu {len(a)} / cuda {len(b)} keypoints, "
-              f"{same:.3%} identical, max |desc diff| {dd:.2e}, max |score diff| {ds:.2e} {'OK' if good else 'MISMATCH'}")
+              f"{same:.3%} identical, max |desc diff| {dd:.2e}, max |score diff| {ds:.2e} "
+              f"{'OK' if good else 'MISMATCH'}")
     print(f"compare-devices: {'PASS' if ok else 'FAIL'} (TF32 allowed for cuDNN convs: "
           f"{torch.backends.cudnn.allow_tf32})")
     return ok

@@ -70,7 +70,8 @@ def match_sets(true_pairs, false_pairs, sizes, kind: str):
     max_d = conf.match_max_distance_orb if kind == "orb" else conf.match_max_distance_sp
     sets = {s: [] for s in sizes}
     counts = {"true": [], "false": []}
-    for label, pairs, ratio, bound in (("true", true_pairs, conf.match_ratio, max_d), ("false", false_pairs, None, None)):
+    for label, pairs, ratio, bound in (("true", true_pairs, conf.match_ratio, max_d),
+                                       ("false", false_pairs, None, None)):
         for fq, fm in pairs:
             m, d = mutual_nn_match_bf(fq.descriptors, fm.descriptors, ratio=ratio, max_distance=bound,
                                       return_distances=True)

@@ -134,8 +134,10 @@ def section_sessions(args) -> None:
         for pair, d in sorted(j["pairs"].items()):
             print(f"  loops {pair}: {d['true']} true, {d['false']} false")
         for row in s["sessions"]:
-            print(f"  {row['name']}: {row['keyframes']} keyframes, ATE odometry {row.get('ate_odometry', float('nan')):.3f} m"
-                  f" -> map {row.get('ate_map', float('nan')):.4f} m (ratio {100 * (row.get('ratio') or float('nan')):.1f} %)")
+            print(f"  {row['name']}: {row['keyframes']} keyframes, "
+                  f"ATE odometry {row.get('ate_odometry', float('nan')):.3f} m"
+                  f" -> map {row.get('ate_map', float('nan')):.4f} m "
+                  f"(ratio {100 * (row.get('ratio') or float('nan')):.1f} %)")
     # cost: interleaved pairs (plain run, then the same log appended to a copy of the map it met),
     # repeated, medians: a busy neighbour then slows both sides of a pair alike
     times = {k: {"plain": [plain[k][1]], "append": [appended[k][1]]} for k in (1, 2, 3)}
@@ -173,7 +175,8 @@ def section_sessions(args) -> None:
     res, wall = run_session(logs[5], runs / "localize5", cfg, extractor, m, mode="localize")
     rep = res.localization
     e = rep["errors"] or {}
-    print(f"\nlocalise session 5: {rep['localised']} of {rep['keyframes']} keyframes ({100 * rep['share_localised']:.1f} %)"
+    print(f"\nlocalise session 5: {rep['localised']} of {rep['keyframes']} keyframes "
+          f"({100 * rep['share_localised']:.1f} %)"
           f", median error {e.get('median_m', float('nan')):.4f} m, max {e.get('max_m', float('nan')):.4f} m, "
           f"{e.get('over_1m')} over 1 m; map bytes unchanged: {map_files_digest(root) == before}; {wall:.1f} s")
     size = sum(p.stat().st_size for p in root.rglob('*') if p.is_file())
@@ -223,7 +226,8 @@ def _replicated_vocab(v: dict, src_ids: np.ndarray, pieces: list[tuple[int, np.n
     idx._image_ends.extend([len(centres)] * (idx.fresh_images + 1))
     t = time.perf_counter()
     idx._build(centres)
-    print(f"  (word index built over {len(centres)} words for the snapshot: {time.perf_counter() - t:.0f} s, not timed)")
+    print(f"  (word index built over {len(centres)} words for the snapshot: {time.perf_counter() - t:.0f} s, "
+          f"not timed)")
     out["graph"] = faiss.serialize_index(idx.graph)
     out["proj"] = idx.proj
     out["index_state"] = np.array([idx.n_indexed, idx.built_at, idx.n_builds], np.int64)

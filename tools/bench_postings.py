@@ -169,7 +169,8 @@ def _pack(bags: list) -> dict:
 def _unpack(z, prefix: str, n: int) -> list:
     from slam_lcd.vocab import BowVector
 
-    words, counts, ends = z[prefix + "words"].astype(np.int64), z[prefix + "counts"].astype(np.float64), z[prefix + "ends"]
+    words = z[prefix + "words"].astype(np.int64)
+    counts, ends = z[prefix + "counts"].astype(np.float64), z[prefix + "ends"]
     starts = np.concatenate([[0], ends[:-1]])
     return [BowVector(words[a:b], counts[a:b]) for a, b in zip(starts[:n], ends[:n], strict=True)]
 

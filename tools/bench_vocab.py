@@ -34,7 +34,8 @@ def synthetic_tree(rng, lo, hi, n_words, dim):
         b = rng.integers(lo, hi + 1, size=len(cur))
         if len(cur) * (lo + hi) / 2 > n_words:  # last level: scale the branching to reach ~n_words
             m = n_words / len(cur)
-            b = rng.integers(max(1, int(m * lo / hi * 2 / 2)), min(hi, int(np.ceil(m * 2 * hi / (lo + hi)))) + 1, size=len(cur))
+            b = rng.integers(max(1, int(m * lo / hi * 2 / 2)), min(hi, int(np.ceil(m * 2 * hi / (lo + hi)))) + 1,
+                             size=len(cur))
             b = np.maximum(1, np.round(b * n_words / b.sum())).astype(int)
         par = np.repeat(np.arange(len(cur)), np.minimum(b, hi))
         noise = (1.2 * 0.6 ** lvl) / np.sqrt(dim)
@@ -66,7 +67,8 @@ def bench_quantize(args, rng):
     for name, (lo, hi) in shapes.items():
         tree = synthetic_tree(rng, lo, hi, args.words, args.dim)
         words = tree.words
-        x = normalise_rows(words[rng.integers(0, len(words), 1000)] + 0.15 * rng.normal(size=(1000, args.dim)) / np.sqrt(args.dim))
+        noise = 0.15 * rng.normal(size=(1000, args.dim)) / np.sqrt(args.dim)
+        x = normalise_rows(words[rng.integers(0, len(words), 1000)] + noise)
         t_greedy = timed(functools.partial(tree.quantize, x), args.repeat)
         t_brute = timed(functools.partial(tree.quantize_exhaustive, x, chunk=1000), max(2, args.repeat // 10))
         agree = float((tree.quantize(x) == tree.quantize_exhaustive(x)).mean())

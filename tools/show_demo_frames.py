@@ -80,8 +80,8 @@ def main() -> int:
     dep_tiles = []
     for k in (0, 2):
         d = np.clip(depths[k] / 12.0, 0, 1)
-        dep_tiles.append(label(small(cv2.applyColorMap((255 * (1 - d)).astype(np.uint8), cv2.COLORMAP_TURBO)[..., ::-1]),
-                               "depth 0-12 m"))
+        coloured = cv2.applyColorMap((255 * (1 - d)).astype(np.uint8), cv2.COLORMAP_TURBO)[..., ::-1]
+        dep_tiles.append(label(small(coloured), "depth 0-12 m"))
     gt50 = make_trajectory("laps", seed=args.seed, rate_hz=50.0)
     odom = simulate_odometry(gt50, seed=args.seed)
     pairs = gt_loop_pairs(gt, T_body_camera=Tbc)
