@@ -67,8 +67,8 @@ def bench_quantize(args, rng):
     for name, (lo, hi) in shapes.items():
         tree = synthetic_tree(rng, lo, hi, args.words, args.dim)
         words = tree.words
-        noise = 0.15 * rng.normal(size=(1000, args.dim)) / np.sqrt(args.dim)
-        x = normalise_rows(words[rng.integers(0, len(words), 1000)] + noise)
+        picked = words[rng.integers(0, len(words), 1000)]  # drawn before the noise
+        x = normalise_rows(picked + 0.15 * rng.normal(size=(1000, args.dim)) / np.sqrt(args.dim))
         t_greedy = timed(functools.partial(tree.quantize, x), args.repeat)
         t_brute = timed(functools.partial(tree.quantize_exhaustive, x, chunk=1000), max(2, args.repeat // 10))
         agree = float((tree.quantize(x) == tree.quantize_exhaustive(x)).mean())
