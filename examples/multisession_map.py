@@ -97,7 +97,7 @@ def main(argv=None) -> int:
     root = work / "map"
     if root.exists():
         raise SystemExit(f"{root} exists: give another --work (the example builds a new map)")
-    for k, path in zip((1, 5), logs):
+    for k, path in zip((1, 5), logs, strict=True):
         with Map.open(root, features=extractor_meta(extractor), conf=cfg.map, write=True, create=True) as m:
             pipe = Pipeline(cfg, extractor=extractor, map=m, expect_depth=True)
             feed(pipe, path)

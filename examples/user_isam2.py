@@ -137,7 +137,8 @@ def main(argv=None) -> int:
         print(f"user_isam2: {e}", file=sys.stderr)
         return 2
     acc = sum(rec.verdict == "accepted" for rec in r.graph.loop_records)
-    print(f"keyframes {len(r.keys)}, loops offered {len(r.closures)}, accepted {acc}, false accepted {r.false_accepted}")
+    print(f"keyframes {len(r.keys)}, loops offered {len(r.closures)}, accepted {acc}, "
+          f"false accepted {r.false_accepted}")
     print(f"ATE odometry {ate(r.gt, r.odometry):.3f} m -> user's graph with our loops {ate(r.gt, r.estimate()):.3f} m")
     return 0
 

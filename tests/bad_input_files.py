@@ -66,7 +66,8 @@ def leftovers(*folders) -> list[str]:
     for d in folders:
         d = Path(d)
         if d.is_dir():
-            found += [str(p) for p in d.rglob(".*") if ".slam-lcd-" in p.name or re.match(r"^\..+\.[a-z0-9_]{6,}$", p.name)]
+            found += [str(p) for p in d.rglob(".*")
+                      if ".slam-lcd-" in p.name or re.match(r"^\..+\.[a-z0-9_]{6,}$", p.name)]
     return found
 
 

@@ -10,7 +10,7 @@ import functools
 from pathlib import Path
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def corridor_features(folder: str, kind: str, weights: str | None) -> tuple:
     """Features of frames 1..84, read exactly as ``slam-lcd eval-lcd`` reads them (same cache entries)."""
     import tempfile

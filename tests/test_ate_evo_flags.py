@@ -42,7 +42,8 @@ APE_CASES = [
     "-r full", "-r rot_part", "-r angle_deg", "-r angle_rad", "-r point_distance", "-a -r full", "-as -r angle_deg",
     "--align_origin -r rot_part",
 ]
-TIMED_APE_CASES = ["-a --t_max_diff 0.02", "-as --t_max_diff 0.005", "-a --t_offset 0.004", "-a --t_max_diff 0.03 --t_offset -0.012"]
+TIMED_APE_CASES = ["-a --t_max_diff 0.02", "-as --t_max_diff 0.005", "-a --t_offset 0.004",
+                   "-a --t_max_diff 0.03 --t_offset -0.012"]
 RPE_CASES = [
     "--rpe", "--rpe -d 10", "--rpe -d 10 -u f --all_pairs", "--rpe -d 1 -u m", "--rpe -d 1 -u m --pairs_from_reference",
     "--rpe -d 0.5 -u m --all_pairs", "--rpe -d 0.5 -u m --all_pairs --pairs_from_reference", "--rpe -d 5 -u d",
@@ -72,7 +73,8 @@ def parse_flags(text: str) -> dict:
             key = {"-r": "relation", "-d": "delta", "-u": "delta_unit", "-t": "delta_tol"}.get(a, a.lstrip("-"))
             i += 1
             value = argv[i]
-            o[key] = value if key in ("relation", "delta_unit") else (int(value) if key == "n_to_align" else float(value))
+            o[key] = (value if key in ("relation", "delta_unit")
+                      else int(value) if key == "n_to_align" else float(value))
         i += 1
     return o
 

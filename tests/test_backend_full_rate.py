@@ -41,7 +41,8 @@ def test_full_rate_matches_keyframes_and_is_smooth(full_and_keyframes):
     # the full-rate trajectory is as good as the keyframes, and far better than odometry
     ate_full = ate_rmse(sc.gt, out.poses)
     ate_odo = ate_rmse(sc.gt, sc.odom)
-    print(f"\nfull rate ({len(out)} stamps from {len(kf_idx)} keyframes): ATE {ate_full:.2f} m, keyframes {res.ate:.2f} m, odometry {ate_odo:.2f} m")
+    print(f"\nfull rate ({len(out)} stamps from {len(kf_idx)} keyframes): ATE {ate_full:.2f} m, "
+          f"keyframes {res.ate:.2f} m, odometry {ate_odo:.2f} m")
     assert ate_full < 0.3 * ate_odo
     assert ate_full < 1.2 * ate_rmse(sc.gt[kf_idx], kf_corr) + 0.5
     # before the first / after the last keyframe: the end correction carried rigidly

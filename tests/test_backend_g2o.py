@@ -51,7 +51,7 @@ def test_pose3example_matches_gtsam_reader(shared_data, tmp_path):
     poses2, edges2 = read_g2o(out)
     for k in poses:
         np.testing.assert_allclose(poses2[k], poses[k], atol=1e-8)
-    for a, b in zip(edges, edges2):
+    for a, b in zip(edges, edges2, strict=True):
         np.testing.assert_allclose(b.T_i_j, a.T_i_j, atol=1e-8)
         np.testing.assert_allclose(b.information, a.information, rtol=1e-8)
 

@@ -124,10 +124,12 @@ def _user_graph(n=80, seed=0):
             f.add(gtsam.PriorFactorPose3(X(0), gtsam.Pose3(gt[0]), gtsam.noiseModel.Isotropic.Sigma(6, 1e-4)))
         else:
             step = inv(gt[i - 1]) @ gt[i] @ se3_exp(np.r_[0, 0, 0.01, 0.02, 0, 0] + rng.normal(0, 1, 6) * odo_sig)
-            f.add(gtsam.BetweenFactorPose3(X(i - 1), X(i), gtsam.Pose3(step), gtsam.noiseModel.Diagonal.Sigmas(odo_sig)))
+            f.add(gtsam.BetweenFactorPose3(X(i - 1), X(i), gtsam.Pose3(step),
+                                           gtsam.noiseModel.Diagonal.Sigmas(odo_sig)))
             est = est @ step
         if i and i % 20 == 0:
-            f.add(gtsam.PriorFactorPose3(X(i), gtsam.Pose3(gt[i]), gtsam.noiseModel.Diagonal.Sigmas([0.1] * 3 + [0.5] * 3)))
+            f.add(gtsam.PriorFactorPose3(X(i), gtsam.Pose3(gt[i]),
+                                         gtsam.noiseModel.Diagonal.Sigmas([0.1] * 3 + [0.5] * 3)))
         v.insert(X(i), gtsam.Pose3(est))
         slots = isam.update(f, v).getNewFactorsIndices()
         user += [(int(s), f.at(j)) for j, s in enumerate(slots)]
@@ -163,7 +165,7 @@ def test_gnc_on_a_users_graph_removes_only_its_own_loops():
     g.finalize()
     verdicts = [r.verdict == "accepted" for r in g.loop_records]
     assert verdicts == truth
-    assert all(r.stage == "gnc" for r, t in zip(g.loop_records, truth) if not t)
+    assert all(r.stage == "gnc" for r, t in zip(g.loop_records, truth, strict=True) if not t)
     _user_factors_untouched(isam, user, g)
     # the user's factors are the same factors: same error as before at the same values
     v0 = isam.calculateEstimate()
@@ -191,7 +193,8 @@ def test_gate_on_a_users_graph_asks_isam2_marginals():
     Tj, Cj = joint.estimate(20, 60)
     assert np.allclose(Tj, rel.estimate(20, 60)[0], atol=1e-9)
     # the exact joint marginal knows the two poses are correlated: smaller than the uncorrelated bound
-    assert np.trace(Cj) < np.trace(rel.estimate(20, 60)[1]) and PcmGate().check(GateLoop.from_closure(good, 20, 60), joint).accept
+    assert np.trace(Cj) < np.trace(rel.estimate(20, 60)[1])
+    assert PcmGate().check(GateLoop.from_closure(good, 20, 60), joint).accept
     g = PoseGraph(BackendConfig(), isam=isam, key=lambda i: X(i), add_odometry=False)
     with pytest.raises(InputError):
         g.add_loop(LoopClosure(1, 0, np.eye(4), np.eye(6)))  # keyframes never registered

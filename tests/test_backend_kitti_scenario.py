@@ -63,5 +63,5 @@ def test_false_loops_are_rejected(shared_data, true_only, false_fraction, hard):
     assert res.false_rejected_frac >= 0.95
     assert res.true_kept_frac >= 0.90
     assert ate_plain > 3.0 * res.ate
-    reasons = [r.reason for r, t in zip(g.loop_records, sc.is_true) if not t]
+    reasons = [r.reason for r, t in zip(g.loop_records, sc.is_true, strict=True) if not t]
     assert all(reasons)

@@ -17,7 +17,8 @@ from slam_lcd.types import LoopClosure
 @pytest.fixture(scope="module")
 def kitti(shared_data):
     d = shared_data / "trajectories"
-    return make_scenario(d / "KITTI_00_gt.txt", ScenarioConfig(stride=8, false_fraction=0.3, seed=3), d / "KITTI_00_gt_times.txt")
+    return make_scenario(d / "KITTI_00_gt.txt", ScenarioConfig(stride=8, false_fraction=0.3, seed=3),
+                         d / "KITTI_00_gt_times.txt")
 
 
 def test_odometry_only_estimate_is_the_odometry(kitti):
@@ -58,7 +59,7 @@ def test_gate_explains_rejections_and_gnc_only_mode_removes_outliers(kitti, tmp_
     print("\n" + res.line("GNC only, 30% false loops, every 8th frame"))
     assert res.false_rejected_frac >= 0.95 and res.true_kept_frac >= 0.9
     assert res.ate < 0.25 * res.ate_odometry
-    rej = [r for r, t in zip(g.loop_records, kitti.is_true) if not t]
+    rej = [r for r, t in zip(g.loop_records, kitti.is_true, strict=True) if not t]
     assert all(r.stage == "gnc" and r.gnc_weight < 0.5 and "GNC" in r.reason for r in rej)
     assert all(len(r.history) >= 2 for r in rej)  # accepted first, then removed
     # iSAM2 (after removeFactorIndices) agrees with a batch solve of the inlier graph, up to

@@ -25,7 +25,8 @@ def test_sphere2500_batch_reaches_ground_truth(sphere):
     values, secs = solve_lm(graph, to_values(init))
     rmse = translation_rmse(from_values(values), gt)
     dof = 6 * len(edges) - 6 * (len(init) - 1)
-    print(f"\nsphere2500 batch LM: translation RMSE {rmse:.3f} m (initial {rmse0:.2f} m), {secs:.2f} s, chi2/dof {2 * graph.error(values) / dof:.2f}")
+    print(f"\nsphere2500 batch LM: translation RMSE {rmse:.3f} m (initial {rmse0:.2f} m), {secs:.2f} s, "
+          f"chi2/dof {2 * graph.error(values) / dof:.2f}")
     assert rmse0 > 30.0
     assert rmse < 1.5 and rmse < 0.05 * rmse0
     # the file's weights are right: the optimum's chi2 per degree of freedom is ~1
@@ -42,6 +43,7 @@ def test_sphere2500_isam2_prefix_matches_batch(sphere):
     est, times = isam2_edge_by_edge(edges, BackendConfig(), n_poses=n)
     assert sorted(est) == list(range(n))
     rmse_gt, rmse_lm, rmse0 = translation_rmse(est, gt), translation_rmse(est, lm), translation_rmse(init, gt)
-    print(f"\nsphere2500[:{n}] iSAM2: RMSE vs GT {rmse_gt:.3f} m, vs batch {rmse_lm:.4f} m (initial {rmse0:.2f} m), median update {1e3 * np.median(times):.2f} ms")
+    print(f"\nsphere2500[:{n}] iSAM2: RMSE vs GT {rmse_gt:.3f} m, vs batch {rmse_lm:.4f} m (initial {rmse0:.2f} m), "
+          f"median update {1e3 * np.median(times):.2f} ms")
     assert rmse_lm < 0.05
     assert rmse_gt < 1.0 and rmse_gt < 0.1 * rmse0

@@ -394,7 +394,8 @@ def test_ctrl_c_while_the_command_line_loads_is_one_line(tmp_path, capfd, monkey
     assert rc == 130
     assert_one_line(err, "interrupted")
     # and in a fresh process, through python -m slam_lcd: the interrupt lands in an import of cli.main
-    interrupted_in_a_fresh_process(tmp_path, ["info", tmp_path / "x.mcap"], "slam_lcd.cli.util", "raise KeyboardInterrupt")
+    interrupted_in_a_fresh_process(tmp_path, ["info", tmp_path / "x.mcap"], "slam_lcd.cli.util",
+                                   "raise KeyboardInterrupt")
 
 
 def test_ctrl_c_caught_in_string_evaluated_code_still_exits_130(demo, tmp_path):

@@ -73,7 +73,8 @@ def test_gt_topic_with_a_repeated_stamp_is_accepted_with_one_warning(demo, tmp_p
 
 
 def test_interpolation_on_real_ground_truth_with_a_repeated_stamp(shared_data):
-    """The real TUM fr2/desk ground truth (a repeated stamp) interpolates; a repeated stamp counts with its first pose."""
+    """The real TUM fr2/desk ground truth (a repeated stamp) interpolates; a repeated stamp counts with its first
+    pose."""
     from slam_lcd.geometry import interpolate_poses
     from slam_lcd.io.trajectory_files import read_trajectory
 

@@ -38,7 +38,7 @@ def batch_inputs(tmp_path_factory):
     logs = root / "logs"
     logs.mkdir()
     for (name, fmt, suffix), seed in zip((("demo_mcap", "mcap", ".mcap"), ("demo_ros1", "rosbag1", ".bag"),
-                                          ("demo_ros2", "rosbag2", "")), (1, 2, 3)):
+                                          ("demo_ros2", "rosbag2", "")), (1, 2, 3), strict=True):
         make_demo_log(logs / f"{name}{suffix}", fmt, frames=30, seed=seed, width=160, height=120)
     data = (logs / "demo_ros1.bag").read_bytes()
     (logs / "corrupt.bag").write_bytes(data[: int(len(data) * 0.4)])
@@ -234,8 +234,9 @@ def test_cli_exit_status_and_real_ctrl_c(batch_inputs, tmp_path, workers):
     env = {**os.environ, "PYTHONPATH": str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", "")}
     sets = [a for s in [*LOOPY, f"features.cache_dir={cfg.features.cache_dir}"] for a in ("--set", s)]
     out = tmp_path / "out"
-    argv = [sys.executable, "-m", "slam_lcd", "batch", str(log_path(logs, "demo_mcap")), str(log_path(logs, "demo_ros1")),
-            str(log_path(logs, "demo_ros2")), "--out", str(out), "--workers", str(workers), "--no-progress", *sets]
+    argv = [sys.executable, "-m", "slam_lcd", "batch", str(log_path(logs, "demo_mcap")),
+            str(log_path(logs, "demo_ros1")), str(log_path(logs, "demo_ros2")), "--out", str(out),
+            "--workers", str(workers), "--no-progress", *sets]
     # SIG_DFL in the child, as a terminal gives it: a shell that starts the tests in the background
     # hands them SIGINT ignored, which Python would keep
     proc = subprocess.Popen(argv, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
@@ -299,7 +300,8 @@ def test_discovery_names_globs_and_ground_truth_folder(tmp_path):
         (tmp_path / rel).write_text("x")
     entries = discover_logs([tmp_path / "day1" / "log.bag", tmp_path / "day2", str(tmp_path / "day*" / "log.bag")])
     assert [(e.path.relative_to(tmp_path).as_posix(), e.name) for e in entries] == [
-        ("day1/log.bag", "day1__log"), ("day2/log.bag", "day2__log"), ("day2/other.mcap", "other"), ("day2/ros2", "ros2")]
+        ("day1/log.bag", "day1__log"), ("day2/log.bag", "day2__log"), ("day2/other.mcap", "other"),
+        ("day2/ros2", "ros2")]
     with pytest.raises(InputError, match="pattern matches 1 entries, none a log"):
         discover_logs([str(tmp_path / "day2" / "*.txt")])
     with pytest.raises(InputError, match="matches nothing"):

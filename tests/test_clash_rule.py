@@ -127,7 +127,8 @@ def test_no_command_writes_onto_an_input_or_two_outputs_on_one_path(logs, tmp_pa
     (d / "o" / "loops").mkdir()
     shutil.copy(d / "log.mcap", d / "o" / "loops" / "log.mcap")  # an input inside an output's folder
     for name in ("odometry.tum", "config.yaml", "report.md", "summary.csv", "pr.csv", "traj.tum"):
-        (d / "o" / name).write_text("1.0 0 0 0 0 0 0 1\n" if name.endswith((".tum", ".csv")) else "run:\n  plots: false\n")
+        text = "1.0 0 0 0 0 0 0 1\n" if name.endswith((".tum", ".csv")) else "run:\n  plots: false\n"
+        (d / "o" / name).write_text(text)
     cache = tmp_path / "cache"
     cache.mkdir()
     monkeypatch.setenv("SLAM_LCD_CACHE_DIR", str(cache))

@@ -16,7 +16,8 @@ ISSUE_NUMBER = re.compile(r"\b" + "iss" + r"ue\s*#?\s*\d+", re.IGNORECASE)
 def test_every_docs_page_is_at_most_250_lines():
     pages = sorted((ROOT / "docs").rglob("*.md"))
     assert len(pages) > 10
-    long = {str(p.relative_to(ROOT)): n for p in pages if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_LINES}
+    long = {str(p.relative_to(ROOT)): n for p in pages
+            if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_LINES}
     assert not long, f"pages over {MAX_LINES} lines: {long}"
 
 

@@ -94,7 +94,8 @@ def test_ate_cli_kitti_times_and_formats(tdir, tmp_path, capsys):
     rc, _, err = _run(["export", str(gt), "--to", "euroc", str(est_csv), "--times", str(times)], capsys)
     assert rc == 0, err
     rc, out, err = _run(
-        ["ate", str(gt), str(est_csv), "--ref-times", str(times), "--est-format", "euroc", "--json", str(tmp_path / "j.json")],
+        ["ate", str(gt), str(est_csv), "--ref-times", str(times), "--est-format", "euroc",
+         "--json", str(tmp_path / "j.json")],
         capsys,
     )
     assert rc == 0, err
@@ -154,7 +155,8 @@ def test_export_mcap_read_back_independently(tdir, tmp_path, capsys):
         (["ate", "{d}/fr2_desk_ORB.txt", "{d}/fr2_desk_ORB.txt", "--bogus"], "unrecognized"),
         (["ate", "{d}/V102_groundtruth.csv", "{d}/fr2_desk_ORB.txt"], "no matching stamps"),
         (["ate", "{d}/fr2_desk_ORB.txt", "{t}/bad.txt"], "line 2"),
-        (["ate", "{d}/fr2_desk_ORB.txt", "{d}/fr2_desk_ORB.txt", "--json", "{d}/fr2_desk_ORB.txt"], "overwrite the input"),
+        (["ate", "{d}/fr2_desk_ORB.txt", "{d}/fr2_desk_ORB.txt", "--json", "{d}/fr2_desk_ORB.txt"],
+         "overwrite the input"),
         (["ate", "{d}/fr2_desk_ORB.txt", "{t}/missing.mcap:/odom"], "not found"),
         (["ate", "{d}/fr2_desk_ORB.txt", "{d}/fr2_desk_ORB.txt", "--ref-format", "kitti"], "12 columns"),
         (["ate", "{d}/fr2_desk_ORB.txt", "{d}/fr2_desk_ORB.txt", "-a", "--n_to_align", "2"], "n_to_align"),

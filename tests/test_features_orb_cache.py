@@ -112,7 +112,8 @@ def test_fingerprint_ignores_device_but_not_settings(kind):
         a = random_superpoint()
         b = random_superpoint(descriptor_sampling="bicubic")
     assert a.fingerprint != b.fingerprint
-    assert a.fingerprint == (load_extractor(FeaturesConfig(kind="orb")) if kind == "orb" else random_superpoint()).fingerprint
+    fresh = load_extractor(FeaturesConfig(kind="orb")) if kind == "orb" else random_superpoint()
+    assert a.fingerprint == fresh.fingerprint
 
 
 def test_an_orb_run_does_not_import_torch(tmp_path):

@@ -44,7 +44,7 @@ def homography_pairs(shared_data):
     rng = np.random.default_rng(0)
     out = []
     for name, idx in (("tum_fr2_desk", (0, 10)), ("kitti", (0, 10))):
-        for i, img in zip(idx, frames(shared_data, name, idx)):
+        for i, img in zip(idx, frames(shared_data, name, idx), strict=True):
             h, w = img.shape
             H = random_homography(rng, w, h)
             out.append((f"{name}[{i}]", img, H, warp_image(img, H)))

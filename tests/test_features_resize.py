@@ -46,7 +46,8 @@ def test_area_interpolation_averages_blocks():
     img = np.arange(16, dtype=np.float32).reshape(4, 4)
     small = downscale(img, 2)
     assert small.shape == (2, 2)
-    np.testing.assert_allclose(small, [[img[:2, :2].mean(), img[:2, 2:].mean()], [img[2:, :2].mean(), img[2:, 2:].mean()]])
+    np.testing.assert_allclose(small, [[img[:2, :2].mean(), img[:2, 2:].mean()],
+                                       [img[2:, :2].mean(), img[2:, 2:].mean()]])
 
 
 def test_keypoints_map_pixel_centre_to_pixel_centre():
@@ -81,7 +82,8 @@ def test_feature_cache_is_keyed_on_resize_max(tmp_path):
     assert "resize_max" not in plain.identity()  # unset: existing caches keep their key
     assert small.identity()["resize_max"] == 80
     assert FeatureCache(plain, tmp_path).base != FeatureCache(small, tmp_path).base
-    orb, orb_small = load_extractor(FeaturesConfig(kind="orb")), load_extractor(FeaturesConfig(kind="orb", resize_max=80))
+    orb = load_extractor(FeaturesConfig(kind="orb"))
+    orb_small = load_extractor(FeaturesConfig(kind="orb", resize_max=80))
     assert "resize_max" not in orb.identity() and orb.fingerprint != orb_small.fingerprint
 
 

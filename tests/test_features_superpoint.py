@@ -127,7 +127,7 @@ def test_nms_keeps_only_window_maxima():
     s = torch.rand(1, 40, 50)
     keep = max_pool_nms(s, 4)
     ys, xs = torch.nonzero(keep[0], as_tuple=True)
-    for y, x in zip(ys.tolist(), xs.tolist()):
+    for y, x in zip(ys.tolist(), xs.tolist(), strict=True):
         win = s[0, max(0, y - 4) : y + 5, max(0, x - 4) : x + 5]
         assert s[0, y, x] == win.max()
     # every window maximum survives
@@ -170,7 +170,7 @@ def test_deterministic_batch_equals_single_and_input_types_agree():
     singles = [ex.extract(im) for im in imgs]
     again = [ex.extract(im) for im in imgs]
     batch = ex.extract_batch(imgs)
-    for a, b, c in zip(singles, again, batch):
+    for a, b, c in zip(singles, again, batch, strict=True):
         # the same call twice: bit-identical
         np.testing.assert_array_equal(a.keypoints, b.keypoints)
         np.testing.assert_array_equal(a.descriptors, b.descriptors)
@@ -247,7 +247,8 @@ def test_heap_holes_are_returned_once_they_grow_past_the_limit():
 
     out = subprocess.run([sys.executable, "-c", _TRIM_SCRIPT], capture_output=True, text=True, check=True)
     free, before, held, after, early, first, again = map(int, out.stdout.split())
-    print(f"\n300 MB of holes: {free} MB free in the heap; RSS {before} -> {held} (freed, kept) -> {after} MB (trimmed)")
+    print(f"\n300 MB of holes: {free} MB free in the heap; "
+          f"RSS {before} -> {held} (freed, kept) -> {after} MB (trimmed)")
     assert free >= 290 and held > before - 30  # kept resident: 'retain'
     assert early == 0 and first == 1 and again == 0  # spaced out; then only once the holes grow again
     assert after < held - 250

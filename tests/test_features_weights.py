@@ -146,7 +146,8 @@ def test_unavailable_is_its_own_error_and_only_for_a_missing_file(tmp_path, monk
     monkeypatch.setenv(ENV_URL, f"http://127.0.0.1:{free_port()}/superpoint_v1.pth")
     with pytest.raises(WeightsUnavailableError) as e:
         resolve_weights(None)  # the env var's URL is used when none is given
-    assert isinstance(e.value, WeightsDownloadError) and "127.0.0.1" in str(e.value) and "--features orb" in str(e.value)
+    assert isinstance(e.value, WeightsDownloadError)
+    assert "127.0.0.1" in str(e.value) and "--features orb" in str(e.value)
     with pytest.raises(WeightsUnavailableError):
         resolve_weights(None, allow_download=False)
     with pytest.raises(WeightsError) as e:

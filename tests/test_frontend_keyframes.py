@@ -49,8 +49,10 @@ def test_keyframes_follow_odometry_thresholds(turtlebot_odom, trans, rot):
 
 
 def test_keyframe_count_shrinks_with_looser_thresholds(turtlebot_odom):
-    tight = select_keyframes(turtlebot_odom, FrontendConfig(kf_min_translation=0.5, kf_min_rotation_deg=15, kf_max_interval_s=0))
-    loose = select_keyframes(turtlebot_odom, FrontendConfig(kf_min_translation=1.5, kf_min_rotation_deg=45, kf_max_interval_s=0))
+    tight = select_keyframes(turtlebot_odom,
+                             FrontendConfig(kf_min_translation=0.5, kf_min_rotation_deg=15, kf_max_interval_s=0))
+    loose = select_keyframes(turtlebot_odom,
+                             FrontendConfig(kf_min_translation=1.5, kf_min_rotation_deg=45, kf_max_interval_s=0))
     assert len(loose) < 0.5 * len(tight)
 
 

@@ -33,11 +33,13 @@ def demo(demo_log):
     imgs, depths, rights = {}, {}, {}
     cam = None
     with open_log(demo_log) as r:
-        for m in r.messages(["/camera/image_raw", "/camera/depth", "/camera/right/image_raw", "/camera/right/camera_info"]):
+        topics = ["/camera/image_raw", "/camera/depth", "/camera/right/image_raw", "/camera/right/camera_info"]
+        for m in r.messages(topics):
             if m.topic == "/camera/right/camera_info":
                 cam = cam or decode_camera_info(m.msg)
                 continue
-            {"/camera/image_raw": imgs, "/camera/depth": depths, "/camera/right/image_raw": rights}[m.topic][m.stamp] = decode_image(m.msg)
+            by_topic = {"/camera/image_raw": imgs, "/camera/depth": depths, "/camera/right/image_raw": rights}
+            by_topic[m.topic][m.stamp] = decode_image(m.msg)
     stamps = np.array(sorted(imgs), np.int64)
     T_bc = TfBuffer.from_log(demo_log).lookup("base_link", "camera_optical_frame", int(stamps[0]))
     gt_all = read_trajectory_from_log(demo_log, "/ground_truth/pose")
@@ -61,7 +63,7 @@ def _ate(est, ref):
 def test_vo_accuracy_on_demo_world(demo, mode):
     gt, cam, T_bc, frames = demo
     vo = RgbdOdometry(cam, FrontendConfig(), T_bc) if mode == "rgbd" else StereoOdometry(cam, FrontendConfig(), T_bc)
-    for s, (img, depth, right) in zip(gt.stamps, frames):
+    for s, (img, depth, right) in zip(gt.stamps, frames, strict=True):
         vo.process(int(s), img, depth if mode == "rgbd" else right)
     res = vo.result()
     traj = res.trajectory()
@@ -91,7 +93,7 @@ def test_vo_from_log_matches_direct_run(demo_log, demo):
     out = visual_odometry_from_log(demo_log, depth_topic="/camera/depth", max_frames=20)
     assert out.mode == "rgbd" and np.allclose(out.T_body_camera, T_bc)
     vo = RgbdOdometry(cam, FrontendConfig(), T_bc)
-    for s, (img, depth, _) in list(zip(gt.stamps, frames))[:20]:
+    for s, (img, depth, _) in list(zip(gt.stamps, frames, strict=True))[:20]:
         vo.process(int(s), img, depth)
     a, b = out.result.trajectory(), vo.result().trajectory()
     assert len(a) == 20 and np.allclose(a.poses, b.poses)
@@ -103,7 +105,7 @@ def test_blank_frames_start_a_new_segment_without_a_jump(demo):
     vo = RgbdOdometry(cam, FrontendConfig(), T_bc)
     sel = KeyframeSelector(FrontendConfig(kf_min_translation=1.0), cam, T_bc)
     statuses = []
-    for k, (s, (img, depth, _)) in enumerate(zip(gt.stamps, frames)):
+    for k, (s, (img, depth, _)) in enumerate(zip(gt.stamps, frames, strict=True)):
         if k in blank:
             img = np.zeros_like(img)
         f = vo.process(int(s), img, depth)
@@ -131,7 +133,7 @@ def test_blank_frames_start_a_new_segment_without_a_jump(demo):
 def test_short_gap_recovers_in_the_same_segment(demo):
     gt, cam, T_bc, frames = demo
     vo = RgbdOdometry(cam, FrontendConfig(), T_bc)
-    for k, (s, (img, depth, _)) in enumerate(zip(gt.stamps[:40], frames[:40])):
+    for k, (s, (img, depth, _)) in enumerate(zip(gt.stamps[:40], frames[:40], strict=True)):
         vo.process(int(s), np.zeros_like(img) if k == 20 else img, depth)
     res = vo.result()
     assert res.frames[20].status == "lost" and res.frames[21].status == "recovered"
@@ -181,7 +183,7 @@ def test_keyframes_from_image_overlap(demo):
     for thr in (0.1, 0.2):
         conf = FrontendConfig(kf_min_translation=1e9, kf_min_rotation_deg=1e9, kf_max_interval_s=0, kf_min_overlap=thr)
         sel = KeyframeSelector(conf, cam, T_bc)
-        for s, T, f in zip(gt.stamps, gt.poses, feats):
+        for s, T, f in zip(gt.stamps, gt.poses, feats, strict=True):
             was = sel.push(int(s), T, None, None, f)
             if len(sel.keyframes) > 1:
                 # the decision agrees with the overlap measured against the keyframe before it

@@ -35,7 +35,8 @@ def _raw(enc: str, payload: np.ndarray, pad: int = 0, big: bool = False):
     step = rows.shape[1] + pad
     data = np.zeros((h, step), np.uint8)
     data[:, : rows.shape[1]] = rows
-    return M.Image(header=M.header(5, "c"), height=h, width=w, encoding=enc, is_bigendian=int(big), step=step, data=data.reshape(-1))
+    return M.Image(header=M.header(5, "c"), height=h, width=w, encoding=enc, is_bigendian=int(big), step=step,
+                   data=data.reshape(-1))
 
 
 @pytest.mark.parametrize("pad", [0, 3])
@@ -82,7 +83,8 @@ def test_compressed_images():
     # image_transport's 'compressedDepth' 16UC1: 12-byte header then PNG
     depth = (RNG.random((48, 64)) * 5000).astype(np.uint16)
     ok, buf = cv2.imencode(".png", depth)
-    msg = M.CompressedImage(header=M.header(1, "c"), format="16UC1; compressedDepth png", data=np.concatenate([np.zeros(12, np.uint8), buf.reshape(-1)]))
+    msg = M.CompressedImage(header=M.header(1, "c"), format="16UC1; compressedDepth png",
+                            data=np.concatenate([np.zeros(12, np.uint8), buf.reshape(-1)]))
     np.testing.assert_array_equal(decode_compressed_image(msg), depth)
 
 
@@ -94,7 +96,8 @@ def test_image_to_gray():
 
 
 def test_camera_info_round_trip_with_stereo_baseline():
-    cam = CameraModel(752, 480, 458.6, 457.3, 367.2, 248.4, "equidistant", np.array([-0.28, 0.07, 0.0002, 0.00002]), baseline=0.11)
+    cam = CameraModel(752, 480, 458.6, 457.3, 367.2, 248.4, "equidistant", np.array([-0.28, 0.07, 0.0002, 0.00002]),
+                      baseline=0.11)
     got = decode_camera_info(M.camera_info_msg(cam, 1, "cam1"))
     assert (got.width, got.height, got.fx, got.fy, got.cx, got.cy) == (752, 480, 458.6, 457.3, 367.2, 248.4)
     assert got.distortion_model == "equidistant" and got.baseline == pytest.approx(0.11)

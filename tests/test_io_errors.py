@@ -42,16 +42,17 @@ def _one_line_error(capsys, argv):
 
 
 def test_truncated_mcap_recovers_with_one_warning(truncated, shared_data, capsys, caplog):
+    from mcap.exceptions import EndOfFile, McapError
     from mcap.reader import make_reader
     from mcap.stream_reader import StreamReader
 
     # the plain mcap library gives up on the cut chunk: it reads no message at all
     n_plain = 0
-    with open(truncated, "rb") as fh, pytest.raises(Exception):
+    with open(truncated, "rb") as fh, pytest.raises(EndOfFile):
         for rec in StreamReader(fh).records:
             n_plain += type(rec).__name__ == "Message"
     assert n_plain == 0
-    with open(truncated, "rb") as fh, pytest.raises(Exception):
+    with open(truncated, "rb") as fh, pytest.raises(McapError):
         make_reader(fh).get_summary()
     # slam-lcd recovers the messages in the readable half of the chunk
     with caplog.at_level(logging.WARNING, logger="slam_lcd"):
@@ -83,7 +84,8 @@ def test_truncated_mcap_cli_stderr_is_one_warning_line(truncated):
     import subprocess
     import sys
 
-    p = subprocess.run([sys.executable, "-m", "slam_lcd", "info", str(truncated)], capture_output=True, text=True, timeout=120)
+    p = subprocess.run([sys.executable, "-m", "slam_lcd", "info", str(truncated)], capture_output=True, text=True,
+                       timeout=120)
     assert p.returncode == 0, p.stderr
     err = [ln for ln in p.stderr.splitlines() if ln.strip()]
     assert len(err) == 1, p.stderr

@@ -40,11 +40,11 @@ def test_batched_tq_refuses_what_the_single_one_refuses():
 def test_batched_messages_equal_single_ones():
     Ts = _poses(12)
     stamps = np.arange(12, dtype=np.int64) * 10**8 + 5
-    for a, (T, s) in zip(M.pose_stamped_msgs(Ts, stamps, "map"), zip(Ts, stamps.tolist())):
+    for a, (T, s) in zip(M.pose_stamped_msgs(Ts, stamps, "map"), zip(Ts, stamps.tolist(), strict=True), strict=True):
         assert a == M.pose_stamped_msg(T, s, "map")
-    for a, (T, s) in zip(M.tf_messages(Ts, stamps, "map", "odom"), zip(Ts, stamps.tolist())):
+    for a, (T, s) in zip(M.tf_messages(Ts, stamps, "map", "odom"), zip(Ts, stamps.tolist(), strict=True), strict=True):
         assert a == M.tf_message([(T, s, "map", "odom")])
     traj = Trajectory(stamps, Ts)
     paths = M.growing_path_msgs(traj, [1, 5, 12], "map")
-    for e, p in zip([1, 5, 12], paths):
+    for e, p in zip([1, 5, 12], paths, strict=True):
         assert p == M.path_msg(Trajectory(stamps[:e], Ts[:e]), "map")

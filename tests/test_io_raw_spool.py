@@ -79,7 +79,8 @@ def test_corrected_mcap_from_the_spool_equals_the_copy_read_from_the_log(report_
                             kf_corrected=kf, loops=[], log_frames=frames, run_conf=cfg.run, copy_from=log,
                             copy_topics=copy, spooled=spooled)
         with open(tmp_path / name, "rb") as fh:
-            return [(c.topic, m.log_time, bytes(m.data)) for _, c, m in make_reader(fh).iter_messages(log_time_order=True)]
+            return [(c.topic, m.log_time, bytes(m.data))
+                    for _, c, m in make_reader(fh).iter_messages(log_time_order=True)]
 
     spool.finish(complete=True)
     from_log, from_spool = write("log.mcap", None), write("spool.mcap", spool)

@@ -2,6 +2,7 @@
 independently (plain rosbags for ROS1/rosbag2, the mcap library + mcap_ros2 decoder for MCAP)."""
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 
 import numpy as np
@@ -65,7 +66,7 @@ def test_ros1_bag_is_time_ordered_across_topics(bags):
         times = [m.log_time for m in r.raw_messages()]
         assert len(times) == r.message_count == 26566
         assert r.start_ns == times[0] and r.end_ns == times[-1]
-    assert all(a <= b for a, b in zip(times, times[1:]))
+    assert all(a <= b for a, b in itertools.pairwise(times))
 
 
 def test_mcap_counts_stamps_and_odometry_against_mcap_library(bags):
@@ -188,7 +189,7 @@ def test_tf_dynamic_chain_interpolates(bags):
     ob = sorted(dynamic[("odom", "base_link")], key=lambda x: x[0])
     mo_st = np.array([s for s, _ in mo])
     # an odom sample strictly between two distinct map->odom samples, in the middle of the log
-    for s, T_ob in ob[len(ob) // 2 :]:
+    for s, T_ob in ob[len(ob) // 2 :]:  # noqa: B007  T_ob is the sample found, used after the loop
         i = int(np.searchsorted(mo_st, s))
         if 0 < i < len(mo) and mo_st[i - 1] < s < mo_st[i]:
             break

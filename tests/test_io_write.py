@@ -118,7 +118,8 @@ def test_round_trip_slam_lcd_and_rosbags(tmp_path, fmt, name):
     rng = np.random.default_rng(0)
     with open_log(path) as r:
         assert r.format == fmt
-        assert {k: v.count for k, v in r.topics.items()} == {t: sum(1 for x in items if x[0] == t) for t in {x[0] for x in items}}
+        assert {k: v.count for k, v in r.topics.items()} == {t: sum(1 for x in items if x[0] == t)
+                                                              for t in {x[0] for x in items}}
         msgs = list(r.messages())
     assert [m.log_time for m in msgs] == sorted(m.log_time for m in msgs)
     by = {}
@@ -162,7 +163,8 @@ def test_mcap_is_readable_by_mcap_ros2_decoder(tmp_path):
 
 @pytest.mark.parametrize(
     "fmt,name,storage",
-    [("mcap", "a.mcap", "mcap"), ("rosbag2", "a_bag2", "mcap"), ("rosbag2", "a_bag2", "sqlite3"), ("rosbag1", "a.bag", "mcap")],
+    [("mcap", "a.mcap", "mcap"), ("rosbag2", "a_bag2", "mcap"), ("rosbag2", "a_bag2", "sqlite3"),
+     ("rosbag1", "a.bag", "mcap")],
 )
 def test_writers_are_deterministic(tmp_path, fmt, name, storage):
     items = _content(2)
@@ -210,13 +212,15 @@ def test_failed_write_leaves_nothing_and_input_is_protected(tmp_path, shared_dat
         assert r.topics["/odom"].count == 2
 
 
-@pytest.mark.parametrize("src_name,fmt,name", [("nav2_turtlebot.mcap", "rosbag1", "o.bag"), ("tf_example.bag", "mcap", "o.mcap")])
+@pytest.mark.parametrize("src_name,fmt,name",
+                         [("nav2_turtlebot.mcap", "rosbag1", "o.bag"), ("tf_example.bag", "mcap", "o.mcap")])
 def test_copy_topics_between_ros1_and_ros2(tmp_path, shared_data, src_name, fmt, name):
     src = shared_data / "bags" / src_name
     with open_log(src) as r, open_writer(tmp_path / name, fmt) as w:
         counts = copy_topics(r, w, ["/tf", "/tf_static"])
     with open_log(src) as a, open_log(tmp_path / name) as b:
-        assert {k: v.count for k, v in b.topics.items()} == counts == {t: a.topics[t].count for t in ("/tf", "/tf_static")}
+        assert {k: v.count for k, v in b.topics.items()} == counts == {t: a.topics[t].count
+                                                                       for t in ("/tf", "/tf_static")}
         ma, mb = list(a.messages("/tf")), list(b.messages("/tf"))
     assert [m.log_time for m in ma] == [m.log_time for m in mb]
     assert [m.stamp for m in ma] == [m.stamp for m in mb]
@@ -230,7 +234,8 @@ def test_write_trajectory_log_with_copied_topics(tmp_path, shared_data):
     odo = read_trajectory_from_log(src, "/odom")
     traj = Trajectory(odo.stamps[::10], odo.poses[::10])
     out = tmp_path / "corrected.mcap"
-    counts = write_trajectory_log(out, traj, copy_from=src, copy_topics=["/odom", "/tf_static"], child_frame_id="base_corrected")
+    counts = write_trajectory_log(out, traj, copy_from=src, copy_topics=["/odom", "/tf_static"],
+                                  child_frame_id="base_corrected")
     n = len(traj)
     assert counts == {"/slam_lcd/corrected": n, "/tf": n, "/slam_lcd/corrected/path": 1, "/odom": 2639, "/tf_static": 1}
     back = read_trajectory_from_log(out, "/slam_lcd/corrected")

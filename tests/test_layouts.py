@@ -52,7 +52,7 @@ def test_layout_is_read_by_its_preset(layout, layout_logs, tmp_path, monkeypatch
 
     calls = []
     real_sgbm = lcd_geometry.dense_disparity
-    monkeypatch.setattr(lcd_geometry, "dense_disparity", lambda l, r: calls.append(1) or real_sgbm(l, r))
+    monkeypatch.setattr(lcd_geometry, "dense_disparity", lambda left, right: calls.append(1) or real_sgbm(left, right))
     cfg = load_config(preset, ["features.kind=orb", "features.feature_cache=false", "run.plots=false",
                                "run.loop_pictures=false"])
     calib = [info.calibration_path] if layout == "euroc" else None

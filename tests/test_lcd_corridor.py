@@ -98,7 +98,8 @@ def test_temporal_consistency_filters_single_detections(corridor, superpoint_wei
 
 
 def test_first_accepted_mode_verifies_fewer_candidates_and_records_the_rest(corridor, superpoint_weights):
-    """lcd.verify_until='first_accepted' stops after the first accepted candidate; the others are recorded as skipped."""
+    """lcd.verify_until='first_accepted' stops after the first accepted candidate; the others are recorded as
+    skipped."""
     feats = corridor_features(str(corridor), "superpoint", str(superpoint_weights))
     counts = {}
     for mode in ("all", "first_accepted"):

@@ -43,8 +43,8 @@ def test_wide_baseline_loops(wide_run, capsys):
     with capsys.disabled():
         print(f"\n[lcd demo wide] keyframes {len(traj)}, GT revisit keyframes {len(queries)} ({len(wide)} with a "
               f">= 20 deg heading difference), accepted loops {len(det.closures)}, revisit keyframes with a loop "
-              f"{len(found)} ({recall:.0%}; wide: {len(found & wide)}), pose error max {errs[:, 0].max() * 100:.2f} cm / "
-              f"{errs[:, 1].max():.3f} deg")
+              f"{len(found)} ({recall:.0%}; wide: {len(found & wide)}), "
+              f"pose error max {errs[:, 0].max() * 100:.2f} cm / {errs[:, 1].max():.3f} deg")
     # measured 80% (40 / 50): 30 at the full 40 PnP inliers, 10 more on the tight-pose rule, each within
     # the odometry's drift budget (1-2.3 m, 9-19 deg off after ~40 m; docs/lcd_pose.md); the bar: 80 %
     tight = sum(1 for c in det.closures if c.evidence.get("pose_tight"))

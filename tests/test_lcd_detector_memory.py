@@ -43,7 +43,10 @@ def test_float16_descriptors_keep_the_detections(sp_features):
     full, rows_full = _run(sp_features, descriptor_storage="memory", descriptor_dtype="float32")
     assert full.memory_bytes()["descriptors_resident"] == 2 * half.memory_bytes()["descriptors_resident"]
     modes = ("ransac", "graph", "graph+ransac")
-    decisions = lambda det: [(r.query_id, r.match_id, r.accepted, *(r.passes(m) for m in modes)) for r in det.records]
+
+    def decisions(det):
+        return [(r.query_id, r.match_id, r.accepted, *(r.passes(m) for m in modes)) for r in det.records]
+
     assert decisions(half) == decisions(full)
 
 

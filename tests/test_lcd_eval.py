@@ -30,7 +30,7 @@ def test_gt_formats_agree(tmp_path, shared_data):
     np.save(tmp_path / "gt.npy", np.tril(bmp))
     assert np.array_equal(load_loop_matrix(tmp_path / "gt.npy", names), bmp)
     i, j = np.nonzero(np.tril(bmp))
-    rows = ["query,match"] + [f"{a + 1},{b + 1}" for a, b in zip(i, j)]  # file stems
+    rows = ["query,match"] + [f"{a + 1},{b + 1}" for a, b in zip(i, j, strict=True)]  # file stems
     (tmp_path / "gt.csv").write_text("\n".join(rows))
     assert np.array_equal(load_loop_matrix(tmp_path / "gt.csv", names), bmp)
     with pytest.raises(InputError, match="84x84 but there are 10 images"):
@@ -123,8 +123,8 @@ def small_corridor(tmp_path, shared_data):
 def test_cli_eval_lcd_writes_outputs(small_corridor, tmp_path, capsys):
     folder, gt = small_corridor
     out = tmp_path / "out"
-    rc = main(["eval-lcd", str(folder), "--gt", str(gt), "--features", "orb", "--exclude-recent", "5", "--no-feature-cache",
-               "--out", str(out)])
+    rc = main(["eval-lcd", str(folder), "--gt", str(gt), "--features", "orb", "--exclude-recent", "5",
+               "--no-feature-cache", "--out", str(out)])
     assert rc == 0
     text = capsys.readouterr().out
     assert "BoW+graph+ransac" in text

@@ -18,7 +18,9 @@ def _project(T_world_cam, X):
     return uv, P[:, 2]
 
 
-def _rgbd_pair(seed=0, noise_px=0.3, T_body_camera=np.eye(4)):
+def _rgbd_pair(seed=0, noise_px=0.3, T_body_camera=None):
+    if T_body_camera is None:
+        T_body_camera = np.eye(4)
     rng = np.random.default_rng(seed)
     T_wb_m = np.eye(4)
     T_wb_q = T_body_camera @ se3_exp(np.array([0.02, -0.1, 0.03, 0.4, -0.1, 0.3])) @ inv(T_body_camera)
@@ -137,7 +139,8 @@ def test_few_inliers_accepted_only_when_the_pose_is_tight():
 
     kf_q, kf_m, matches, T_gt = _rgbd_pair(seed=3)
     few = matches[:20]
-    assert LcdConfig().pnp_min_inliers_tight == 15  # on by default, with the odometry check (test_lcd_odometry_check.py)
+    # on by default, with the odometry check (test_lcd_odometry_check.py)
+    assert LcdConfig().pnp_min_inliers_tight == 15
     conf = LcdConfig(pnp_min_inliers_tight=15)
     assert conf.pnp_min_inliers == 40
     v = estimate_loop_pose(kf_q, kf_m, few, conf)
@@ -149,7 +152,8 @@ def test_few_inliers_accepted_only_when_the_pose_is_tight():
     off = estimate_loop_pose(kf_q, kf_m, few, LcdConfig(pnp_min_inliers_tight=0))
     assert not off.ok and off.reason == "too_few_3d_points"
     # a pose that the same points determine less well than the bound: rejected as loose
-    strict = estimate_loop_pose(kf_q, kf_m, few, LcdConfig(pnp_min_inliers_tight=15, pnp_tight_max_sigma_m=0.1 * sigma_t))
+    strict = estimate_loop_pose(kf_q, kf_m, few,
+                                LcdConfig(pnp_min_inliers_tight=15, pnp_tight_max_sigma_m=0.1 * sigma_t))
     assert not strict.ok and strict.reason == "few_inliers_loose_pose"
     # 20 inliers among 40 points with depth (the other 20 matched wrongly): share 0.5 < 0.8
     rng = np.random.default_rng(0)

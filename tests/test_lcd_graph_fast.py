@@ -43,7 +43,7 @@ def _point_sets(rng, n):
 def test_crossings_equal_brute_force_on_random_and_degenerate_sets():
     rng = np.random.default_rng(7)
     checked = 0
-    for trial in range(40):
+    for _ in range(40):
         n = int(rng.integers(3, 160))
         for pts in _point_sets(rng, n):
             edges = rng.integers(0, len(pts), (int(rng.integers(1, 3 * n)), 2))

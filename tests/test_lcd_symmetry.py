@@ -33,8 +33,8 @@ def test_symmetric_matching_gives_the_same_pairs_and_ratios_both_ways(binary):
     m12, dist12, r12 = mutual_nn_match_symmetric(d1, d2)
     m21, dist21, r21 = mutual_nn_match_symmetric(d2, d1)
     assert len(m12) > 50
-    a = {tuple(p): (d, r) for p, d, r in zip(m12.tolist(), dist12, r12)}
-    b = {(j, i): (d, r) for (i, j), d, r in zip(m21.tolist(), dist21, r21)}
+    a = {tuple(p): (d, r) for p, d, r in zip(m12.tolist(), dist12, r12, strict=True)}
+    b = {(j, i): (d, r) for (i, j), d, r in zip(m21.tolist(), dist21, r21, strict=True)}
     assert a.keys() == b.keys()
     for k in a:
         assert a[k][0] == pytest.approx(b[k][0], abs=1e-5) and a[k][1] == pytest.approx(b[k][1], abs=1e-5)

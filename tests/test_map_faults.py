@@ -573,8 +573,8 @@ def test_orb_map_refused_by_a_superpoint_run(world, mapdir, tmp_path, capfd, sup
 def test_superpoint_map_refused_by_an_orb_run(world, mapdir, tmp_path, capfd, command):
     """A SuperPoint map (its manifest says so) opened by an ORB run: refused, nothing modified."""
     _as_superpoint_map(mapdir, "ab" * 32)
-    _refused(world, mapdir, command, [], mapdir / "map.json", "the map holds superpoint features, this run extracts orb",
-             tmp_path, capfd)
+    _refused(world, mapdir, command, [], mapdir / "map.json",
+             "the map holds superpoint features, this run extracts orb", tmp_path, capfd)
 
 
 @pytest.mark.parametrize("command", ["run", "localize"])

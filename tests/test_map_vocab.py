@@ -36,7 +36,7 @@ def _kf(i, d):
 def _save_map(root, vconf, centres="int8", n=40):
     det = LoopDetector(vocab_conf=vconf)
     kfs = [_kf(i, d) for i, d in enumerate(_stream(n))]
-    for kf, d in zip(kfs, _stream(n)):
+    for kf, d in zip(kfs, _stream(n), strict=True):
         det.remember(kf, d, None, "none")
     m = Map.open(root, features=FEATURES, write=True, create=True, conf=MapConfig(visual_links=False,
                                                                                   vocab_centres=centres))

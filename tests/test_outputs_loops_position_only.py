@@ -23,7 +23,8 @@ def _record(q, m, T_match_query):
 
 def test_position_only_ground_truth_gives_exact_distance_and_translation_error():
     stamps = np.arange(6, dtype=np.int64) * 1_000_000_000
-    est = [_pose(0, 0, 0), _pose(40, 3, 0.5), _pose(95, 4, 3), _pose(180, 1, 4), _pose(260, -0.5, 1.5), _pose(10, 0.3, 0.2)]
+    est = [_pose(0, 0, 0), _pose(40, 3, 0.5), _pose(95, 4, 3), _pose(180, 1, 4), _pose(260, -0.5, 1.5),
+           _pose(10, 0.3, 0.2)]
     T_station = _pose(30, 4.0, -2.5)  # the Leica frame: the estimate's world turned and shifted
     gt_positions = [T_station @ T for T in est]
     gt = Trajectory(stamps, np.array([make_T(np.eye(3), T[:3, 3]) for T in gt_positions]))  # rotations unknown

@@ -58,7 +58,7 @@ def test_plugin_reports_every_loop_once_with_lookahead():
         cfg = load_config("default", ["features.kind=orb", f"run.extract_ahead={ahead}"])
         seen = []
         pipe = Pipeline(cfg, camera=cam, T_body_camera=T_bc, extractor=load_extractor(cfg.features),
-                        on_loop=lambda c, r: seen.append(c))
+                        on_loop=lambda c, r, seen=seen: seen.append(c))
         returned = []
         for k, (img, depth) in enumerate(frames):
             cov = np.diag([1e-4] * 3 + [1e-3] * 3) if k else None

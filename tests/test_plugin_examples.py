@@ -127,7 +127,7 @@ def test_detector_takes_user_keyframes_with_their_own_ids(user_run, rgbd_detecto
     own = [(index[c.query_id], index[c.match_id]) for c in r.closures]
     assert own == plain and len(own) >= 20
     assert all(np.allclose(x.T_match_query, y.T_match_query) and np.allclose(x.information, y.information)
-               for x, y in zip(rgbd_detector.closures, r.closures))
+               for x, y in zip(rgbd_detector.closures, r.closures, strict=True))
     kf = demo_keyframes_rgbd.keyframes[0]
     det = LoopDetector()
     with pytest.raises(InputError, match="not an integer"):

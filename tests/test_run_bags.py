@@ -1,8 +1,8 @@
 """`slam-lcd run` on logs laid out like the bags users have: a calibration file instead of (or over)
 CameraInfo, ground truth of every message type (and as a TF chain), no odometry.
 
-One tiny demo log (30 frames, 320x240: the VO tracks from that size on, RGB-D + stereo) and variants of it copied with topics
-dropped or ground truth rewritten; ORB features keep each run at a few seconds.
+One tiny demo log (30 frames, 320x240: the VO tracks from that size on, RGB-D + stereo) and variants of it copied
+with topics dropped or ground truth rewritten; ORB features keep each run at a few seconds.
 """
 from __future__ import annotations
 
@@ -131,8 +131,9 @@ def _writer_of(kind, gt):
 
     def write(_r, w):
         if kind == "tf":
-            w.write("/tf_static", M.tf_message([(T_WORLD_MOCAP, int(gt.stamps[0]), "world", "mocap")]), int(gt.stamps[0]))
-        for s, T in zip(gt.stamps.tolist(), gt.poses):
+            w.write("/tf_static", M.tf_message([(T_WORLD_MOCAP, int(gt.stamps[0]), "world", "mocap")]),
+                    int(gt.stamps[0]))
+        for s, T in zip(gt.stamps.tolist(), gt.poses, strict=True):
             if kind == "PoseWithCovarianceStamped":
                 msg, topic = M.pose_with_covariance_stamped_msg(T, np.eye(6) * 1e-4, s, "world"), "/gt"
             elif kind == "Odometry":
@@ -265,7 +266,7 @@ def _raw_stereo(tiny_log, tmp_path):
         return "\n".join("  - [" + ", ".join(f"{x:.12f}" for x in row) + "]" for row in T)
 
     cams = []
-    for k, (topic, (R, D)) in enumerate(rigs.items()):
+    for k, (topic, (_R, D)) in enumerate(rigs.items()):
         cams.append(f"""cam{k}:
   T_cam_imu:
 {block(inv(T_b_raw[topic]))}
@@ -333,7 +334,8 @@ def test_stereo_log_with_odometry_gives_the_loop_detector_the_pair(tiny_log, tmp
     log = _variant(tiny_log, tmp_path / "stereo_odom.mcap", drop=("/camera/depth",))
     calls = []
     real = lcd_geometry.dense_disparity
-    monkeypatch.setattr(lcd_geometry, "dense_disparity", lambda l, r: calls.append(r.shape) or real(l, r))
+    monkeypatch.setattr(lcd_geometry, "dense_disparity",
+                        lambda left, right: calls.append(right.shape) or real(left, right))
     res = run_log(log, tmp_path / "out", _orb_config(), progress=False, write_mcap=False)
     assert res.topics["odom"] == "/odom" and res.topics["right"] == "/camera/right/image_raw"
     assert len(calls) == res.n_keyframes >= 2

@@ -115,7 +115,8 @@ def test_euroc_sensor_yaml_pair(tmp_path):
     cam = calib.cameras[0].camera
     assert (cam.width, cam.height) == (752, 480)
     assert (cam.fx, cam.fy, cam.cx, cam.cy) == (458.654, 457.296, 367.215, 248.375)
-    assert cam.distortion_model == "plumb_bob" and np.allclose(cam.D, [-0.28340811, 0.07395907, 0.00019359, 1.76187114e-05])
+    assert cam.distortion_model == "plumb_bob"
+    assert np.allclose(cam.D, [-0.28340811, 0.07395907, 0.00019359, 1.76187114e-05])
     assert np.allclose(calib.cameras[0].T_body_camera, _euroc_T(EUROC_CAM0), atol=1e-6)
     # the EuRoC stereo baseline is about 11 cm
     assert 0.105 < cam.baseline < 0.115
@@ -133,7 +134,8 @@ def test_kalibr_camchain_matches_euroc_files(tmp_path):
     assert np.allclose(c1.T_body_camera, _euroc_T(EUROC_CAM1), atol=1e-6)
     partner, T_c1_c0 = calib.stereo_partner(c0)
     assert partner is c1 and np.allclose(T_c1_c0, inv(_euroc_T(EUROC_CAM1)) @ _euroc_T(EUROC_CAM0), atol=1e-6)
-    euroc = load_calibration([_write(tmp_path, "a/sensor.yaml", EUROC_CAM0), _write(tmp_path, "b/sensor.yaml", EUROC_CAM1)])
+    euroc = load_calibration([_write(tmp_path, "a/sensor.yaml", EUROC_CAM0),
+                              _write(tmp_path, "b/sensor.yaml", EUROC_CAM1)])
     assert c0.camera.baseline == pytest.approx(euroc.cameras[0].camera.baseline, abs=1e-6)
 
 
@@ -175,7 +177,8 @@ BAD_EUROC = {
 
 BAD_KALIBR = {
     "cam1 without T_cn_cnm1": (lambda t: t.replace("  T_cn_cnm1:", "  T_cx:"), "cam1.T_cn_cnm1 is missing"),
-    "omni camera": (lambda t: t.replace("camera_model: pinhole", "camera_model: omni", 1), "cam0.camera_model is 'omni'"),
+    "omni camera": (lambda t: t.replace("camera_model: pinhole", "camera_model: omni", 1),
+                    "cam0.camera_model is 'omni'"),
     "no resolution": (lambda t: t.replace("  resolution: [752, 480]\n  rostopic: /cam1", "  rostopic: /cam1"),
                       "cam1.resolution is missing"),
     "zero focal": (lambda t: t.replace("[458.654, 457.296", "[0.0, 457.296"), "cam0.intrinsics has a non-positive"),

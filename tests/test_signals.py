@@ -140,9 +140,10 @@ def test_a_later_run_removes_stale_staging_folders_of_ours_only(small_log, tmp_p
     gone.wait()
     out = tmp_path / "run"
     out.mkdir()
-    stale = [out / f"{STAGING_PREFIX}{_host()}.{gone.pid}.abc123", tmp_path / f"{STAGING_PREFIX}{_host()}.{gone.pid}.x1"]
-    kept = [out / f"{STAGING_PREFIX}{_host()}.{os.getpid()}.live12", out / f"{STAGING_PREFIX}otherhost.{gone.pid}.far12",
-            out / ".my-own-folder"]
+    stale = [out / f"{STAGING_PREFIX}{_host()}.{gone.pid}.abc123",
+             tmp_path / f"{STAGING_PREFIX}{_host()}.{gone.pid}.x1"]
+    kept = [out / f"{STAGING_PREFIX}{_host()}.{os.getpid()}.live12",
+            out / f"{STAGING_PREFIX}otherhost.{gone.pid}.far12", out / ".my-own-folder"]
     for d in stale + kept:
         d.mkdir()
         (d / "corrected.tum").write_text("1 0 0 0 0 0 0 1\n")

@@ -63,7 +63,7 @@ def test_tum_layout_depth_is_the_kinect_model(tum_logs):
     assert tum_logs["noisy"].depth_model == KINECT_V1 and tum_logs["exact"].depth_model is None
     assert "Kinect v1" in tum_logs["noisy"].summary()
     assert len(noisy) == len(exact) == 6
-    assert all(a.dtype == np.uint16 and np.array_equal(a, b) for a, b in zip(noisy, again))  # seeded
+    assert all(a.dtype == np.uint16 and np.array_equal(a, b) for a, b in zip(noisy, again, strict=True))  # seeded
     assert not np.array_equal(noisy[0], noisy[1])  # the noise differs from frame to frame
     zt = np.concatenate([e.ravel() for e in exact]).astype(np.float64) / 1000.0
     zn = np.concatenate([n.ravel() for n in noisy]).astype(np.float64) / 1000.0

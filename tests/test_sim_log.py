@@ -27,7 +27,8 @@ def _digest(path: Path) -> str:
     return h.hexdigest()
 
 
-@pytest.mark.parametrize("fmt,name", [("mcap", "demo.mcap"), ("rosbag2", "demo_bag"), ("rosbag1", "demo.bag"), ("folder", "demo_dir")])
+@pytest.mark.parametrize("fmt,name", [("mcap", "demo.mcap"), ("rosbag2", "demo_bag"), ("rosbag1", "demo.bag"),
+                                      ("folder", "demo_dir")])
 def test_same_seed_gives_identical_bytes(tmp_path, fmt, name):
     a = make_demo_log(tmp_path / "a" / name, fmt=fmt, seed=1, stereo=True, **SMALL)
     b = make_demo_log(tmp_path / "b" / name, fmt=fmt, seed=1, stereo=True, **SMALL)

@@ -92,7 +92,10 @@ def test_sampled_world_points_reproject_within_half_a_pixel(world):
     X = np.concatenate(pts)
     uv_a, z_a = _project(cam, T_a, X)
     uv_b, z_b = _project(cam, T_b, X)
-    inside = lambda uv, z: (z > 0.1) & (uv[:, 0] > 2) & (uv[:, 0] < cam.width - 3) & (uv[:, 1] > 2) & (uv[:, 1] < cam.height - 3)
+
+    def inside(uv, z):
+        return (z > 0.1) & (uv[:, 0] > 2) & (uv[:, 0] < cam.width - 3) & (uv[:, 1] > 2) & (uv[:, 1] < cam.height - 3)
+
     keep = inside(uv_a, z_a) & inside(uv_b, z_b)
     X, uv_a, z_a, uv_b, z_b = X[keep], uv_a[keep], z_a[keep], uv_b[keep], z_b[keep]
     # visible in both views: the rendered depth around the projection is the point's own depth
@@ -113,11 +116,13 @@ def test_sampled_world_points_reproject_within_half_a_pixel(world):
     # (lightly blurred: the two views resample the texture at different scales and mip levels)
     ia = _bilinear(cv2.GaussianBlur(img_a, (0, 0), 1.0).astype(np.float64), uv_a)
     ib = _bilinear(cv2.GaussianBlur(img_b, (0, 0), 1.0).astype(np.float64), uv_b)
-    print("photometric consistency: corr %.3f, median |diff| %.2f" % (np.corrcoef(ia, ib)[0, 1], np.median(np.abs(ia - ib))))
+    print(f"photometric consistency: corr {np.corrcoef(ia, ib)[0, 1]:.3f}, "
+          f"median |diff| {np.median(np.abs(ia - ib)):.2f}")
     assert np.corrcoef(ia, ib)[0, 1] > 0.9
     assert np.median(np.abs(ia - ib)) < 8.0
     # control: a 4-pixel misregistration is clearly visible to this check
-    ic = _bilinear(cv2.GaussianBlur(img_b, (0, 0), 1.0).astype(np.float64), np.clip(uv_b + (4.0, 0.0), 0, cam.width - 2))
+    ic = _bilinear(cv2.GaussianBlur(img_b, (0, 0), 1.0).astype(np.float64),
+                   np.clip(uv_b + (4.0, 0.0), 0, cam.width - 2))
     assert np.corrcoef(ia, ic)[0, 1] < np.corrcoef(ia, ib)[0, 1] - 0.1
 
 

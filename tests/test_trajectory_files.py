@@ -174,7 +174,8 @@ def test_round_trip_random_poses(tmp_path, fmt):
 
 @pytest.mark.parametrize(
     "name, fmt",
-    [("fr2_desk_ORB.txt", "tum"), ("V102_groundtruth.csv", "euroc"), ("KITTI_00_ORB.txt", "kitti"), ("V102.txt", "euroc")],
+    [("fr2_desk_ORB.txt", "tum"), ("V102_groundtruth.csv", "euroc"), ("KITTI_00_ORB.txt", "kitti"),
+     ("V102.txt", "euroc")],
 )
 def test_round_trip_real_files_through_every_format(traj_dir, tmp_path, name, fmt):
     src = read_trajectory(traj_dir / name)

@@ -49,7 +49,7 @@ def test_incremental_words_follow_feature_tracks():
     # one word per landmark track: matched features joined their match's word, the others founded new ones
     assert words.n_words == n_landmarks
     lm_to_word = {}
-    for lm, w in zip(np.concatenate(ids), np.concatenate(assigned)):
+    for lm, w in zip(np.concatenate(ids), np.concatenate(assigned), strict=True):
         assert lm_to_word.setdefault(lm, w) == w
     assert len(set(lm_to_word.values())) == n_landmarks
     # per-word counts = how often the landmark was seen; centres are unit running means
@@ -57,7 +57,7 @@ def test_incremental_words_follow_feature_tracks():
     assert np.array_equal(words.counts[[lm_to_word[k] for k in range(n_landmarks)]], seen)
     assert np.allclose(np.linalg.norm(words.centres, axis=1), 1.0, atol=1e-5)
     first = [w for lm, w in lm_to_word.items() if seen[lm] > 3][0]
-    members = np.concatenate([d[a == first] for d, a in zip(images, assigned)])
+    members = np.concatenate([d[a == first] for d, a in zip(images, assigned, strict=True)])
     assert np.allclose(words.centres[first], unit(members.mean(0, keepdims=True))[0], atol=1e-5)
 
 

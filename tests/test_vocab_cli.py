@@ -55,7 +55,8 @@ def test_train_from_mcap_log(corridor_dir, tmp_path):
     assert vocab.n_images == 8
     # same frames from the folder give the same words
     out_dir = tmp_path / "from_dir.npz"
-    assert main(["vocab", "train", str(corridor_dir), "--out", str(out_dir), "--features", "orb", "--max-images", "8"]) == 0
+    assert main(["vocab", "train", str(corridor_dir), "--out", str(out_dir), "--features", "orb",
+                 "--max-images", "8"]) == 0
     other = Vocabulary.load(out_dir)
     assert len(other) == len(vocab)
     x = np.concatenate([other.tree.words[:50]])
@@ -71,5 +72,6 @@ def test_errors_are_one_line(tmp_path, capsys, corridor_dir):
     assert main(["vocab", "info", str(tmp_path / "missing.npz")]) == 2
     assert "not found" in capsys.readouterr().err
     assert main(["vocab", "train", str(tmp_path / "nothing"), "--out", str(tmp_path / "v.npz")]) == 2
-    assert main(["vocab", "train", str(corridor_dir / "1.jpg"), "--out", str(tmp_path / "v.npz"), "--features", "orb"]) == 2
+    assert main(["vocab", "train", str(corridor_dir / "1.jpg"), "--out", str(tmp_path / "v.npz"),
+                 "--features", "orb"]) == 2
     assert "--image-topic" in capsys.readouterr().err

@@ -86,7 +86,8 @@ def compare(descs, gt, name, online=True):
     if online:
         rows["online (no vocab)"] = retrieval(None, descs, gt) + (None, None, None, None)
     print(f"\n[vocab] corridor, {name} features, trained on frames 1-{N_TRAIN}, 44 queries, exclude 20 recent")
-    print(f"[vocab] {'vocabulary':22s} {'top-1':>6s} {'top-5':>6s} {'words':>6s} {'depth':>5s} {'greedy=exh':>10s} {'train s':>7s}")
+    print(f"[vocab] {'vocabulary':22s} {'top-1':>6s} {'top-5':>6s} {'words':>6s} {'depth':>5s} "
+          f"{'greedy=exh':>10s} {'train s':>7s}")
     for label, (t1, t5, n, depth, agr, t) in rows.items():
         extra = f"{n:6d} {depth:5d} {agr:10.3f} {t:7.1f}" if n is not None else f"{'':6s} {'':5s} {'':10s} {'':7s}"
         print(f"[vocab] {label:22s} {t1:3d}/44 {t5:3d}/44 {extra}")

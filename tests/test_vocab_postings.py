@@ -20,7 +20,7 @@ class ListPostings:
         self.lists: dict[int, list[tuple[int, float]]] = {}
 
     def append(self, kf_index, words, values):
-        for w, v in zip(words.tolist(), values.tolist()):
+        for w, v in zip(words.tolist(), values.tolist(), strict=True):
             self.lists.setdefault(w, []).append((kf_index, v))
 
     def gather(self, words):
@@ -65,7 +65,7 @@ def same_gather(got, want):
     """Same postings in the same order; values equal as float64 (they are stored compactly when they can be)."""
     kf, val, at, runs = got
     assert kf.dtype == at.dtype == runs.dtype == np.int64
-    return all(np.array_equal(x, y) for x, y in zip((kf, val.astype(np.float64), at, runs), want))
+    return all(np.array_equal(x, y) for x, y in zip((kf, val.astype(np.float64), at, runs), want, strict=True))
 
 
 def append(store, k, bow):

@@ -8,6 +8,7 @@ on the same words.
 from __future__ import annotations
 
 import functools
+import itertools
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +26,7 @@ def unit(x):
     return x / np.linalg.norm(x, axis=1, keepdims=True)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def frame_descriptors(folder: str, weights: str) -> tuple:
     """SuperPoint descriptors (default settings, at most 1000 per frame) of an image folder, via the feature cache."""
     from slam_lcd.features import FeatureCache, FeaturesConfig, load_extractor
@@ -138,7 +139,8 @@ def test_same_input_gives_the_same_words(real_sequences):
         runs.append((db, bows))
     (a, bows_a), (b, bows_b) = runs
     assert a.words.index.active and a.n_words == b.n_words
-    assert all(np.array_equal(x.words, y.words) and np.array_equal(x.counts, y.counts) for x, y in zip(bows_a, bows_b))
+    assert all(np.array_equal(x.words, y.words) and np.array_equal(x.counts, y.counts)
+               for x, y in zip(bows_a, bows_b, strict=True))
     assert np.array_equal(a.words.centres, b.words.centres)
     q = as_unit_vectors(sets[3])
     assert np.array_equal(a.words.nearest(q)[0], b.words.nearest(q)[0])
@@ -148,7 +150,7 @@ def test_unit_vector_matching_equals_the_shared_matcher(real_sequences):
     from slam_lcd.features.matching import mutual_nn_match
 
     kitti = [as_unit_vectors(d) for d in dict(real_sequences)["kitti"][:6]]
-    for a, b in zip(kitti[1:], kitti[:-1]):
+    for b, a in itertools.pairwise(kitti):
         m1 = mutual_nn_match(a, b, ratio=0.9, max_distance=0.8)
         m2 = mutual_nn_unit(a, b, 0.9, 0.8)
         assert len(m1) > 300 and np.array_equal(m1, m2)
@@ -256,8 +258,8 @@ def test_words_inserted_beside_the_next_image_give_the_same_graph_and_words():
     (db_bg, w_bg, c_bg), (db_fg, w_fg, c_fg) = _grow_words(True), _grow_words(False)
     ix_bg, ix_fg = db_bg.words.index, db_fg.words.index
     assert ix_bg.active and ix_bg.background_insert and not ix_fg.background_insert
-    assert all(np.array_equal(a, b) for a, b in zip(w_bg, w_fg))
-    assert all((a is None and b is None) or np.array_equal(a, b) for a, b in zip(c_bg, c_fg))
+    assert all(np.array_equal(a, b) for a, b in zip(w_bg, w_fg, strict=True))
+    assert all((a is None and b is None) or np.array_equal(a, b) for a, b in zip(c_bg, c_fg, strict=True))
     assert ix_bg.n_indexed == ix_fg.n_indexed == ix_bg.graph.ntotal == ix_fg.graph.ntotal
     assert ix_bg.insert_cpu_s > 0 and ix_fg.insert_cpu_s > 0
     import faiss
@@ -304,7 +306,8 @@ def test_a_forked_child_inserts_on_its_own_worker_thread():
         ok = False
         try:
             ix.update(centres, np.zeros(0, np.int64))
-            ok = ix.graph.ntotal == 1300 and ix.nearest(centres, centres[1250:1260])[0].tolist() == list(range(1250, 1260))
+            ok = (ix.graph.ntotal == 1300
+                  and ix.nearest(centres, centres[1250:1260])[0].tolist() == list(range(1250, 1260)))
         finally:
             os._exit(0 if ok else 1)
     _, status = os.waitpid(pid, 0)
@@ -417,7 +420,7 @@ def test_word_arrays_grow_in_place_and_keep_their_words():
     held = w.centres  # a view someone holds: the arrays are copied instead, the view stays valid
     w._grow(2 * len(w._counts))
     assert np.array_equal(held, before[0])
-    assert all(np.array_equal(a, b) for a, b in zip((w.centres, w.counts, w.image_counts), before))
+    assert all(np.array_equal(a, b) for a, b in zip((w.centres, w.counts, w.image_counts), before, strict=True))
     assert not w._centres[w.n_words:].any()
     w.add_image(unit(rng.normal(size=(50, 32))))
     assert w.n_words == len(before[0]) + 50

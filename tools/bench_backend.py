@@ -36,16 +36,20 @@ def shared_data() -> Path:
 
 def bench_kitti(data: Path, false_fraction: float, stride: int, seed: int) -> None:
     d = data / "trajectories"
-    sc = make_scenario(d / "KITTI_00_gt.txt", ScenarioConfig(stride=stride, false_fraction=false_fraction, seed=seed), d / "KITTI_00_gt_times.txt")
+    sc = make_scenario(d / "KITTI_00_gt.txt", ScenarioConfig(stride=stride, false_fraction=false_fraction, seed=seed),
+                       d / "KITTI_00_gt_times.txt")
     print(f"KITTI-00 scenario: {len(sc.stamps)} keyframes, {sc.n_true} true + {sc.n_false} false loops (seed {seed})")
     g, res = run_scenario(sc, BackendConfig())
     ut = np.array(g.update_times) * 1e3
     lt = np.array(g.loop_times) * 1e3
     print(f"  online (iSAM2 + gate, then final GNC): {res.line('robust')}")
-    print(f"  iSAM2 update per keyframe: median {np.median(ut):.3f} ms, mean {ut.mean():.3f} ms, p95 {np.percentile(ut, 95):.3f} ms, total {ut.sum() / 1e3:.2f} s")
-    print(f"  add_loop (gate + iSAM2 update): median {np.median(lt):.2f} ms, max {lt.max():.1f} ms over {len(lt)} loops")
+    print(f"  iSAM2 update per keyframe: median {np.median(ut):.3f} ms, mean {ut.mean():.3f} ms, "
+          f"p95 {np.percentile(ut, 95):.3f} ms, total {ut.sum() / 1e3:.2f} s")
+    print(f"  add_loop (gate + iSAM2 update): median {np.median(lt):.2f} ms, max {lt.max():.1f} ms "
+          f"over {len(lt)} loops")
     gt_ = g.gnc_times
-    print(f"  GNC re-checks (every {g.conf.gnc_every_n_loops} loops + finalize): {len(gt_)} runs, total {sum(gt_):.2f} s, final {gt_[-1] if gt_ else 0:.2f} s")
+    print(f"  GNC re-checks (every {g.conf.gnc_every_n_loops} loops + finalize): {len(gt_)} runs, "
+          f"total {sum(gt_):.2f} s, final {gt_[-1] if gt_ else 0:.2f} s")
 
     # Same graph, three batch solves from the odometry initial estimate.
     odo = g.odometry_values()
@@ -59,10 +63,13 @@ def bench_kitti(data: Path, false_fraction: float, stride: int, seed: int) -> No
     w_loops = w[n_base:] >= 0.5
     print(f"  batch on the same graph ({graph_all.size()} factors, all loops):")
     print(f"    GNC (TLS):       {t_gnc:7.2f} s  ATE {ate_rmse(sc.gt, values_to_array(gnc_vals, n)):.2f} m, "
-          f"false rejected {int((~w_loops & ~sc.is_true).sum())}/{sc.n_false}, true kept {int((w_loops & sc.is_true).sum())}/{sc.n_true}")
-    print(f"    plain LM:        {t_lm:7.2f} s  ATE {ate_rmse(sc.gt, values_to_array(lm_vals, n)):.2f} m (no outlier handling)")
+          f"false rejected {int((~w_loops & ~sc.is_true).sum())}/{sc.n_false}, "
+          f"true kept {int((w_loops & sc.is_true).sum())}/{sc.n_true}")
+    print(f"    plain LM:        {t_lm:7.2f} s  ATE {ate_rmse(sc.gt, values_to_array(lm_vals, n)):.2f} m "
+          f"(no outlier handling)")
     print(f"    LM, inliers only:{t_lm_inl:7.2f} s  ATE {ate_rmse(sc.gt, values_to_array(lm_inl, n)):.2f} m")
-    print(f"    ratio GNC / plain LM: {t_gnc / t_lm:.1f}x; all {n} iSAM2 keyframe updates / plain LM: {ut.sum() / 1e3 / t_lm:.2f}x")
+    print(f"    ratio GNC / plain LM: {t_gnc / t_lm:.1f}x; "
+          f"all {n} iSAM2 keyframe updates / plain LM: {ut.sum() / 1e3 / t_lm:.2f}x")
 
 
 def bench_sphere(data: Path) -> None:
@@ -81,7 +88,8 @@ def bench_sphere(data: Path) -> None:
     t0 = time.perf_counter()
     est, times = isam2_edge_by_edge(edges, BackendConfig())
     tt = time.perf_counter() - t0
-    print(f"  iSAM2 pose by pose: {tt:6.2f} s total, median update {1e3 * np.median(times):.2f} ms, RMSE {translation_rmse(est, gt):.3f} m")
+    print(f"  iSAM2 pose by pose: {tt:6.2f} s total, median update {1e3 * np.median(times):.2f} ms, "
+          f"RMSE {translation_rmse(est, gt):.3f} m")
 
 
 def main(argv=None) -> int:

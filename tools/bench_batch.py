@@ -89,7 +89,8 @@ def main() -> None:
             par.append(wp)
             print(f"  repeat {r + 1}: sequential {ws:6.1f} s, {a.workers} workers ({engine}) {wp:6.1f} s, "
                   f"ratio {ws / wp:.2f}")
-        same = all({k: x[k] for k in FIGURES} == {k: y[k] for k in FIGURES} for x, y in zip(rows_seq, rows_par))
+        same = all({k: x[k] for k in FIGURES} == {k: y[k] for k in FIGURES}
+                   for x, y in zip(rows_seq, rows_par, strict=True))
         ms, mp = statistics.median(seq), statistics.median(par)
         print(f"median wall time: sequential {ms:.1f} s, {a.workers} workers {mp:.1f} s")
         print(f"speed-up sequential / {a.workers} workers: {ms / mp:.2f} (ideal {min(a.workers, a.logs)}); "

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import functools
 import os
 import sys
 import time
@@ -72,8 +73,8 @@ def main() -> int:
         return 2
     print(f"{'case':28s} {'slam-lcd s':>10s} {'evo s':>8s} {'ratio':>6s}  {'slam-lcd RMSE':>15s} {'evo RMSE':>15s}")
     for name, ref, est, kind, mode in CASES:
-        t_ours, v_ours = best_time(lambda: ours(d, ref, est, mode), args.repeat)
-        t_evo, v_evo = best_time(lambda: theirs(d, ref, est, kind, mode), args.repeat)
+        t_ours, v_ours = best_time(functools.partial(ours, d, ref, est, mode), args.repeat)
+        t_evo, v_evo = best_time(functools.partial(theirs, d, ref, est, kind, mode), args.repeat)
         print(f"{name:28s} {t_ours:10.3f} {t_evo:8.3f} {t_ours / t_evo:6.2f}  {v_ours:15.9f} {v_evo:15.9f}")
     return 0
 

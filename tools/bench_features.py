@@ -11,8 +11,8 @@ For each image size (320x240, 640x480, 1241x376) and device (CPU, and CUDA when 
 - batch 1 and batch 8; ORB (OpenCV, CPU) on the same images in the same run.
 
 Forward and full runs are interleaved; the medians are reported, and the ratio is the
-median of the per-pair ratios, so background load affects both sides alike. The acceptance figure is printed last: full / forward at 640x480,
-batch 1, CPU (target <= 1.15).
+median of the per-pair ratios, so background load affects both sides alike. The acceptance figure is printed last:
+full / forward at 640x480, batch 1, CPU (target <= 1.15).
 
     python tools/bench_features.py [--weights PATH] [--device cpu|cuda|all] [--reps 3]
 """
@@ -53,7 +53,8 @@ def test_images(size, n, shared: Path | None) -> list[np.ndarray]:
             imgs.append(cv2.resize(im, (w, h), interpolation=cv2.INTER_AREA))
         else:
             rng = np.random.default_rng(i)
-            im = cv2.resize(rng.integers(0, 256, (h // 8, w // 8), dtype=np.uint8), (w, h), interpolation=cv2.INTER_NEAREST)
+            im = cv2.resize(rng.integers(0, 256, (h // 8, w // 8), dtype=np.uint8), (w, h),
+                            interpolation=cv2.INTER_NEAREST)
             imgs.append(cv2.GaussianBlur(im, (3, 3), 0))
     return imgs
 
@@ -107,8 +108,8 @@ def bench_superpoint(extractor: SuperPointExtractor, imgs, batch: int, reps: int
     f_ms = statistics.median(tf) * 1e3 / batch
     x_ms = statistics.median(tx) * 1e3 / batch
     # ratio of each interleaved (forward, full) pair, then the median: robust to load drifts
-    ratio = statistics.median(b / a for a, b in zip(tf, tx))
-    cpu_ratio = statistics.median(b / max(a, 1e-9) for a, b in zip(cf, cx))
+    ratio = statistics.median(b / a for a, b in zip(tf, tx, strict=True))
+    cpu_ratio = statistics.median(b / max(a, 1e-9) for a, b in zip(cf, cx, strict=True))
     return {"forward_ms": f_ms, "full_ms": x_ms, "ratio": ratio, "cpu_time_ratio": cpu_ratio, "keypoints": n_kp}
 
 
@@ -139,17 +140,18 @@ def compare_devices(conf: FeaturesConfig, weights, shared: Path | None) -> bool:
     imgs = test_images((640, 480), 3, shared) + test_images((1241, 376), 3, shared)
     imgs.append(imgs[0][:473, :629])  # a size not divisible by 8
     ok = True
-    for i, (a, b) in enumerate(zip(cpu.extract_batch(imgs), gpu.extract_batch(imgs))):
+    for i, (a, b) in enumerate(zip(cpu.extract_batch(imgs), gpu.extract_batch(imgs), strict=True)):
         ka = {tuple(k): j for j, k in enumerate(a.keypoints.tolist())}
         common = [(ka[tuple(k)], j) for j, k in enumerate(b.keypoints.tolist()) if tuple(k) in ka]
         same = len(common) / max(len(a), len(b), 1)
-        ia, ib = (np.array(x, int) for x in zip(*common)) if common else (np.zeros(0, int),) * 2
+        ia, ib = (np.array(x, int) for x in zip(*common, strict=True)) if common else (np.zeros(0, int),) * 2
         dd = float(np.abs(a.descriptors[ia] - b.descriptors[ib]).max()) if common else float("nan")
         ds = float(np.abs(a.scores[ia] - b.scores[ib]).max()) if common else float("nan")
         good = same >= 0.97 and dd < 2e-2 and ds < 1e-3
         ok &= good
         print(f"compare-devices image {i} {a.image_size}: cpu {len(a)} / cuda {len(b)} keypoints, "
-              f"{same:.3%} identical, max |desc diff| {dd:.2e}, max |score diff| {ds:.2e} {'OK' if good else 'MISMATCH'}")
+              f"{same:.3%} identical, max |desc diff| {dd:.2e}, max |score diff| {ds:.2e} "
+              f"{'OK' if good else 'MISMATCH'}")
     print(f"compare-devices: {'PASS' if ok else 'FAIL'} (TF32 allowed for cuDNN convs: "
           f"{torch.backends.cudnn.allow_tf32})")
     return ok

@@ -14,6 +14,7 @@ checks that the verdicts are identical (the reference is tests/lcd_graph_referen
 from __future__ import annotations
 
 import argparse
+import functools
 import sys
 import time
 from pathlib import Path
@@ -69,7 +70,8 @@ def match_sets(true_pairs, false_pairs, sizes, kind: str):
     max_d = conf.match_max_distance_orb if kind == "orb" else conf.match_max_distance_sp
     sets = {s: [] for s in sizes}
     counts = {"true": [], "false": []}
-    for label, pairs, ratio, bound in (("true", true_pairs, conf.match_ratio, max_d), ("false", false_pairs, None, None)):
+    for label, pairs, ratio, bound in (("true", true_pairs, conf.match_ratio, max_d),
+                                       ("false", false_pairs, None, None)):
         for fq, fm in pairs:
             m, d = mutual_nn_match_bf(fq.descriptors, fm.descriptors, ratio=ratio, max_distance=bound,
                                       return_distances=True)
@@ -120,10 +122,10 @@ def main(argv=None) -> int:
             print(f"{s:>7}  no match set this large (more --pairs, or ORB)")
             continue
         t_ref, t_new, t_exit, rounds, same = [], [], [], [], True
-        for label, kq, km, m in sets[s]:
-            a, v = timed(lambda: ref.verify_graph(kq, km, m, exact), args.repeat)
-            b, w = timed(lambda: verify_graph(kq, km, m, exact), args.repeat)
-            c, x = timed(lambda: verify_graph(kq, km, m, fast), args.repeat)
+        for _label, kq, km, m in sets[s]:
+            a, v = timed(functools.partial(ref.verify_graph, kq, km, m, exact), args.repeat)
+            b, w = timed(functools.partial(verify_graph, kq, km, m, exact), args.repeat)
+            c, x = timed(functools.partial(verify_graph, kq, km, m, fast), args.repeat)
             same &= (v.accepted, v.reason, v.score, v.n_nodes, v.iterations) == \
                 (w.accepted, w.reason, w.score, w.n_nodes, w.iterations) and np.array_equal(v.kept, w.kept)
             same &= x.accepted == v.accepted

@@ -103,7 +103,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--frames", type=int, default=300)
     ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--formats", nargs="+", default=["mcap", "rosbag2", "rosbag1"], choices=["mcap", "rosbag2", "rosbag1"])
+    ap.add_argument("--formats", nargs="+", default=["mcap", "rosbag2", "rosbag1"],
+                    choices=["mcap", "rosbag2", "rosbag1"])
     ap.add_argument("--wall", action="store_true", help="measure wall-clock instead of CPU time")
     args = ap.parse_args(argv)
     from slam_lcd.runtime.machine import machine_line

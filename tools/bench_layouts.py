@@ -14,7 +14,8 @@ accepted (judged against the exact ground truth) and wall time, with PASS when
 TUM's depth carries the Kinect v1 errors (``slam_lcd.sim.kinect``); ``--exact-depth``
 writes the exact rendered depth instead (log ``tum_exact-depth.mcap``), to compare both.
 ``--work DIR`` keeps the logs and outputs there (a rerun reuses a log made with the same
-size, laps and depth model); by default a temporary folder. Runs go through the CLI in a subprocess, as a user types them.
+size, laps and depth model); by default a temporary folder. Runs go through the CLI in a subprocess, as a user
+types them.
 """
 from __future__ import annotations
 

@@ -100,20 +100,22 @@ def main(argv=None) -> None:
                 r["total"].append(dt)
                 for part, s in r["det"].last_part_seconds.items():
                     r["parts"].setdefault(part, []).append(s)
-    print(f"{len(kfs)} keyframes ({args.laps:g} laps at {args.rate:g} Hz, {args.size}), timed from keyframe {args.skip}")
+    print(f"{len(kfs)} keyframes ({args.laps:g} laps at {args.rate:g} Hz, {args.size}), "
+          f"timed from keyframe {args.skip}")
     for label, r in runs.items():
         det = r["det"]
         found, false, errs = set(), 0, []
         for c in det.closures:
             t, a = relative_error(cams[c.match_id], cams[c.query_id])
             false += not (t < 2.0 and a < 45.0)
-            errs.append(relative_error(c.T_match_query, np.linalg.inv(demo.gt.poses[c.match_id]) @ demo.gt.poses[c.query_id]))
+            errs.append(relative_error(c.T_match_query,
+                                       np.linalg.inv(demo.gt.poses[c.match_id]) @ demo.gt.poses[c.query_id]))
             found.add(c.query_id) if c.query_id in queries else None
         e = np.array(errs) if errs else np.zeros((1, 2))
         parts = "  ".join(f"{p} {1000 * np.mean(v):.1f}" for p, v in sorted(r["parts"].items()))
-        print(f"{label:6s} {1000 * np.mean(r['total']):7.1f} ms/keyframe | loops {len(det.closures)}, revisit keyframes "
-              f"{len(found)}/{len(queries)}, false {false}, pose error max {e[:, 0].max() * 100:.2f} cm / "
-              f"{e[:, 1].max():.2f} deg | {parts}")
+        print(f"{label:6s} {1000 * np.mean(r['total']):7.1f} ms/keyframe | loops {len(det.closures)}, "
+              f"revisit keyframes {len(found)}/{len(queries)}, false {false}, "
+              f"pose error max {e[:, 0].max() * 100:.2f} cm / {e[:, 1].max():.2f} deg | {parts}")
     ratio = np.mean(runs["after"]["total"]) / np.mean(runs["before"]["total"])
     print(f"ratio after / before: x{ratio:.2f}")
 

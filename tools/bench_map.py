@@ -134,12 +134,14 @@ def section_sessions(args) -> None:
         for pair, d in sorted(j["pairs"].items()):
             print(f"  loops {pair}: {d['true']} true, {d['false']} false")
         for row in s["sessions"]:
-            print(f"  {row['name']}: {row['keyframes']} keyframes, ATE odometry {row.get('ate_odometry', float('nan')):.3f} m"
-                  f" -> map {row.get('ate_map', float('nan')):.4f} m (ratio {100 * (row.get('ratio') or float('nan')):.1f} %)")
+            print(f"  {row['name']}: {row['keyframes']} keyframes, "
+                  f"ATE odometry {row.get('ate_odometry', float('nan')):.3f} m"
+                  f" -> map {row.get('ate_map', float('nan')):.4f} m "
+                  f"(ratio {100 * (row.get('ratio') or float('nan')):.1f} %)")
     # cost: interleaved pairs (plain run, then the same log appended to a copy of the map it met),
     # repeated, medians: a busy neighbour then slows both sides of a pair alike
     times = {k: {"plain": [plain[k][1]], "append": [appended[k][1]]} for k in (1, 2, 3)}
-    for r in range(args.cost_repeats - 1):
+    for _ in range(args.cost_repeats - 1):
         for k in (1, 2, 3):
             times[k]["plain"].append(run_session(logs[k], runs / "cost_plain", cfg, extractor)[1])
             dst = runs / "cost_map"
@@ -173,7 +175,8 @@ def section_sessions(args) -> None:
     res, wall = run_session(logs[5], runs / "localize5", cfg, extractor, m, mode="localize")
     rep = res.localization
     e = rep["errors"] or {}
-    print(f"\nlocalise session 5: {rep['localised']} of {rep['keyframes']} keyframes ({100 * rep['share_localised']:.1f} %)"
+    print(f"\nlocalise session 5: {rep['localised']} of {rep['keyframes']} keyframes "
+          f"({100 * rep['share_localised']:.1f} %)"
           f", median error {e.get('median_m', float('nan')):.4f} m, max {e.get('max_m', float('nan')):.4f} m, "
           f"{e.get('over_1m')} over 1 m; map bytes unchanged: {map_files_digest(root) == before}; {wall:.1f} s")
     size = sum(p.stat().st_size for p in root.rglob('*') if p.is_file())
@@ -206,7 +209,7 @@ def _replicated_vocab(v: dict, src_ids: np.ndarray, pieces: list[tuple[int, np.n
     off = v["bow_offsets"]
     reps = max(r for r, _ in pieces) + 1
     words, counts, lens = [], [], []
-    for r, (rep, src_kf) in enumerate(pieces):
+    for rep, src_kf in pieces:
         for k in src_kf:
             i = at[int(k)]
             words.append(v["bow_words"][off[i]:off[i + 1]] + rep * W)
@@ -223,7 +226,8 @@ def _replicated_vocab(v: dict, src_ids: np.ndarray, pieces: list[tuple[int, np.n
     idx._image_ends.extend([len(centres)] * (idx.fresh_images + 1))
     t = time.perf_counter()
     idx._build(centres)
-    print(f"  (word index built over {len(centres)} words for the snapshot: {time.perf_counter() - t:.0f} s, not timed)")
+    print(f"  (word index built over {len(centres)} words for the snapshot: {time.perf_counter() - t:.0f} s, "
+          f"not timed)")
     out["graph"] = faiss.serialize_index(idx.graph)
     out["proj"] = idx.proj
     out["index_state"] = np.array([idx.n_indexed, idx.built_at, idx.n_builds], np.int64)
@@ -242,7 +246,7 @@ def _replicated(src: Path, dst: Path, keyframes: int, vocab: bool = False) -> No
     new, table, next_id, total, rep = [], [], 0, 0, 0
     pieces = []  # (repetition, source keyframe ids) per repeated session
     while total < keyframes:
-        for meta, s in zip(man.sessions, sess):
+        for meta, s in zip(man.sessions, sess, strict=True):
             n = min(len(s), keyframes - total)
             if n <= 0:
                 break

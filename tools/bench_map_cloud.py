@@ -88,22 +88,25 @@ def main() -> int:
             print(line, flush=True)
     med = {k: statistics.median(v) for k, v in walls.items()}
     mem = {k: statistics.median(v) for k, v in peaks.items()}
-    pair_ratios = [b / a_ for a_, b in zip(walls["off"], walls["on"])]
+    pair_ratios = [b / a_ for a_, b in zip(walls["off"], walls["on"], strict=True)]
     rep = json.loads((work / f"{name}-on" / "report.json").read_text())
     mc = rep["map_cloud"]
     sec = mc["seconds"]
     print(f"log: {log.name}: {rep['frames']} frames, {rep['keyframes']} keyframes; features {a.features}; "
           f"{a.repeats} interleaved pairs")
-    print(f"median wall without the cloud {med['off']:.1f} s, with it {med['on']:.1f} s: ratio {med['on'] / med['off']:.3f} "
+    print(f"median wall without the cloud {med['off']:.1f} s, with it {med['on']:.1f} s: "
+          f"ratio {med['on'] / med['off']:.3f} "
           f"(median of the pairs' ratios {statistics.median(pair_ratios):.3f}; target <= 1.10)")
     cpu = {k: statistics.median(v) for k, v in cpus.items()}
     print(f"median CPU time (user + system, all threads) without {cpu['off']:.1f} s, with {cpu['on']:.1f} s: "
           f"ratio {cpu['on'] / cpu['off']:.3f} (less sensitive to other jobs on the machine than the wall)")
-    print(f"median peak resident without {mem['off']:.0f} MB, with {mem['on']:.0f} MB: added {mem['on'] - mem['off']:+.0f} MB "
+    print(f"median peak resident without {mem['off']:.0f} MB, with {mem['on']:.0f} MB: "
+          f"added {mem['on'] - mem['off']:+.0f} MB "
           f"(target <= 300 MB)")
     shares = [100 * s / w for s, w in own]
     print(f"the cloud's own time in the run's thread: median {statistics.median(shares):.1f} % of the run's wall "
-          f"(last run: handing keyframes over {sec['keyframes']:.2f} s, merge {sec['merge']:.2f}, files {sec['files']:.2f}, "
+          f"(last run: handing keyframes over {sec['keyframes']:.2f} s, merge {sec['merge']:.2f}, "
+          f"files {sec['files']:.2f}, "
           f"figures {sec['figures']:.2f}); in its own thread {sec['keyframes_thread']:.2f} s; "
           f"on-disk store {mc['store_mb']} MB")
     s, t = mc["sharpness"], mc["truth"]

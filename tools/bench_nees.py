@@ -87,7 +87,7 @@ def run_dir_nees(run_dir: Path, log: Path):
     order = np.argsort(st)
     ids = sorted(stamp)
     P = interpolate_poses(np.array(st)[order], np.array(T)[order], np.array([stamp[i] for i in ids], np.int64))
-    return report(loops, dict(zip(ids, P)))
+    return report(loops, dict(zip(ids, P, strict=True)))
 
 
 if __name__ == "__main__":

@@ -60,7 +60,7 @@ class PerWordPostings:
             self.size = size = np.concatenate([size, np.zeros(grow, np.int64)])
         words = bow.words
         counts = size[words]
-        for w, n, c in zip(words.tolist(), counts.tolist(), bow.counts.tolist()):
+        for w, n, c in zip(words.tolist(), counts.tolist(), bow.counts.tolist(), strict=True):
             if n == 0:
                 kf[w] = np.empty(2, dtype=np.int32)
                 tf[w] = np.empty(2, dtype=np.float64)
@@ -82,8 +82,8 @@ class PerWordPostings:
             return e, np.zeros(0), e
         ws, ns = words[at].tolist(), lens[at].tolist()
         kf, tf = self.kf, self.tf
-        k = np.concatenate([kf[w][:n] for w, n in zip(ws, ns)]).astype(np.int64)
-        t = np.concatenate([tf[w][:n] for w, n in zip(ws, ns)])
+        k = np.concatenate([kf[w][:n] for w, n in zip(ws, ns, strict=True)]).astype(np.int64)
+        t = np.concatenate([tf[w][:n] for w, n in zip(ws, ns, strict=True)])
         return k, t, np.repeat(at, lens[at])
 
 
@@ -169,9 +169,10 @@ def _pack(bags: list) -> dict:
 def _unpack(z, prefix: str, n: int) -> list:
     from slam_lcd.vocab import BowVector
 
-    words, counts, ends = z[prefix + "words"].astype(np.int64), z[prefix + "counts"].astype(np.float64), z[prefix + "ends"]
+    words = z[prefix + "words"].astype(np.int64)
+    counts, ends = z[prefix + "counts"].astype(np.float64), z[prefix + "ends"]
     starts = np.concatenate([[0], ends[:-1]])
-    return [BowVector(words[a:b], counts[a:b]) for a, b in zip(starts[:n], ends[:n])]
+    return [BowVector(words[a:b], counts[a:b]) for a, b in zip(starts[:n], ends[:n], strict=True)]
 
 
 def make_bags(n: int, trained: int, seed: int, path: Path) -> None:
@@ -315,7 +316,7 @@ def main(argv=None) -> None:
             what, idfs = f"{len(vocab)} trained words", ["vocabulary", "database"] if args.idf == "both" else [args.idf]
         else:
             vocab, after = None, z["n_words"][:n].tolist()
-            frames = list(zip(_unpack(z, "q_", n), bags, [0] + after[:-1], after))
+            frames = list(zip(_unpack(z, "q_", n), bags, [0] + after[:-1], after, strict=True))
             what, idfs = f"online words (to {after[-1]})", ["database"]
     n = len(frames)
     print(f"== BoW index: {n} keyframes, {what}, {sum(len(f[1]) for f in frames) / n:.0f} words per keyframe; "

@@ -138,8 +138,9 @@ def part_demo(name: str, work: Path, weights) -> dict:
     rep = json.loads((out / "report.json").read_text())
     ate = rep["eval"]["ate"]
     before, after = ate["before"]["translation_m"]["rmse"], ate["after"]["translation_m"]["rmse"]
-    return {"demo_wall_s": wall, "demo_cpu_s": cpu, "demo_log_s": rep["log_duration_s"], "demo_keyframes": rep["keyframes"],
-            "demo_loops": rep["loops"]["accepted"], "demo_false": rep["loops"]["false_accepted"],
+    return {"demo_wall_s": wall, "demo_cpu_s": cpu, "demo_log_s": rep["log_duration_s"],
+            "demo_keyframes": rep["keyframes"], "demo_loops": rep["loops"]["accepted"],
+            "demo_false": rep["loops"]["false_accepted"],
             "demo_ate_before": before, "demo_ate_after": after, "demo_ate_ratio": after / before}
 
 
@@ -245,7 +246,8 @@ COLUMNS = [  # (header, key, format)
     ("extract ms", "extract_ms", "{:.0f}"), ("kpts", "keypoints", "{:.0f}"),
     ("demo wall/log", "demo_rt", "{}"), ("loops", "demo_loops", "{}"), ("false", "demo_false", "{}"),
     ("ATE after/before", "demo_ate_ratio", "{:.1%}"), ("corridor R@100P", "corridor_r100p", "{:.3f}"),
-    ("wide recall", "wide", "{}"), ("EuRoC after/VO", "euroc_ate_ratio", "{:.1%}"), ("EuRoC false", "euroc_false", "{}"),
+    ("wide recall", "wide", "{}"), ("EuRoC after/VO", "euroc_ate_ratio", "{:.1%}"),
+    ("EuRoC false", "euroc_false", "{}"),
 ]
 
 
@@ -261,11 +263,13 @@ def print_table(rows: dict) -> None:
         if "forward_ms" in r:
             r["fwd"] = f"{r['forward_ms']:.0f} ({r.get('forward_cpu_ms', float('nan')):.0f})"
         if "demo_wall_s" in r:
-            r["demo_rt"] = (f"{r['demo_wall_s']:.1f} / {r['demo_log_s']:.1f} s = {r['demo_wall_s'] / r['demo_log_s']:.2f}x"
+            r["demo_rt"] = (f"{r['demo_wall_s']:.1f} / {r['demo_log_s']:.1f} s "
+                            f"= {r['demo_wall_s'] / r['demo_log_s']:.2f}x"
                             f" (CPU {r.get('demo_cpu_s', float('nan')):.0f} s)")
         if "wide_recall" in r:
             r["wide"] = f"{r['wide_recall']:.0%} ({r['wide_found']}/{r['wide_queries']}, false {r['wide_false']})"
-        cells = [fmt.format(r[key]) if r.get(key) is not None or key == "resize_max" else "-" for _, key, fmt in COLUMNS]
+        cells = [fmt.format(r[key]) if r.get(key) is not None or key == "resize_max" else "-"
+                 for _, key, fmt in COLUMNS]
         print(f"| {name} | " + " | ".join(cells) + " |")
 
 

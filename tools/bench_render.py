@@ -54,7 +54,8 @@ def main() -> int:
         "gray": lambda i: render(world, cam, T[i], with_depth=False),
         "gray+depth": lambda i: render(world, cam, T[i]),
         "rgb+depth": lambda i: render(world, cam, T[i], color=True),
-        "stereo gray (2 views)+depth": lambda i: (render(world, cam, T[i]), render(world, cam, T[i] @ T_lr, with_depth=False)),
+        "stereo gray (2 views)+depth": lambda i: (render(world, cam, T[i]),
+                                                  render(world, cam, T[i] @ T_lr, with_depth=False)),
     }
     print(f"{'case':30s} {'ms/frame CPU':>12s} {'frames/s (1 core)':>18s} {'wall fps':>9s} {'x baseline':>10s}")
     for name, fn in cases.items():

@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import itertools
 import tempfile
 import time
 from pathlib import Path
@@ -286,7 +287,8 @@ def grow(stream: PlaceStream, n: int, conf, checkpoints: list[int], label: str, 
                 if measure_recall and vocab is not None:
                     row["agree"], row["nearest_recall"], row["exhaustive_ms"] = _tree_agreement(vocab, next_desc)
                 elif measure_recall:
-                    row["agree"], row["nearest_recall"], row["exhaustive_ms"] = _agreement(db, as_unit_vectors(next_desc))
+                    agreement = _agreement(db, as_unit_vectors(next_desc))
+                    row["agree"], row["nearest_recall"], row["exhaustive_ms"] = agreement
             rows.append(row)
             rss_prev, kf_prev = rss_bytes(), k + 1
             print(_fmt(row), flush=True)
@@ -330,7 +332,8 @@ def _print_target(late: dict) -> None:
 
 
 _HEAD = (f"{'path':10s} {'kf':>6s} {'words':>8s} {'quant':>7s} {'query':>7s} {'insert':>7s} {'total':>7s} ms/kf "
-         f"{'median':>7s} {'ref.ms':>6s} {'kB/kf':>6s} {'(marg)':>6s} {'agree':>6s} {'nn-rec':>6s} {'exh.ms':>7s} {'revisit@1':>9s}  index")
+         f"{'median':>7s} {'ref.ms':>6s} {'kB/kf':>6s} {'(marg)':>6s} {'agree':>6s} {'nn-rec':>6s} {'exh.ms':>7s} "
+         f"{'revisit@1':>9s}  index")
 
 
 def _fmt(r: dict) -> str:
@@ -395,7 +398,8 @@ def bench_database(args) -> None:
                 threads=args.lcd_threads) if base_n > 0 else []
     t_base = time.perf_counter() - t0
     t0 = time.perf_counter()
-    new = grow(PlaceStream(n, args.seed, landmarks=table), n, conf, checkpoints, "indexed", True, threads=args.lcd_threads)
+    new = grow(PlaceStream(n, args.seed, landmarks=table), n, conf, checkpoints, "indexed", True,
+               threads=args.lcd_threads)
     t_new = time.perf_counter() - t0
     print(f"wall: exhaustive {t_base:.0f} s for {base_n} keyframes, indexed {t_new:.0f} s for {n} keyframes")
     by_kf = {r["keyframes"]: r for r in new}
@@ -427,7 +431,8 @@ def _print_reference(rows: list[dict]) -> None:
     """The machine reference over the run: a slow moment shows as a larger reference at that checkpoint."""
     refs = [r["reference_ms"] for r in rows]
     late = rows[-1]
-    print("machine reference (fixed workload, ms): " + ", ".join(f"{r['keyframes']}: {r['reference_ms']:.2f}" for r in rows)
+    print("machine reference (fixed workload, ms): "
+          + ", ".join(f"{r['keyframes']}: {r['reference_ms']:.2f}" for r in rows)
           + f"; at the last checkpoint x{late['reference_ms'] / min(refs):.2f} the run's fastest (the window's total, "
           f"mean {late['total']:.1f} / median {late['total_median']:.1f} ms, is measured at that moment)")
 
@@ -485,7 +490,9 @@ def _config(args, cache_dir: Path, extra: list[str] = ()):
     return load_config("default", _config_sets(args, cache_dir, extra))
 
 
-def _bare_forward_seconds(log: Path, stamps: np.ndarray, weights, sample: int, features_conf) -> tuple[float, int, float]:
+def _bare_forward_seconds(
+    log: Path, stamps: np.ndarray, weights, sample: int, features_conf
+) -> tuple[float, int, float]:
     """Bare SuperPoint network time (forward_raw) and whole-model time over the keyframes' images (a sample, scaled).
 
     The model is built from the run's own ``features`` section (precision, layout), without its cache."""
@@ -595,7 +602,8 @@ def bench_demo(args) -> None:
         ratios.append(wall / (0.5 * (before + sp)))
         _print_demo_run(log, res, cfg, wall, stamps, sp, n, sp_full)
         if args.repeat > 1:
-            print(f"  run {rep + 1} of {args.repeat}: wall / mean(bare forward before, after) = {ratios[-1]:.3f}", flush=True)
+            print(f"  run {rep + 1} of {args.repeat}: wall / mean(bare forward before, after) = {ratios[-1]:.3f}",
+                  flush=True)
     if len(walls) > 1:
         print(f"\n{len(walls)} runs in turn with the bare forward: wall median {np.median(walls):.1f} s "
               f"({', '.join(f'{w:.1f}' for w in walls)}), bare forward median {np.median(bares):.1f} s "
@@ -652,7 +660,7 @@ def bench_log(args) -> None:
     head = "".join(f"{p:>9s}" for p in parts)
     print(f"  keyframes    LCD mean  median     max  backend {head}   RSS MB   (ms per keyframe)")
     edges = sorted(set([0, 100, 200] + list(range(300, n - 100, max(100, n // 8))) + [max(n - 100, 0), n]))
-    for a, b in zip(edges[:-1], edges[1:]):
+    for a, b in itertools.pairwise(edges):
         if b <= a or a >= n:
             continue
         seg = ks[a:b]
@@ -686,7 +694,8 @@ def main(argv=None) -> None:
     db.add_argument("--lcd-threads", type=int, default=1,
                     help="BLAS and faiss threads of each keyframe's database work, as run.lcd_threads in a run "
                          "(default 1, a run's default while SuperPoint extracts ahead; 0: the libraries' own)")
-    db.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="VocabConfig override, e.g. ann_ef_search=24")
+    db.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="VocabConfig override, e.g. ann_ef_search=24")
     db.set_defaults(func=bench_database)
     for name, func, helptext in (
         ("log", bench_log, "loop detection + back end per keyframe over a long demo log, features cached"),
@@ -696,7 +705,8 @@ def main(argv=None) -> None:
         p.add_argument("--log", help="an existing demo log (default: render one into --work)")
         p.add_argument("--laps", type=float, default=10.0, help="laps of the rendered log (log section; default 10)")
         p.add_argument("--seed", type=int, default=0)
-        p.add_argument("--work", default="bench-scaling", help="folder for logs, caches and outputs (default ./bench-scaling)")
+        p.add_argument("--work", default="bench-scaling",
+                       help="folder for logs, caches and outputs (default ./bench-scaling)")
         p.add_argument("--weights", help="SuperPoint weights (default: the usual search)")
         p.add_argument("--skip-warm", action="store_true", help="log: the feature cache in --work is already filled")
         p.add_argument("--forward-sample", type=int, default=60,

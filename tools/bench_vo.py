@@ -83,7 +83,7 @@ def run_on_log(args) -> int:
                              laps=args.laps, width=args.width, height=args.height, camera_rate=args.rate)
         print(info.summary().splitlines()[0], f"[{time.perf_counter() - t0:.0f} s]")
     gt_all = read_trajectory_from_log(path, "/ground_truth/pose")
-    gtd = {int(s): p for s, p in zip(gt_all.stamps, gt_all.poses)}
+    gtd = {int(s): p for s, p in zip(gt_all.stamps, gt_all.poses, strict=True)}
     for mode in args.modes.split(","):
         t0 = time.perf_counter()
         kw = {"depth_topic": "/camera/depth"} if mode == "rgbd" else {"right_topic": "/camera/right/image_raw"}
@@ -108,7 +108,8 @@ def report(mode, res, gtd, wall_s, T_bc) -> None:
     drift = np.linalg.norm((inv(tr.poses[0]) @ tr.poses[-1])[:3, 3] - (inv(ref[0]) @ ref[-1])[:3, 3])
     print(f"[{mode}] ATE rmse {ate:.3f} m = {100 * ate / L:.2f}% of path {L:.1f} m (end-point drift {drift:.3f} m)")
     print(f"[{mode}] RPE over 5 m: {rpe_t:.2f}% translation, {rpe_r:.3f} deg/m rotation")
-    print(f"[{mode}] covariance consistency: median NEES of 10-frame motions {nees(tr, gtd, T_bc):.2f} (6 = consistent)")
+    print(f"[{mode}] covariance consistency: median NEES of 10-frame motions {nees(tr, gtd, T_bc):.2f} "
+          f"(6 = consistent)")
 
 
 def main(argv=None) -> int:
@@ -120,7 +121,8 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", type=int, default=None)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--modes", default="rgbd,stereo")
-    ap.add_argument("--direct", action="store_true", help="render in memory instead of writing and reading a demo MCAP log")
+    ap.add_argument("--direct", action="store_true",
+                    help="render in memory instead of writing and reading a demo MCAP log")
     ap.add_argument("--log", default=None, help="demo log path to write/reuse (default: a temporary file)")
     args = ap.parse_args(argv)
     from slam_lcd.runtime.machine import machine_line
@@ -145,12 +147,12 @@ def main(argv=None) -> int:
             right, _ = render(world, cam, T_wc @ T_lr, with_depth=False)
         frames.append((img, depth, right))
     print(f"rendering: {(time.perf_counter() - t0) / len(gt) * 1e3:.1f} ms/frame")
-    gtd = {int(s): p for s, p in zip(gt.stamps, gt.poses)}
+    gtd = {int(s): p for s, p in zip(gt.stamps, gt.poses, strict=True)}
     conf = FrontendConfig()
     for mode in args.modes.split(","):
         vo = RgbdOdometry(cam, conf, T_bc) if mode == "rgbd" else StereoOdometry(cam, conf, T_bc)
         t0 = time.perf_counter()
-        for s, (img, depth, right) in zip(gt.stamps, frames):
+        for s, (img, depth, right) in zip(gt.stamps, frames, strict=True):
             vo.process(int(s), img, depth if mode == "rgbd" else right)
         dt = (time.perf_counter() - t0) / len(gt)
         res = vo.result()
@@ -162,10 +164,12 @@ def main(argv=None) -> int:
         n_kf = sum(f.status == "keyframe" for f in res.frames)
         print(f"[{mode}] {dt * 1e3:.1f} ms/frame; tracked {len(tr)}/{len(gt)} frames, lost {res.n_lost}, "
               f"segments {res.n_segments}, tracking keyframes {n_kf}")
+        drift = (inv(tr.poses[0]) @ tr.poses[-1])[:3, 3] - (inv(ref[0]) @ ref[-1])[:3, 3]
         print(f"[{mode}] ATE rmse {ate:.3f} m = {100 * ate / L:.2f}% of path {L:.1f} m "
-              f"(end-point drift {np.linalg.norm((inv(tr.poses[0]) @ tr.poses[-1])[:3, 3] - (inv(ref[0]) @ ref[-1])[:3, 3]):.3f} m)")
+              f"(end-point drift {np.linalg.norm(drift):.3f} m)")
         print(f"[{mode}] RPE over 5 m: {rpe_t:.2f}% translation, {rpe_r:.3f} deg/m rotation")
-        print(f"[{mode}] covariance consistency: median NEES of 10-frame motions {nees(tr, gtd, T_bc):.2f} (6 = consistent)")
+        print(f"[{mode}] covariance consistency: median NEES of 10-frame motions {nees(tr, gtd, T_bc):.2f} "
+              f"(6 = consistent)")
     return 0
 
 

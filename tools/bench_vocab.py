@@ -13,6 +13,7 @@ Zipf-like word distribution (~500 features per keyframe).
 from __future__ import annotations
 
 import argparse
+import functools
 import os
 import statistics
 import time
@@ -33,7 +34,8 @@ def synthetic_tree(rng, lo, hi, n_words, dim):
         b = rng.integers(lo, hi + 1, size=len(cur))
         if len(cur) * (lo + hi) / 2 > n_words:  # last level: scale the branching to reach ~n_words
             m = n_words / len(cur)
-            b = rng.integers(max(1, int(m * lo / hi * 2 / 2)), min(hi, int(np.ceil(m * 2 * hi / (lo + hi)))) + 1, size=len(cur))
+            b = rng.integers(max(1, int(m * lo / hi * 2 / 2)), min(hi, int(np.ceil(m * 2 * hi / (lo + hi)))) + 1,
+                             size=len(cur))
             b = np.maximum(1, np.round(b * n_words / b.sum())).astype(int)
         par = np.repeat(np.arange(len(cur)), np.minimum(b, hi))
         noise = (1.2 * 0.6 ** lvl) / np.sqrt(dim)
@@ -65,9 +67,10 @@ def bench_quantize(args, rng):
     for name, (lo, hi) in shapes.items():
         tree = synthetic_tree(rng, lo, hi, args.words, args.dim)
         words = tree.words
-        x = normalise_rows(words[rng.integers(0, len(words), 1000)] + 0.15 * rng.normal(size=(1000, args.dim)) / np.sqrt(args.dim))
-        t_greedy = timed(lambda: tree.quantize(x), args.repeat)
-        t_brute = timed(lambda: tree.quantize_exhaustive(x, chunk=1000), max(2, args.repeat // 10))
+        picked = words[rng.integers(0, len(words), 1000)]  # drawn before the noise
+        x = normalise_rows(picked + 0.15 * rng.normal(size=(1000, args.dim)) / np.sqrt(args.dim))
+        t_greedy = timed(functools.partial(tree.quantize, x), args.repeat)
+        t_brute = timed(functools.partial(tree.quantize_exhaustive, x, chunk=1000), max(2, args.repeat // 10))
         agree = float((tree.quantize(x) == tree.quantize_exhaustive(x)).mean())
         widths = [int(b.max()) for b in tree.branching()]
         print(f"{name:28s} words={tree.n_words:7d} depth={tree.depth} max-branching/level={widths}")
@@ -109,7 +112,7 @@ def bench_query(args, rng):
         t_build = time.perf_counter() - t0
         queries = [random_bow() for _ in range(args.repeat)]
         it = iter(queries * 3)
-        t_q = timed(lambda: db.query(next(it), top_k=5, exclude_recent_n=50), args.repeat - 1)
+        t_q = timed(lambda db=db, it=it: db.query(next(it), top_k=5, exclude_recent_n=50), args.repeat - 1)
         q = queries[0]
         cur_idf = db.idf()
         n_brute = min(1000, args.keyframes)

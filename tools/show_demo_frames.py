@@ -40,7 +40,10 @@ def top_view(gt, odom, pairs, size=(320, 240)):
     W, H = size
     s = min((W - 20) / OUTER[2], (H - 20) / OUTER[3])
     img = np.full((H, W, 3), 255, np.uint8)
-    px = lambda x, y: (int(10 + x * s), int(H - 10 - y * s))
+
+    def px(x, y):
+        return int(10 + x * s), int(H - 10 - y * s)
+
     cv2.rectangle(img, px(OUTER[0], OUTER[1]), px(OUTER[2], OUTER[3]), (0, 0, 0), 2)
     for b in BLOCKS:
         cv2.rectangle(img, px(b[0], b[1]), px(b[2], b[3]), (120, 120, 120), -1)
@@ -70,12 +73,15 @@ def main() -> int:
         tiles.append(label(img if args.color else cv2.cvtColor(to_gray_uint8(img), cv2.COLOR_GRAY2RGB),
                            f"frame {i}  lap {lap:.2f}"))
         depths.append(dep)
-    small = lambda im: cv2.resize(im, (320, 240), interpolation=cv2.INTER_AREA)
+
+    def small(im):
+        return cv2.resize(im, (320, 240), interpolation=cv2.INTER_AREA)
+
     dep_tiles = []
     for k in (0, 2):
         d = np.clip(depths[k] / 12.0, 0, 1)
-        dep_tiles.append(label(small(cv2.applyColorMap((255 * (1 - d)).astype(np.uint8), cv2.COLORMAP_TURBO)[..., ::-1]),
-                               "depth 0-12 m"))
+        coloured = cv2.applyColorMap((255 * (1 - d)).astype(np.uint8), cv2.COLORMAP_TURBO)[..., ::-1]
+        dep_tiles.append(label(small(coloured), "depth 0-12 m"))
     gt50 = make_trajectory("laps", seed=args.seed, rate_hz=50.0)
     odom = simulate_odometry(gt50, seed=args.seed)
     pairs = gt_loop_pairs(gt, T_body_camera=Tbc)
@@ -83,10 +89,9 @@ def main() -> int:
     tv = top_view(gt50, odom, pairs)
     f8v = top_view(f8, f8, np.zeros((0, 2)))
     f8v = label(f8v, "figure-eight path")
-    row = lambda ims: np.hstack(ims)
-    top = row([cv2.resize(t, (480, 360), interpolation=cv2.INTER_AREA) for t in tiles[:3]])
-    mid = row([cv2.resize(t, (480, 360), interpolation=cv2.INTER_AREA) for t in tiles[3:]])
-    bottom = row(dep_tiles + [tv, f8v])
+    top = np.hstack([cv2.resize(t, (480, 360), interpolation=cv2.INTER_AREA) for t in tiles[:3]])
+    mid = np.hstack([cv2.resize(t, (480, 360), interpolation=cv2.INTER_AREA) for t in tiles[3:]])
+    bottom = np.hstack(dep_tiles + [tv, f8v])
     bottom = np.hstack([bottom, np.full((240, top.shape[1] - bottom.shape[1], 3), 255, np.uint8)])
     mosaic = np.vstack([top, mid, bottom])
     cv2.imwrite(args.out, cv2.cvtColor(mosaic, cv2.COLOR_RGB2BGR))

@@ -68,7 +68,9 @@ class HomographyScores:
     n_keypoints: tuple[int, int]
 
 
-def homography_scores(f1: Features, f2: Features, H: np.ndarray, thr: float = 3.0, border: float = 4.0) -> HomographyScores:
+def homography_scores(
+    f1: Features, f2: Features, H: np.ndarray, thr: float = 3.0, border: float = 4.0
+) -> HomographyScores:
     """Repeatability and mutual-NN precision of ``f1`` (image) vs ``f2`` (image warped by ``H``)."""
     Hinv = np.linalg.inv(H)
     k1, k2 = f1.keypoints.astype(np.float64), f2.keypoints.astype(np.float64)

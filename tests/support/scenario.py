@@ -90,7 +90,9 @@ def _exp_small(xi: np.ndarray) -> np.ndarray:
     return T
 
 
-def make_scenario(gt_path: str | Path, conf: ScenarioConfig | None = None, times_path: str | Path | None = None) -> Scenario:
+def make_scenario(
+    gt_path: str | Path, conf: ScenarioConfig | None = None, times_path: str | Path | None = None
+) -> Scenario:
     c = conf or ScenarioConfig()
     rng = np.random.default_rng(c.seed)
     gt_all = read_kitti_poses(gt_path)
@@ -149,7 +151,8 @@ def make_scenario(gt_path: str | Path, conf: ScenarioConfig | None = None, times
         made += 1
     loops.sort(key=lambda x: x[0])
     closures = [
-        LoopClosure(query_id=q, match_id=m, T_match_query=Z, information=info.copy(), query_stamp=int(stamps[q]), match_stamp=int(stamps[m]))
+        LoopClosure(query_id=q, match_id=m, T_match_query=Z, information=info.copy(),
+                    query_stamp=int(stamps[q]), match_stamp=int(stamps[m]))
         for q, m, Z, _ in loops
     ]
     is_true = np.array([t for *_, t in loops], dtype=bool)

@@ -15,7 +15,8 @@ from slam_lcd.backend.pose_graph import isam2_params
 
 
 def between_factor(e: G2oEdge) -> gtsam.BetweenFactorPose3:
-    return gtsam.BetweenFactorPose3(e.i, e.j, gtsam.Pose3(e.T_i_j), gtsam.noiseModel.Gaussian.Information(e.information))
+    return gtsam.BetweenFactorPose3(e.i, e.j, gtsam.Pose3(e.T_i_j),
+                                    gtsam.noiseModel.Gaussian.Information(e.information))
 
 
 def prior_factor(key: int, T: np.ndarray, sigma: float = 1e-4) -> gtsam.PriorFactorPose3:
@@ -32,7 +33,7 @@ def to_values(poses: dict[int, np.ndarray]) -> gtsam.Values:
 def from_values(values: gtsam.Values) -> dict[int, np.ndarray]:
     flat = np.asarray(gtsam.utilities.extractPose3(values))
     out = {}
-    for row, k in zip(flat, values.keys()):
+    for row, k in zip(flat, values.keys(), strict=True):
         T = np.eye(4)
         T[:3, :3] = row[:9].reshape(3, 3)
         T[:3, 3] = row[9:12]
@@ -48,7 +49,9 @@ def batch_graph(edges: list[G2oEdge], anchor: int, T_anchor: np.ndarray) -> gtsa
     return g
 
 
-def solve_lm(graph: gtsam.NonlinearFactorGraph, initial: gtsam.Values, max_iterations: int = 100) -> tuple[gtsam.Values, float]:
+def solve_lm(
+    graph: gtsam.NonlinearFactorGraph, initial: gtsam.Values, max_iterations: int = 100
+) -> tuple[gtsam.Values, float]:
     """Plain batch Levenberg-Marquardt; returns (values, seconds)."""
     p = gtsam.LevenbergMarquardtParams()
     p.setMaxIterations(max_iterations)
