@@ -26,16 +26,17 @@ from __future__ import annotations
 import logging
 import time
 from collections import deque
-from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass
-from typing import Callable
+from collections.abc import Callable
+from concurrent.futures import Future
 
 import numpy as np
 
 from .backend import PoseGraph, correct_full_rate
 from .backend.pose_graph import ACCEPTED
 from .config import Config
+from .extract_ahead import ExtractionPool
 from .frontend import KeyframeSelector
+from .frontend.frame_queue import Frame, FrameQueue
 from .frontend.odometry_buffer import OdometryBuffer
 from .lcd import LoopDetector
 from .runtime.stage_timer import StageTimer, resident_kb
@@ -43,15 +44,6 @@ from .runtime.thread_limits import limited_threads
 from .types import CameraModel, Keyframe, LoopClosure, Trajectory
 
 log = logging.getLogger(__name__)
-
-
-@dataclass
-class _Frame:
-    stamp: int
-    image: np.ndarray
-    depth: np.ndarray | None = None
-    right_image: np.ndarray | None = None
-    colour: np.ndarray | None = None
 
 
 class Pipeline:
@@ -109,23 +101,19 @@ class Pipeline:
         self.keyframes: list[Keyframe] = []
         self.closures: list[LoopClosure] = []
         self._odom = OdometryBuffer()
-        self._pending: list[_Frame] = []
+        self._frames = FrameQueue()  # frames waiting for odometry (slam_lcd.frontend.frame_queue)
         # when the log carries depth, a frame waits for its depth image (or for the next frame):
         # message order at equal stamps differs between log formats, the result must not
         self.expect_depth = bool(expect_depth)
-        self._early_depth: dict[int, np.ndarray] = {}  # depth that arrived before its image
         self._segment_from: int | None = None  # stamp of an odometry break not yet handed to a keyframe
         self._finalized = False
         self._detector_stale = self._stale_warned = False  # an interrupt inside the detector: no more detection
         # keyframes handed in, made by the selector but not handed in, waiting for features / loops
         self._n_submitted = 0
         self._unsubmitted: list[tuple[int, Keyframe]] = []
-        self._ahead = max(0, int(self.config.run.extract_ahead))
-        self._lcd_threads = int(self.config.run.lcd_threads) if self._ahead else 0  # leave a core to extraction
-        self._workers = self._extract_workers()
-        self._torch_threads_before: int | None = None  # torch's own thread count while the workers share it out
+        self._extraction = ExtractionPool(self.config.run, extractor)  # background extraction (slam_lcd.extract_ahead)
+        self._ahead = self._extraction.ahead
         self._inflight: deque[tuple[Keyframe, Future | None]] = deque()
-        self._executor: ThreadPoolExecutor | None = None
         # per keyframe: seconds of loop detection (and its parts), of the back end, resident kB after it
         self.keyframe_seconds: list[dict[str, float]] = []
         # a multi-session map (slam_lcd.map.Map): its keyframes are loop candidates; loops to them are
@@ -167,21 +155,13 @@ class Pipeline:
 
         ``colour``: the same frame in colour (RGB uint8) when ``image`` is its grey version; only the
         map cloud uses it (the features see ``image``)."""
-        if depth is None:
-            depth = self._early_depth.pop(int(stamp_ns), None)
-        self._pending.append(_Frame(int(stamp_ns), image, depth, right_image, colour))
+        self._frames.add(stamp_ns, image, depth, right_image, colour)
         return self._release(final=False)
 
     def add_depth(self, stamp_ns: int, depth: np.ndarray) -> list[LoopClosure]:
         """A depth image for the frame of the same stamp, whether that frame came before or comes after."""
-        stamp_ns = int(stamp_ns)
-        for f in self._pending:
-            if f.stamp == stamp_ns:
-                f.depth = depth
-                return self._release(final=False)
-        self._early_depth[stamp_ns] = depth
-        while len(self._early_depth) > 8:  # depth whose image never came: keep only the newest
-            self._early_depth.pop(min(self._early_depth))
+        if self._frames.add_depth(stamp_ns, depth):
+            return self._release(final=False)
         return []
 
     def add_keyframe(self, kf: Keyframe) -> list[LoopClosure]:
@@ -198,34 +178,12 @@ class Pipeline:
         future = None
         if kf.features is None and kf.image is not None:
             if self._ahead > 0:
-                future = self._worker().submit(self._extract, kf.stamp, kf.image)
+                future = self._extraction.submit(self._extract, kf.stamp, kf.image)
             else:
                 kf.features = self._extract(kf.stamp, kf.image)
         self._inflight.append((kf, future))
         self._n_submitted += 1  # queued: an interrupt before this line hands the keyframe over again
         return self._drain(keep=self._ahead)
-
-    def _extract_workers(self) -> int:
-        """Extraction threads (``run.extract_workers``): several only for a torch model on the CPU."""
-        n = int(self.config.run.extract_workers)
-        device = getattr(getattr(self.extractor, "device", None), "type", None)
-        if self._ahead == 0 or device != "cpu":
-            return 1
-        if n == 0:
-            import torch
-
-            n = torch.get_num_threads()
-        return max(1, min(n, self._ahead))
-
-    def _worker(self) -> ThreadPoolExecutor:
-        if self._executor is None:
-            if self._workers > 1:  # N keyframes at once, torch's threads shared out between them
-                import torch
-
-                self._torch_threads_before = torch.get_num_threads()
-                torch.set_num_threads(max(1, self._torch_threads_before // self._workers))
-            self._executor = ThreadPoolExecutor(max_workers=self._workers, thread_name_prefix="slam-lcd-features")
-        return self._executor
 
     def _drain(self, keep: int) -> list[LoopClosure]:
         """Detect loops on the oldest waiting keyframes until at most ``keep`` wait."""
@@ -294,9 +252,12 @@ class Pipeline:
         return accepted
 
     def _sink(self, kf: Keyframe) -> None:
+        sink = self.keyframe_sink
+        if sink is None:
+            return
         try:
             with self.timer("keyframe_sink"):
-                self.keyframe_sink(kf)
+                sink(kf)
         except Exception as e:  # pictures are a nicety: never cost the run (said once)
             log.warning("keyframe %d not kept for the loop pictures (%s); no more are kept", kf.id, e)
             self.keyframe_sink = None
@@ -323,7 +284,7 @@ class Pipeline:
         done = False
         try:
             busy = any(f is not None and not f.done() for _, f in self._inflight)  # extraction running now
-            with self.timer("loop_detection"), limited_threads(self._lcd_threads if busy else 0):
+            with self.timer("loop_detection"), limited_threads(self._extraction.lcd_threads if busy else 0):
                 closures = det.add(kf, insert=self._insert_keyframes)
             done = True
             return closures
@@ -335,14 +296,7 @@ class Pipeline:
 
     def close(self) -> None:
         """Stop the background extraction thread (waiting keyframes are not processed)."""
-        if self._executor is not None:
-            self._executor.shutdown(wait=True, cancel_futures=True)
-            self._executor = None
-        if self._torch_threads_before is not None:
-            import torch
-
-            torch.set_num_threads(self._torch_threads_before)
-            self._torch_threads_before = None
+        self._extraction.close()
 
     # ------------------------------------------------------------------ internals
     def _extract(self, stamp: int, image: np.ndarray):
@@ -352,33 +306,24 @@ class Pipeline:
             return self.extractor.extract(image)
 
     def _release(self, final: bool) -> list[LoopClosure]:
-        """Process the frames odometry covers (all with ``final``); with ``expect_depth`` the newest waits for its depth."""
+        """Process the frames odometry covers (all with ``final``); with ``expect_depth`` the newest waits for
+        its depth."""
         out: list[LoopClosure] = []
         if not self._odom:
             if final:
-                self._pending.clear()
+                self._frames.clear()
             return out
-        last = self._odom.stamps[-1]
-        keep, ready = [], []
-        newest = self._pending[-1] if self._pending else None
-        for f in self._pending:
-            complete = f.depth is not None or not self.expect_depth or f is not newest
-            if (f.stamp <= last and complete) or final:
-                if f.stamp < self._odom.stamps[0]:
-                    continue  # before the first odometry sample: no pose to attach
-                ready.append(f)
-            else:
-                keep.append(f)
-        self._pending = keep
+        ready = self._frames.take_ready(self._odom.stamps[0], self._odom.stamps[-1], final=final,
+                                        expect_depth=self.expect_depth)
         for i, f in enumerate(ready):
             try:
                 out += self._process(f)
             except BaseException:
-                self._pending = ready[i + 1:] + self._pending  # interrupted: the rest stays queued
+                self._frames.put_back(ready[i + 1:])  # interrupted: the rest stays queued
                 raise
         return out
 
-    def _process(self, f: _Frame) -> list[LoopClosure]:
+    def _process(self, f: Frame) -> list[LoopClosure]:
         T, cov = self._odom.at(f.stamp)
         features = None
         if self.config.run.keyframe_on_overlap and self.config.frontend.kf_min_overlap > 0:

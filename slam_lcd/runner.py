@@ -1,9 +1,10 @@
-"""``slam-lcd run``: choose the sources of a log, drive them into the :class:`~slam_lcd.pipeline.Pipeline`, write the outputs.
+"""``slam-lcd run``: choose the sources of a log, drive them into the :class:`~slam_lcd.pipeline.Pipeline`,
+write the outputs.
 
 Sources (:mod:`slam_lcd.sensors`): the topics (explicit flags win, else the log's only
 camera image, its CameraInfo and depth, the only ``nav_msgs/Odometry``, a ground-truth
 pose topic whose name says so), their decoding, the camera mounting and, for a log without
-odometry, the built-in visual odometry as the odometry source. Outputs
+odometry, the built-in visual odometry as the odometry source (chosen in :mod:`slam_lcd.run_sources`). Outputs
 (:mod:`slam_lcd.outputs`): :data:`RUN_OUTPUTS`, written as one set into ``out_dir``.
 
 Bad input fails before any work, in one line that names the log (and the flag, topic and
@@ -13,7 +14,6 @@ its topic and stamp; nothing is written then, and an earlier run's folder is unt
 """
 from __future__ import annotations
 
-import dataclasses
 import logging
 import os
 import time
@@ -21,7 +21,7 @@ from collections import deque
 from pathlib import Path
 
 from .config import Config, validate_config
-from .errors import DamagedImageError, FileMissingError, PipelineError, stamp_text
+from .errors import DamagedImageError, FileMissingError, PipelineError
 from .io import open_log
 from .io.prefetch import prefetched
 from .io.raw_spool import RawSpool
@@ -30,14 +30,21 @@ from .outputs.corrected_log import copied_topics
 from .outputs.output_set import OutputSet
 from .outputs.result import RunResult
 from .outputs.write import RUN_OUTPUTS, write_set
+from .run_sources import (
+    calibrated_camera,
+    calibration_of,
+    cloud_sensor,
+    ground_truth_tf,
+    log_frames,
+    make_pipeline,
+    map_cloud_builder,
+    no_keyframe_reason,
+    odometry_and_stereo,
+    set_calibrated_camera,
+)
 from .runtime.interrupts import interrupted_word
 from .runtime.progress import progress_bar
-from .sensors.ground_truth import (
-    POSITION_ONLY_NOTE,
-    decode_ground_truth,
-    ground_truth_from_messages,
-    ground_truth_from_tf,
-)
+from .sensors.ground_truth import POSITION_ONLY_NOTE, decode_ground_truth, ground_truth_from_messages
 from .sensors.messages import (
     at_message,
     check_first_messages,
@@ -48,15 +55,8 @@ from .sensors.messages import (
     decode_gray,
     decode_pose_of,
 )
-from .sensors.mounting import body_frame_of, calibrated_mounting, mounting_from_camera_info, static_transforms
-from .sensors.topics import (
-    Topics,
-    choose_right_topic,
-    choose_topics,
-    configured_topics,
-    copyable_topics,
-    static_tf_topics,
-)
+from .sensors.mounting import body_frame_of, mounting_from_camera_info, static_transforms
+from .sensors.topics import Topics, choose_topics, configured_topics, copyable_topics
 from .types import Trajectory
 from .vision.gray import image_to_gray
 
@@ -132,7 +132,7 @@ def run_log(
         raise FileMissingError("no such log file or directory", log_path)
     if gt_file is not None and not Path(gt_file).is_file():
         raise FileMissingError("ground-truth trajectory file not found (--gt)", gt_file)
-    calibration = _calibration(calib)
+    calibration = calibration_of(calib)
     extra_inputs = dict(input_paths or {})
     if calibration is not None:
         extra_inputs.update({f"--calib {i}": p for i, p in enumerate(calibration.sources)})
@@ -151,36 +151,22 @@ def run_log(
             flags = configured_topics(reader, cfg.sensors, image_topic, odom_topic, gt_topic, depth_topic, right_topic)
             right_topic = flags.pop("right_topic")
             topics = choose_topics(reader, **flags)
-            calibrated = _calibrated_camera(calibration, topics, log_path)
+            calibrated = calibrated_camera(calibration, topics, log_path)
             first = check_first_messages(reader, topics)
             check_image_sizes(reader, topics, first, calibrated, calibration)
             result.topics = {k: v for k, v in vars(topics).items() if v}
-            result.frames = _log_frames(first, topics)
+            result.frames = log_frames(first, topics)
             result.gt_source = (f"file {gt_file}" if gt_file is not None else
                                 f"topic {topics.gt}" if topics.gt else None)
-            gt_from_tf = None
-            if topics.gt_frames is not None:  # a TF chain: read before streaming (a tiny topic)
-                gt_from_tf = ground_truth_from_tf(reader, topics.gt, *topics.gt_frames, static_tf_topics(reader))
+            gt_from_tf = ground_truth_tf(reader, topics)
             if topics.gt_position_only:
                 result.alignment = f"{cfg.eval.align}; {POSITION_ONLY_NOTE}"
                 log.warning("%s: %s", log_path, POSITION_ONLY_NOTE)
             mcap_wanted = write_mcap and cfg.run.write_mcap
             copy_topics = copyable_topics(reader, cfg.run.copy_images, log_path) if mcap_wanted else []
-            vo_odometry = None
-            right, rectifier, partner, stereo = None, None, None, None
-            if topics.depth is None:  # a stereo pair instead: the VO (without odometry) and the loop poses' points
-                partner = calibration.stereo_partner(calibrated) if calibrated is not None else None
-                right = choose_right_topic(reader, topics.image, right_topic,
-                                           partner[0].rostopic if partner is not None else None)
-                if right is None and topics.odom is None:
-                    raise PipelineError(_no_odometry_reason(topics.image), log_path)
-                if right is not None and (partner is not None or topics.odom is None):
-                    rectifier = _rectifier(calibration, calibrated, log_path)
-            if topics.odom is None:
-                vo_odometry = _visual_odometry(log_path, topics, cfg, calibrated, right, rectifier)
+            vo_odometry, stereo, right = odometry_and_stereo(reader, topics, right_topic, cfg, calibration,
+                                                             calibrated, log_path)
             if right is not None:
-                stereo = _stereo_frames(reader, right, calibrated, rectifier, vo_odometry)
-                topics.right = right if stereo is not None else None
                 result.topics["right"] = right
             tf = static_transforms(reader, log_path)
             if cfg.run.loop_pictures:  # a working folder inside the staging folder: discarded with it on failure
@@ -189,19 +175,13 @@ def run_log(
                 album = KeyframeAlbum(outputs.staging / ".loop_keyframes", cfg.lcd.descriptor_dtype)
             if copy_topics:  # the topics corrected.mcap copies, kept undecoded from the one pass over the log
                 spool = RawSpool(outputs.staging / ".corrected_mcap_spool", copied_topics(copy_topics))
-            map_cloud = _map_cloud_builder(cfg, topics, stereo, outputs, result, log_path)
-            pipe = _make_pipeline(cfg, extractor, vocab, log_path, topics, album,
+            map_cloud = map_cloud_builder(cfg, topics, stereo, outputs, result, log_path)
+            pipe = make_pipeline(cfg, extractor, vocab, log_path, topics, album,
                                   rectified=stereo is not None and stereo.rectifier is not None, map=map,
                                   map_mode=map_mode, map_cloud=map_cloud)
             if calibrated is not None:  # the calibration file's camera (CameraInfo is not read then)
-                T_bc = (vo_odometry.T_body_camera if vo_odometry is not None else
-                        calibrated_mounting(cfg.frontend, calibrated, tf, body_frame_of(first.get(topics.odom))))
-                if stereo is not None and stereo.rectifier is not None:  # the main pass sees the rectified pair
-                    pipe.set_camera(stereo.rectifier.camera, T_bc @ stereo.rectifier.T_cam0_rect)
-                elif stereo is not None and not calibrated.camera.baseline:  # the baseline of the pair
-                    pipe.set_camera(dataclasses.replace(calibrated.camera, baseline=stereo.baseline), T_bc)
-                else:
-                    pipe.set_camera(calibrated.camera, T_bc)
+                set_calibrated_camera(pipe, cfg, calibrated, vo_odometry, stereo, tf,
+                                      body_frame_of(first.get(topics.odom)))
             if vo_odometry is not None:  # built-in VO ran first: its poses are the odometry
                 for stamp, T, cov, segment_start in vo_odometry.odometry_samples():
                     pipe.add_odometry(stamp, T, cov, segment_start=segment_start)
@@ -211,7 +191,7 @@ def run_log(
                                       vo_odometry, log_path, progress, stereo, spool)
             result.log_duration_s = reader.duration_ns * 1e-9
             if map_cloud is not None:
-                result.map_cloud_sensor = _cloud_sensor(pipe, topics, stereo, calibration)
+                result.map_cloud_sensor = cloud_sensor(pipe, topics, stereo, calibration)
             if gt_from_tf is not None:
                 gt_traj_from_log = gt_from_tf
 
@@ -227,7 +207,7 @@ def run_log(
             notes.append(f"The back end's final re-check (GNC) was interrupted ({signal_name()}) and skipped.")
             result.interrupted = True
         if not result.interrupted and not pipe.keyframes:
-            raise PipelineError(_no_keyframe_reason(pipe, topics, result.n_frames), log_path)
+            raise PipelineError(no_keyframe_reason(pipe, topics, result.n_frames), log_path)
         if gt_traj is None:
             gt_traj = gt_traj_from_log
         if gt_traj is None:
@@ -247,32 +227,6 @@ def run_log(
     write_set(outputs, pipe, result, gt_traj, log_path if mcap_wanted else None, copy_topics, notes, read_to_end,
               album=album, spool=spool, surfaces=surfaces)
     return result
-
-
-def _map_cloud_builder(cfg, topics: Topics, stereo, outputs: OutputSet, result: RunResult, log_path):
-    """The map cloud's builder (its store inside the staging folder), or None with the reason in ``result``."""
-    if not cfg.map_cloud.enabled:
-        return None
-    if topics.depth is None and stereo is None:
-        reason = "the log has no depth image and no stereo pair with a baseline"
-        log.warning("%s: no map cloud (map.ply): %s", log_path, reason)
-        result.map_cloud = {"built": False, "reason": reason}
-        return None
-    from .cloud import MapCloudBuilder
-
-    source = topics.depth if topics.depth is not None else f"{topics.image} + {topics.right}"
-    return MapCloudBuilder(cfg.map_cloud, source=f"{log_path}: {source}", folder=outputs.staging)
-
-
-def _cloud_sensor(pipe, topics: Topics, stereo, calibration) -> dict:
-    """Where the cloud's points came from: ``export-map`` reads the same topics with the same camera."""
-    from .outputs.map_cloud import camera_facts
-
-    return {"kind": "depth" if topics.depth is not None else "stereo", "image_topic": topics.image,
-            "depth_topic": topics.depth, "right_topic": topics.right if topics.depth is None else None,
-            "rectified": bool(stereo is not None and stereo.rectifier is not None),
-            "calibration": [str(p) for p in calibration.sources] if calibration is not None else None,
-            "camera": camera_facts(pipe.camera, pipe.T_body_camera)}
 
 
 def _import_in_background(module: str) -> None:
@@ -320,23 +274,10 @@ class _ReadAheadJudge:
             return False
         self.seen = n
         self.marks.append((time.perf_counter(), self.timer.seconds["features_wait"]))
-        if len(self.marks) < self.marks.maxlen:
+        if len(self.marks) <= _READ_AHEAD_AFTER:  # not yet the last _READ_AHEAD_AFTER keyframes' span
             return False
         (t0, w0), (t1, w1) = self.marks[0], self.marks[-1]
         return w1 - w0 < _READ_AHEAD_MAX_WAIT * (t1 - t0)
-
-
-def _log_frames(first: dict, topics: Topics) -> dict:
-    """The odometry's frame_id and child_frame_id and the ground truth's frame_id (from their first messages)."""
-    frames = {}
-    m = first.get(topics.odom) if topics.odom else None
-    if m is not None:
-        frames["odom"] = m.msg.header.frame_id.lstrip("/") or None
-        frames["body"] = (getattr(m.msg, "child_frame_id", "") or "").lstrip("/") or None
-    g = first.get(topics.gt) if topics.gt else None
-    if g is not None and hasattr(g.msg, "header"):
-        frames["gt"] = g.msg.header.frame_id.lstrip("/") or None
-    return {k: v for k, v in frames.items() if v}
 
 
 def _append_to_map(map, pipe, result: RunResult, log_path: Path, name: str | None, gt, notes: list[str]) -> dict:
@@ -350,32 +291,6 @@ def _append_to_map(map, pipe, result: RunResult, log_path: Path, name: str | Non
     joined = map.add_session(pipe, name=name or log_path.stem, log_path=log_path, ground_truth=gt)
     map.save()
     return map_summary(map, joined, current=map.session_names[-1], pipe=pipe)
-
-
-def _make_pipeline(cfg, extractor, vocab, log_path, topics: Topics, keyframe_sink=None, rectified: bool = False,
-                   map=None, map_mode: str = "append", map_cloud=None):
-    """The pipeline with its collaborators: the extractor, the vocabulary (None: online), the feature
-    cache of this log (``rectified``: the images are the rectified pair's, cached apart from the raw
-    ones), whether frames wait for depth, the loop pictures' keyframe album."""
-    from .features import load_extractor
-    from .pipeline import Pipeline  # imported late: topic errors need no model
-
-    extractor = extractor if extractor is not None else load_extractor(cfg.features)
-    feature_source = None
-    if cfg.features.feature_cache:
-        from .features import FeatureCache
-
-        cache = FeatureCache(extractor)
-
-        cache_topic = f"{topics.image}#rectified" if rectified else topics.image
-
-        def feature_source(stamp, img):
-            return cache.extract(log_path, cache_topic, stamp, img)
-
-    return Pipeline(cfg, extractor=extractor, vocab=vocab, feature_source=feature_source,
-                    expect_depth=topics.depth is not None, keyframe_sink=keyframe_sink,
-                    loop_sink=getattr(keyframe_sink, "keep_loop", None), map=map, map_mode=map_mode,
-                    map_cloud=map_cloud)
 
 
 def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame, vo_odometry, log_path,
@@ -446,12 +361,12 @@ def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame,
             elif stereo is not None and m.topic == topics.right:
                 try:
                     with pipe.timer("decode"), at_message(m, log_path):
-                        right = decode_gray(m)
+                        right_gray = decode_gray(m)
                 except DamagedImageError as e:
                     damaged.append(e)
                     continue
                 with at_message(m, log_path, decoding=False):
-                    for stamp, left, right in stereo.add_right(m.stamp, right):
+                    for stamp, left, right in stereo.add_right(m.stamp, right_gray):
                         pipe.add_image(stamp, left, right_image=right)
             elif m.topic == topics.gt:
                 with at_message(m, log_path):
@@ -476,98 +391,6 @@ def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame,
     if damaged:
         log.warning("%s: %d damaged image message(s) skipped; the first: %s", log_path, len(damaged),
                     damaged[0].problem)
+    if topics.gt is None:  # no ground-truth topic streamed: nothing was read on the way
+        return None
     return ground_truth_from_messages(gt_st, gt_T, log_path, topics.gt)
-
-
-def _no_keyframe_reason(pipe, topics: Topics, n_frames: int) -> str:
-    odom = pipe.odometry_trajectory()
-    span = (f"odometry from {stamp_text(odom.stamps[0])} to {stamp_text(odom.stamps[-1])}" if len(odom)
-            else "no odometry sample")
-    source = topics.odom or "the visual odometry"
-    return (f"no keyframe was made from the {n_frames} frames of {topics.image}: none falls within the odometry "
-            f"of {source} ({span}); nothing to correct")
-
-
-def _visual_odometry(log_path, topics: Topics, cfg, calibrated=None, right_topic: str | None = None,
-                     rectifier=None):
-    """Built-in RGB-D (or, with ``right_topic``, stereo) visual odometry over the whole log (a first
-    pass; see slam_lcd.sensors.log_vo)."""
-    from .sensors.log_vo import visual_odometry_from_log
-
-    kind = f"stereo visual odometry on {topics.image} + {right_topic}" if right_topic else \
-        f"RGB-D visual odometry on {topics.image} + {topics.depth}"
-    log.warning("%s: no odometry topic; running the built-in %s first", log_path, kind)
-    cam = calibrated.camera if calibrated is not None else None
-    T_bc = calibrated.T_body_camera if calibrated is not None else None
-    return visual_odometry_from_log(log_path, cfg.frontend, image_topic=topics.image, depth_topic=topics.depth,
-                                    right_topic=right_topic, camera_info_topic=topics.camera_info, camera=cam,
-                                    T_body_camera=T_bc, rectifier=rectifier, depth_unit_m=cfg.sensors.depth_unit_m)
-
-
-def _no_odometry_reason(image_topic: str) -> str:
-    """What a monocular log without odometry lacks, and the three ways to provide it."""
-    return (f"no odometry: the log has no odometry topic (nav_msgs/Odometry), no depth image and no second camera "
-            f"beside {image_topic}, and one camera alone gives no metric odometry; pass --odom-topic TOPIC (an "
-            f"odometry or pose topic of the log), --depth-topic TOPIC (RGB-D visual odometry) or --right-topic TOPIC "
-            f"(a second camera: stereo visual odometry; a raw pair is rectified with --calib)")
-
-
-def _stereo_frames(reader, right: str, calibrated, rectifier, vo_odometry):
-    """The pairing of left and right images that gives the loop poses stereo points, or None (said)
-    when the baseline of the pair is unknown."""
-    from .sensors.stereo_pairs import StereoFrames, right_camera_info_baseline
-
-    if rectifier is not None:
-        baseline = rectifier.camera.baseline
-    else:
-        baseline = ((calibrated.camera.baseline if calibrated is not None else None)
-                    or (vo_odometry.camera.baseline if vo_odometry is not None else None)
-                    or right_camera_info_baseline(reader, right))
-    if not baseline:
-        log.warning("%s: stereo pair %s has no baseline (no right CameraInfo projection, no calibration): "
-                    "loop poses get no stereo points", reader.path, right)
-        return None
-    log.info("%s: loop poses take their 3-D points from the stereo pair (+ %s)%s", reader.path, right,
-             ", rectified for the main pass too" if rectifier is not None else "")
-    return StereoFrames(right, baseline=baseline, rectifier=rectifier)
-
-
-def _rectifier(calibration, calibrated, log_path):
-    """None for a rectified pair (or one described by CameraInfo); else the rectification of the
-    calibrated pair (:mod:`slam_lcd.sensors.rectify`): the stereo VO matches along image rows."""
-    from .sensors.rectify import is_rectified, stereo_rectifier
-
-    if calibration is None or calibrated is None:
-        return None  # CameraInfo pairs: the right camera's projection gives the baseline of a rectified pair
-    partner = calibration.stereo_partner(calibrated)
-    if partner is None:
-        raise PipelineError(f"{calibration.describe()}: camera {calibrated.name} has no second camera with an "
-                            "extrinsic, so the stereo baseline is unknown", log_path)
-    if is_rectified(calibrated.camera, partner[0].camera, partner[1]):
-        return None
-    log.warning("%s: cameras %s and %s of %s are not a rectified pair: the stereo VO rectifies them", log_path,
-                calibrated.name, partner[0].name, calibration.describe())
-    return stereo_rectifier(calibrated.camera, partner[0].camera, partner[1], calibration.sources[0])
-
-
-def _calibration(calib):
-    """None, or the :class:`~slam_lcd.sensors.calibration.Calibration` of ``calib`` (paths or loaded)."""
-    from .sensors.calibration import Calibration, load_calibration
-
-    if calib is None or isinstance(calib, Calibration):
-        return calib
-    return load_calibration(calib)
-
-
-def _calibrated_camera(calibration, topics: Topics, log_path):
-    """The calibration's camera of the image topic; it wins over the log's CameraInfo (said in the log)."""
-    if calibration is None:
-        return None
-    cam = calibration.camera_for(topics.image)
-    if topics.camera_info is not None:
-        log.warning("%s: --calib wins: camera %s of %s is used, not the log's CameraInfo %s", log_path, cam.name,
-                    calibration.describe(), topics.camera_info)
-        topics.camera_info = None
-    else:
-        log.info("%s: camera %s of %s for %s", log_path, cam.name, calibration.describe(), topics.image)
-    return cam

@@ -3,7 +3,8 @@
 This module keeps iSAM2 and the Python-side lists in step; the decisions live in modules
 usable without a ``PoseGraph``: :mod:`.gate`: accept/reject one new loop (chi-square against the estimate, PCM pairwise
   tests), behind the small :class:`~slam_lcd.backend.gate.LoopGate` protocol; :mod:`.gnc`:
-  the batch GNC (TLS) re-check of the loop factors; :mod:`.loop_factors`: loop closures as ``BetweenFactorPose3``
+  the batch GNC (TLS) re-check of the loop factors (its weights made verdicts: :mod:`.gnc_verdicts`);
+  :mod:`.loop_factors`: loop closures as ``BetweenFactorPose3``
   with robust kernels.
 
 Two ways to run:
@@ -40,6 +41,7 @@ from .config import BackendConfig, gnc_due
 from .g2o import G2oEdge
 from .gate import ChainRelatives, GateLoop, LoopGate, default_gate
 from .gnc import gnc_loop_weights
+from .gnc_verdicts import gnc_changes, record_gnc_verdicts
 from .graph_outputs import GraphOutputs
 from .loop_factors import robust_kernel, valid_information
 from .poses import check_pose, isam2_params, values_to_array
@@ -334,32 +336,13 @@ class PoseGraph(GraphOutputs):
                                max_iterations=self.conf.gnc_max_iterations)
         # decide first, then change iSAM2 and the records together (an interrupt in between
         # leaves the records as iSAM2 is)
-        stats, add, remove = [], [], []
-        for lp, wi, chi2 in zip(cands, res.weights, res.residual_chi2, strict=True):
-            stats.append((lp, float(wi), float(chi2)))
-            inlier = wi >= self.conf.gnc_outlier_weight
-            if inlier and lp.record.verdict == REJECTED:
-                add.append(lp)
-            elif not inlier and lp.record.verdict == ACCEPTED:
-                remove.append(lp)
-        add_ids, remove_ids = {id(lp) for lp in add}, {id(lp) for lp in remove}
-        changed = []
+        stats, add, remove = gnc_changes(cands, res.weights, res.residual_chi2, self.conf.gnc_outlier_weight)
+        changed: list[LoopRecord] = []
         try:
             if add or remove:
                 self._isam_apply(add=add, remove=remove)
         finally:
-            for lp, wi, chi2 in stats:
-                rec = lp.record
-                rec.gnc_weight, rec.chi2_residual = wi, chi2
-                if id(lp) in add_ids and lp.isam_index is not None:
-                    lp.set_verdict(ACCEPTED, "gnc",
-                                   f"restored by GNC re-check (weight {wi:.2f}, residual chi2 {chi2:.1f})")
-                elif id(lp) in remove_ids and lp.isam_index is None:
-                    lp.set_verdict(REJECTED, "gnc", f"GNC (TLS) outlier: weight {wi:.2f}, residual chi2 {chi2:.1f}")
-                else:
-                    continue
-                rec.history.append(f"{rec.verdict}: {rec.reason}")
-                changed.append(rec)
+            changed = record_gnc_verdicts(stats, add, remove)
         self.gnc_times.append(time.perf_counter() - t0)
         self._last_gnc_values = res.values
         return changed

@@ -21,11 +21,10 @@ from ..errors import InputError
 from ..features.matching import mutual_nn_match_symmetric
 from ..types import CameraModel, Features, Keyframe, LoopClosure
 from ..vision.camera import default_camera
+from .candidate_check import verify_candidate
 from .config import LcdConfig, stops_at_first_accepted
-from .geometry import estimate_loop_pose, keyframe_points3d
+from .geometry import keyframe_points3d
 from .islands import IslandMember, verification_order
-from .odometry_check import odometry_drift_reason
-from .pair import check_pair
 from .records import CandidateRecord, PartClock, StoredKeyframe, drop_arrays, failed_on_a_count, loop_closure
 from .store import DESCRIPTOR_DTYPES, DescriptorSource, DescriptorStore, compact_descriptors, compact_loaded
 from .temporal import TemporalConsistency
@@ -357,49 +356,8 @@ class LoopDetector:
                      clock: PartClock | None = None) -> CandidateRecord:
         clock = clock or PartClock()
         m = self._entries[cand.match_id]
-        rec = CandidateRecord(q.id, m.id, rank, float(cand.bow_score), query_stamp=q.stamp, match_stamp=m.stamp)
-        if cand.bow_score < c.min_bow_score:
-            rec.reason = "low_bow_score"
-            return rec
-        m_desc = self._store.get(m.id)
-        clock.lap("store")
-        mode = c.verify
-        need_graph = self.run_all_checks or mode in ("graph", "graph+ransac")
-        need_ransac = self.run_all_checks or mode == "ransac"
-        checks = check_pair(q.features, m.features, q_desc, m_desc, q.camera, m.camera, c,
-                            graph=need_graph, ransac=need_ransac,
-                            graph_ransac=self.run_all_checks or mode == "graph+ransac",
-                            match=self._match, clock=clock)
-        rec.n_matches, rec.n_verified = checks.n_matches, checks.n_verified
-        rec.graph, rec.ransac, rec.ransac_on_graph = checks.graph, checks.ransac, checks.ransac_on_graph
-        rec.graph_matches = checks.graph_matches if checks.graph is not None else None
-        matches = checks.graph_matches if need_graph else checks.ransac_matches
-        if not rec.passes(mode):
-            rec.reason = rec.failure(mode)
-            return rec
-        if c.pose:
-            used = matches
-            if mode in ("graph", "graph+ransac") and rec.graph is not None:
-                used = checks.graph_matches[rec.graph.kept]
-            if mode == "ransac" and rec.ransac is not None:
-                used = checks.ransac_matches[rec.ransac.mask]
-            if mode == "graph+ransac" and rec.ransac_on_graph is not None:
-                used = used[rec.ransac_on_graph.mask]
-            rec.pose = estimate_loop_pose(q.keyframe, m.keyframe, used, c, points3d_m=m.points3d,
-                                          source=m.points_source) if m.points3d is not None else \
-                estimate_loop_pose(q.keyframe, m.keyframe, used, c)
-            if rec.pose.ok and rec.pose.tight and m.position >= self._floor:  # odometry links one session only
-                assert rec.pose.T_match_query is not None  # an ok pose has its transform
-                why, rec.pose.odometry = odometry_drift_reason(rec.pose.T_match_query, m.keyframe.T_world_body,
-                                                               q.keyframe.T_world_body, q.path_m - m.path_m, c)
-                if why:
-                    rec.pose = dataclasses.replace(rec.pose, ok=False, reason=why)
-            clock.lap("pose")
-            if not rec.pose.ok and c.require_pose:
-                rec.reason = f"pose:{rec.pose.reason}"
-                return rec
-        rec.accepted, rec.reason = True, "ok"
-        return rec
+        return verify_candidate(c, q, q_desc, m, self._store, cand, rank, clock, run_all_checks=self.run_all_checks,
+                                match=self._match, same_session=m.position >= self._floor)
 
     def _closure(self, r: CandidateRecord) -> LoopClosure:
         return loop_closure(r, self.conf.verify, inter_session=not self.in_current_session(r.match_id))

@@ -25,7 +25,7 @@ K  route                   start_at laps     seed      world_seed lighting expo 
 lighting epoch; ``expo``: a global exposure factor of the renderer. Every field is only a
 default: explicit arguments override it.
 
-World seeds from 1000 on (:data:`slam_lcd.sim.world.OTHER_PLACE_SEED`) are another
+World seeds from 1000 on (:data:`slam_lcd.sim.building.OTHER_PLACE_SEED`) are another
 building on the demo corridors: lamps, floor and ceiling grids, wall materials, decal
 sites, pillars and corner panels stand elsewhere, so session 4 shares neither textures nor
 the 3-D places of its keypoints with sessions 1-3 (below 1000 only textures change).

@@ -1,0 +1,157 @@
+"""The demo log's bytes: a ROS log (MCAP, rosbag2, ROS1 bag) with the topics listed in
+:mod:`slam_lcd.sim.demo_log`, or a plain folder of PNG images and TUM trajectories.
+
+Why apart from :mod:`slam_lcd.sim.demo_log`: that module decides what a log holds (route,
+stamps, odometry, rendered frames); these writers only lay the same content out in one
+format each. They read a scenario (camera, stamps, ground truth, odometry, mounting) and the
+rendered frames ``(index, image, depth | None, right | None)`` in camera order, and return
+``{topic or file: (type, count)}``. A dataset layout's logs are written by
+:mod:`slam_lcd.sim.layouts` instead.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import cv2
+import numpy as np
+
+from ..files.atomic import atomic_path
+from ..types import CameraModel, Trajectory
+from . import rig
+
+if TYPE_CHECKING:
+    from .demo_log import _Scenario
+
+
+def write_demo_log(out, fmt, sc: _Scenario, frames_iter, *, depth, stereo, compressed, color, io_conf):
+    """The demo topics as a ``fmt`` log at ``out``, in time order (camera first at equal stamps)."""
+    from ..io import messages as M
+    from ..io.writers import open_writer
+
+    conf = demo_io_conf(io_conf)
+    cam_frame, right_frame = rig.CAMERA_FRAME, rig.RIGHT_CAMERA_FRAME
+    right_cam = CameraModel(**{**sc.camera.__dict__}) if stereo else None
+    left_cam = CameraModel(**{**sc.camera.__dict__, "baseline": None})
+    types: dict[str, str] = {}
+    odo = sc.odom
+    gt = sc.gt_odo
+    cam_index = {int(s): i for i, s in enumerate(sc.cam_stamps)}
+
+    def put(w, topic, msg, stamp):
+        types.setdefault(topic, msg.__msgtype__)
+        w.write(topic, msg, int(stamp))
+
+    with open_writer(out, fmt, conf=conf) as w:
+        t0 = int(min(sc.cam_stamps[0], sc.odo_stamps[0]))
+        statics = [(sc.T_bc, t0, rig.BODY_FRAME, cam_frame)]
+        if not sc.odom_at_start:  # a session's odometry frame is its own: its relation to the world is unknown
+            statics.append((np.eye(4), t0, rig.WORLD_FRAME, rig.ODOM_FRAME))
+        if stereo:
+            statics.append((sc.T_bc @ rig.T_left_right(rig.STEREO_BASELINE), t0, rig.BODY_FRAME, right_frame))
+        put(w, "/tf_static", M.tf_message(statics), t0)
+        # merge camera frames and odometry samples in time order (camera first at equal stamps)
+        events = ([(int(s), 0, i) for i, s in enumerate(sc.cam_stamps)]
+                  + [(int(s), 1, i) for i, s in enumerate(sc.odo_stamps)])
+        events.sort()
+        frames_iter = iter(frames_iter)
+        for stamp, kind, i in events:
+            if kind == 0:
+                fi, img, dep, right = next(frames_iter)
+                assert fi == cam_index[stamp]
+                put(w, "/camera/camera_info", M.camera_info_msg(left_cam, stamp, cam_frame), stamp)
+                if compressed:
+                    put(w, "/camera/image_raw/compressed",
+                        M.compressed_image_msg(img, stamp, cam_frame, "jpeg", conf.jpeg_quality), stamp)
+                else:
+                    put(w, "/camera/image_raw", M.image_msg(img, stamp, cam_frame), stamp)
+                if dep is not None:
+                    put(w, "/camera/depth", M.image_msg(dep, stamp, cam_frame, "32FC1"), stamp)
+                if right is not None:
+                    put(w, "/camera/right/camera_info", M.camera_info_msg(right_cam, stamp, right_frame), stamp)
+                    if compressed:
+                        put(w, "/camera/right/image_raw/compressed",
+                            M.compressed_image_msg(right, stamp, right_frame, "jpeg", conf.jpeg_quality), stamp)
+                    else:
+                        put(w, "/camera/right/image_raw", M.image_msg(right, stamp, right_frame), stamp)
+            else:
+                put(w, "/odom",
+                    M.odometry_msg(odo.poses[i], odo.covariances[i], stamp, rig.ODOM_FRAME, rig.BODY_FRAME), stamp)
+                put(w, "/ground_truth/pose", M.pose_stamped_msg(gt.poses[i], stamp, sc.world_frame), stamp)
+        counts = dict(w.counts)
+    return {t: (types[t], n) for t, n in counts.items()}
+
+
+def demo_io_conf(io_conf):
+    """``io_conf``, or the defaults with ROS1 bags compressed: raw depth would make them large."""
+    from ..io.config import IOConfig
+
+    conf = io_conf
+    if conf is None:
+        conf = IOConfig()
+        if conf.rosbag1_compression == "none":
+            conf.rosbag1_compression = "lz4"  # 1 GB of raw depth otherwise
+    return conf
+
+
+def _stamp_name(stamp_ns: int) -> str:
+    return f"{stamp_ns // 1_000_000_000}.{(stamp_ns % 1_000_000_000) // 1000:06d}"
+
+
+def _write_tum(path: Path, traj: Trajectory) -> None:
+    """TUM lines ``t x y z qx qy qz qw``."""
+    from ..io.trajectory_files import write_tum
+
+    write_tum(path, traj)
+
+
+def write_demo_folder(out: Path, sc: _Scenario, frames_iter, *, color, depth, stereo):
+    """PNG images, image lists, TUM trajectories and ``camera.yaml``, written atomically (whole or absent)."""
+    import yaml
+
+    counts: dict[str, tuple[str, int]] = {}
+    with atomic_path(out, directory=True) as tmp:
+        tmp.mkdir()
+        (tmp / "image").mkdir()
+        lists = {"image": []}
+        if depth:
+            (tmp / "depth").mkdir()
+            lists["depth"] = []
+        if stereo:
+            (tmp / "right").mkdir()
+            lists["right"] = []
+        for i, img, dep, right in frames_iter:
+            name = _stamp_name(int(sc.cam_stamps[i]))
+            bgr = cv2.cvtColor(img, cv2.COLOR_RGB2BGR) if img.ndim == 3 else img
+            cv2.imwrite(str(tmp / "image" / f"{name}.png"), bgr)
+            lists["image"].append(name)
+            if dep is not None:
+                mm = np.clip(np.round(dep * 1000.0), 0, 65535).astype(np.uint16)
+                cv2.imwrite(str(tmp / "depth" / f"{name}.png"), mm)
+                lists["depth"].append(name)
+            if right is not None:
+                cv2.imwrite(str(tmp / "right" / f"{name}.png"),
+                            cv2.cvtColor(right, cv2.COLOR_RGB2BGR) if right.ndim == 3 else right)
+                lists["right"].append(name)
+        for key, names in lists.items():
+            text = f"# {key} images of the slam-lcd demo world\n# timestamp filename\n"
+            text += "".join(f"{n} {key}/{n}.png\n" for n in names)
+            (tmp / f"{key}.txt").write_text(text, encoding="utf-8")
+            counts[f"{key}/"] = ("png", len(names))
+        _write_tum(tmp / "groundtruth.txt", sc.gt_odo)
+        _write_tum(tmp / "odometry.txt", sc.odom)
+        counts["groundtruth.txt"] = ("tum", len(sc.gt_odo))
+        counts["odometry.txt"] = ("tum", len(sc.odom))
+        cam = sc.camera
+        meta = {
+            "width": cam.width, "height": cam.height, "fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy,
+            "distortion_model": "none", "baseline_m": cam.baseline if stereo else None,
+            "depth_scale": 1000.0,  # depth PNG value / depth_scale = metres (0 = no depth)
+            "T_body_camera": [[float(v) for v in row] for row in sc.T_bc],
+            "frame_rate_hz": float(1e9 / (sc.cam_stamps[1] - sc.cam_stamps[0])) if len(sc.cam_stamps) > 1 else None,
+            "groundtruth": f"base_link pose in '{sc.world_frame}' (TUM: t x y z qx qy qz qw)",
+            "odometry": ("drifting base_link pose in 'odom' (the start pose: identity at the first stamp)"
+                         if sc.odom_at_start else "drifting base_link pose in 'odom' (= 'world' at the first stamp)"),
+        }
+        (tmp / "camera.yaml").write_text(yaml.safe_dump(meta, sort_keys=False), encoding="utf-8")
+    return counts
