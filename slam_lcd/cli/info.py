@@ -6,7 +6,7 @@ are real per-topic rates, not count / whole-log duration; ``--no-scan`` skips th
 from __future__ import annotations
 
 import sys
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 
 
 def register(sub) -> None:
@@ -17,7 +17,7 @@ def register(sub) -> None:
 
 
 def _fmt_time(ns: int) -> str:
-    dt = datetime.fromtimestamp(ns / 1e9, tz=timezone.utc)
+    dt = datetime.fromtimestamp(ns / 1e9, tz=UTC)
     return f"{dt:%Y-%m-%d %H:%M:%S.%f}"[:-3] + f" UTC ({ns // 1_000_000_000}.{ns % 1_000_000_000:09d})"
 
 

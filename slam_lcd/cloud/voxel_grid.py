@@ -32,7 +32,7 @@ class Cloud:
         return len(self.points)
 
     @classmethod
-    def empty(cls) -> "Cloud":
+    def empty(cls) -> Cloud:
         return cls(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.uint8))
 
 

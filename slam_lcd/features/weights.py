@@ -24,10 +24,14 @@ import urllib.error
 import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..errors import DownloadError, WeightsError
 from ..files.atomic import atomic_path
 from .config import SUPERPOINT_SHA256, SUPERPOINT_URL
+
+if TYPE_CHECKING:
+    import torch
 
 ENV_WEIGHTS = "SLAM_LCD_SUPERPOINT_WEIGHTS"
 ENV_CACHE = "SLAM_LCD_CACHE_DIR"
@@ -172,7 +176,7 @@ def _looks_like_text(path: Path) -> bool:
     return b"\x00" not in chunk
 
 
-def load_state_dict_checked(model: "torch.nn.Module", path: str | Path) -> None:
+def load_state_dict_checked(model: torch.nn.Module, path: str | Path) -> None:
     """Load ``path`` into ``model`` with ``strict=True``; any problem is a one-line WeightsError."""
     import torch  # here, not at import: `slam-lcd weights` and the resolver need no torch
 

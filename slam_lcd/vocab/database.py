@@ -47,7 +47,7 @@ class BowVector:
     counts: np.ndarray  # (M,) float64
 
     @classmethod
-    def from_word_ids(cls, ids: np.ndarray) -> "BowVector":
+    def from_word_ids(cls, ids: np.ndarray) -> BowVector:
         w, c = np.unique(np.asarray(ids, dtype=np.int64), return_counts=True)
         return cls(w, c.astype(np.float64))
 

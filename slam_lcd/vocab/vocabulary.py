@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import json
 import zipfile
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Iterable
 
 import numpy as np
 
@@ -102,7 +102,7 @@ class Vocabulary:
             np.savez(fh, **arrays)
 
     @classmethod
-    def load(cls, path: str | Path) -> "Vocabulary":
+    def load(cls, path: str | Path) -> Vocabulary:
         """Read a file written by :meth:`save`; any other or damaged file raises VocabularyError."""
         path = Path(path)
         if not path.is_file():

@@ -215,7 +215,7 @@ class WordIndex:
         self._image_ends: deque[int] = deque(maxlen=self.fresh_images + 1)  # word count after each image
 
     @classmethod
-    def from_config(cls, dim: int, conf) -> "WordIndex":
+    def from_config(cls, dim: int, conf) -> WordIndex:
         return cls(dim, min_words=conf.ann_min_words, pca_dims=conf.ann_pca_dims, hnsw_m=conf.ann_hnsw_m,
                    ef_search=conf.ann_ef_search, candidates=conf.ann_candidates, fresh_images=conf.ann_fresh_images,
                    hint_images=conf.ann_hint_images, hint_max_distance=conf.ann_hint_max_distance,
