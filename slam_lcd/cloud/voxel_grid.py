@@ -120,7 +120,7 @@ class VoxelGrid:
         parts = [(self._keys, self._sums, self._csums, self._counts, self._views), *self._pending]
         self._pending, self._n_pending = [], 0
         self._keys, self._sums, self._csums, self._counts, self._views = _reduce(
-            *(np.concatenate(p) for p in zip(*parts)))
+            *(np.concatenate(p) for p in zip(*parts, strict=True)))
 
     def __len__(self) -> int:
         self._merge()

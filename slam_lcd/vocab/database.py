@@ -22,6 +22,7 @@ nearest-word search is sub-linear in the word count above ``ann_min_words``
 from __future__ import annotations
 
 from dataclasses import dataclass
+from itertools import pairwise
 
 import numpy as np
 
@@ -221,7 +222,7 @@ class _Postings:
         offs = ends - runs
         kf = np.empty(int(ends[-1]), dtype=np.int64)
         val = np.empty(len(kf), dtype=self.val.dtype)
-        for s, o, m in zip(starts[long].tolist(), offs[long].tolist(), runs[long].tolist()):
+        for s, o, m in zip(starts[long].tolist(), offs[long].tolist(), runs[long].tolist(), strict=True):
             kf[o:o + m] = self.kf[s:s + m]
             val[o:o + m] = self.val[s:s + m]
         short = ~long
@@ -641,7 +642,7 @@ def restore_bows(state: dict[str, np.ndarray]) -> list[BowVector]:
     if off.shape != (len(state["kf_ids"]) + 1,) or int(off[-1]) != len(words) or len(counts) != len(words):
         raise ValueError("the bags of words do not fit together")
     return [BowVector(words[a:b].astype(np.int64), counts[a:b].astype(np.float64))
-            for a, b in zip(off[:-1].tolist(), off[1:].tolist())]
+            for a, b in pairwise(off.tolist())]
 
 
 def restore_into(db: BowDatabase, state: dict[str, np.ndarray]) -> list[BowVector]:

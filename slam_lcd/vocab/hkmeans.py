@@ -23,7 +23,7 @@ def build_hkmeans_tree(x: np.ndarray, k: int, depth: int, seed: int = 0, iters: 
     n_prev = 1
     prev_centres = None
     centres, parents = [], []
-    for lvl in range(depth):
+    for _ in range(depth):
         order = np.argsort(assign, kind="stable")
         bounds = np.searchsorted(assign[order], np.arange(n_prev + 1))
         lvl_c, lvl_p = [], []

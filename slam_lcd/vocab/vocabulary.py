@@ -95,7 +95,7 @@ class Vocabulary:
             "desc_kind": np.array(self.desc_kind), "desc_dim": np.array(self.desc_dim),
             "meta": np.array(json.dumps(self.meta)),
         }
-        for lvl, (c, p) in enumerate(zip(self.tree.centres, self.tree.parents), start=1):
+        for lvl, (c, p) in enumerate(zip(self.tree.centres, self.tree.parents, strict=True), start=1):
             arrays[f"centres_{lvl}"] = c
             arrays[f"parents_{lvl}"] = p.astype(np.int32)
         with atomic_write(path, "wb") as fh:
