@@ -129,7 +129,8 @@ class VoxelGrid:
     @property
     def nbytes(self) -> int:
         """Bytes the grid's arrays hold (pending batches included)."""
-        arrays = [self._keys, self._sums, self._csums, self._counts, self._views] + [a for b in self._pending for a in b]
+        arrays = [self._keys, self._sums, self._csums, self._counts, self._views]
+        arrays += [a for b in self._pending for a in b]
         return int(sum(a.nbytes for a in arrays))
 
     def cloud(self, min_views: int = 1) -> Cloud:

@@ -88,7 +88,8 @@ def download_weights(url: str, target: Path, sha256: str | None, timeout: float 
             digest = h.hexdigest()
             if sha256 and digest != sha256.lower():
                 raise WeightsDownloadError(
-                    f"checksum mismatch for download from {url}: got sha256 {digest}, expected {sha256}; file discarded",
+                    f"checksum mismatch for download from {url}: got sha256 {digest}, expected {sha256}; "
+                    "file discarded",
                     target,
                 )
     except (urllib.error.URLError, OSError, ValueError) as e:

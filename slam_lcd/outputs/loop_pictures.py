@@ -257,7 +257,8 @@ def _caption(row: dict, verdict: str) -> list[str]:
 
 
 def write_loop_pictures(out_dir: Path, album: KeyframeAlbum, rows: list[dict], lcd_conf,
-                        n_rejected: int, stop=None, thumbnails: dict | None = None, thumb_width: int = 240) -> list[str]:
+                        n_rejected: int, stop=None, thumbnails: dict | None = None,
+                        thumb_width: int = 240) -> list[str]:
     """Draw the chosen loops into ``out_dir/loops``; returns the picture names written (contact sheet last).
 
     ``stop``: a :class:`threading.Event` checked before each picture (the outputs are being abandoned).

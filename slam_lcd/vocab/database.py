@@ -596,7 +596,8 @@ def snapshot(db: BowDatabase, centres: str = "int8") -> dict[str, np.ndarray] | 
             "images": w.image_counts.astype(np.int32),
             "bow_offsets": np.concatenate([[0], np.cumsum(lens)]).astype(np.int64),
             "bow_words": (np.concatenate(db._bow_words) if lens.sum() else np.zeros(0)).astype(np.int32),
-            "bow_counts": counts.astype(np.uint16) if counts.size and counts.max() <= 65535 else counts.astype(np.float64),
+            "bow_counts": (counts.astype(np.uint16) if counts.size and counts.max() <= 65535
+                           else counts.astype(np.float64)),
             "proj": proj, "graph": graph, "index_state": state, "image_ends": ends}
 
 

@@ -15,9 +15,9 @@ proposes a few candidate words per descriptor and the winner is chosen exactly a
   ``ann_ef_search``; cost per query ~log(words). The graph keeps each projected word as 8-bit
   codes (``ann_storage: sq8``; ``flat`` keeps float32): a search waits on memory more than it
   computes, and a quarter of the bytes searched ~15% faster for the same candidates, 0.001 less
-  agreement with exhaustive search on real SuperPoint words (docs/vocab_online.md). Graph search suits SuperPoint descriptors,
-  whose words lie on a low-dimensional set (intrinsic dimension ~11 measured on real words):
-  on real words it beat an inverted file (faiss ``IndexIVFFlat``) of the same cost by 4-5
+  agreement with exhaustive search on real SuperPoint words (docs/vocab_online.md). Graph search
+  suits SuperPoint descriptors, whose words lie on a low-dimensional set (intrinsic dimension
+  ~11 measured on real words): on real words it beat an inverted file (faiss ``IndexIVFFlat``) of the same cost by 4-5
   points of recall (docs/vocab_online.md).
 - **Exact re-ranking.** The ``ann_candidates`` best words by projected similarity are scored
   by the full dot product with the current centres; ties go to the lowest word id, as the
@@ -181,10 +181,10 @@ class WordIndex:
                  ef_search: int = 16, candidates: int = 12, fresh_images: int = 2, hint_images: int = 16,
                  hint_max_distance: float = 0.5, rebuild_growth: float = 0.0, storage: str = "sq8",
                  hint_gap: bool = True, ef_construction: int = 40, background_insert: bool = True):
-        if pca_dims < 1 or hnsw_m < 2 or ef_search < 1 or ef_construction < 1 or candidates < 1 or fresh_images < 0 or hint_images < 0 \
-                or not (rebuild_growth == 0 or rebuild_growth > 1):
-            raise ConfigError("vocab.ann_*: pca_dims, ef_search, ef_construction and candidates must be >= 1, hnsw_m >= 2, "
-                              "fresh_images and hint_images >= 0, rebuild_growth 0 (never) or > 1")
+        if (pca_dims < 1 or hnsw_m < 2 or ef_search < 1 or ef_construction < 1 or candidates < 1
+                or fresh_images < 0 or hint_images < 0 or not (rebuild_growth == 0 or rebuild_growth > 1)):
+            raise ConfigError("vocab.ann_*: pca_dims, ef_search, ef_construction and candidates must be >= 1, "
+                              "hnsw_m >= 2, fresh_images and hint_images >= 0, rebuild_growth 0 (never) or > 1")
         if storage not in _STORAGES:
             raise ConfigError(f"vocab.ann_storage: {storage!r} is not one of {', '.join(_STORAGES)}")
         self.dim = dim
