@@ -60,17 +60,14 @@ pool scoring or move), and a search does not depend on the thread count.
 """
 from __future__ import annotations
 
-import os
-import threading
-import time
 from collections import deque
-from concurrent.futures import Future, ThreadPoolExecutor
-from contextlib import contextmanager
+from concurrent.futures import Future
 
 import numpy as np
 
 from ..errors import ConfigError
 from .descriptors import nearest_by_dot
+from .faiss_threads import _add_on_one_thread, _insertion_thread, _one_faiss_thread
 
 # the graph is built once at least this many settled words exist (the projection needs data)
 _MIN_BUILD_WORDS = 64
@@ -79,58 +76,6 @@ _HINT_CANDIDATES = 4
 # how the graph stores each word's projected position: 8-bit codes (a quarter of the memory, searched
 # ~15% faster: the search waits on memory) or float32
 _STORAGES = ("sq8", "flat")
-
-
-@contextmanager
-def _one_faiss_thread():
-    """faiss on one OpenMP thread for the duration.
-
-    Why for searches too: a keyframe's few hundred graph searches take ~10 ms; split over
-    OpenMP threads they wait on each other whenever a core is busy with something else (the
-    extraction workers of a run, another process), which measured twice as slow as one thread
-    (18.9 vs 9.2 ms for 470 searches at 72k words, a loaded 2-core machine). The answer does not
-    depend on the thread count.
-    """
-    import faiss
-
-    threads = faiss.omp_get_max_threads()
-    faiss.omp_set_num_threads(1)
-    try:
-        yield
-    finally:
-        faiss.omp_set_num_threads(threads)
-
-
-_inserter: ThreadPoolExecutor | None = None
-_inserter_lock = threading.Lock()
-
-
-def _forget_inserter() -> None:
-    """In a forked child: the parent's worker thread does not exist there; the child starts its own."""
-    global _inserter, _inserter_lock
-    _inserter, _inserter_lock = None, threading.Lock()
-
-
-if hasattr(os, "register_at_fork"):
-    os.register_at_fork(after_in_child=_forget_inserter)
-
-
-def _insertion_thread() -> ThreadPoolExecutor:
-    """The one worker thread that inserts words into graphs (shared by every index of the process:
-    an insertion is ~10 ms and one index waits for its own before the next use)."""
-    global _inserter
-    with _inserter_lock:
-        if _inserter is None:
-            _inserter = ThreadPoolExecutor(max_workers=1, thread_name_prefix="slam-lcd-words")
-        return _inserter
-
-
-def _add_on_one_thread(graph, rows: np.ndarray) -> float:
-    """Insert ``rows`` (node i = word i) on one faiss thread; returns the CPU seconds it took."""
-    t = time.thread_time()
-    with _one_faiss_thread():  # the graph's links do not depend on scheduling
-        graph.add(rows)
-    return time.thread_time() - t
 
 
 def exact_nearest(centres: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
