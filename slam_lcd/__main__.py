@@ -10,13 +10,13 @@ return. (The installed ``slam-lcd`` script does not take this path.)
 """
 import sys
 
+from .runtime.interrupts import STOP_SIGNALS, Terminated, exit_status, install_stop_signals, interrupt_behind
+
 
 def _forget_caught_keyboard_interrupt() -> None:
     """Clear CPython's record of a caught Ctrl-C in string-evaluated code (see the module docstring)."""
     exec("None", {})  # noqa: S102 - a constant; the call itself is what clears the flag
 
-
-from .runtime.interrupts import STOP_SIGNALS, Terminated, exit_status, install_stop_signals, interrupt_behind
 
 install_stop_signals()  # SIGTERM / SIGHUP while the command line loads: one line too
 try:

@@ -110,9 +110,9 @@ class PipelineError(SlamLcdError):
     """A run that cannot proceed (e.g. log without the image topic it needs)."""
 
 
-_CONTEXT_KINDS = (DamagedImageError, InvalidPoseError, UnsortedStampsError, MessageEncodingError, TopicTypeError, ConfigError,
-                  CalibrationError,
-                  CorruptLogError, WeightsError, VocabularyError, FileMissingError, InputError, PipelineError)
+_CONTEXT_KINDS = (DamagedImageError, InvalidPoseError, UnsortedStampsError, MessageEncodingError, TopicTypeError,
+                  ConfigError, CalibrationError, CorruptLogError, WeightsError, VocabularyError, FileMissingError,
+                  InputError, PipelineError)
 
 
 def in_context(err: SlamLcdError, where: str, path: str | Path | None = None) -> SlamLcdError:

@@ -103,9 +103,10 @@ def _check_args(args) -> None:
         raise InputError(f"--n_to_align must be >= 3 (Umeyama needs 3 points) or -1 (all), got {args.n_to_align}")
     if args.n_to_align != -1 and not (args.align or args.correct_scale):
         raise InputError("--n_to_align needs -a and/or -s")
-    rpe_only = [name for name, given in (("--delta", args.delta is not None), ("--delta_unit", args.delta_unit is not None),
-                                         ("--delta_tol", args.delta_tol is not None), ("--all_pairs", args.all_pairs),
-                                         ("--pairs_from_reference", args.pairs_from_reference)) if given]
+    rpe_given = (("--delta", args.delta is not None), ("--delta_unit", args.delta_unit is not None),
+                 ("--delta_tol", args.delta_tol is not None), ("--all_pairs", args.all_pairs),
+                 ("--pairs_from_reference", args.pairs_from_reference))
+    rpe_only = [name for name, given in rpe_given if given]
     if rpe_only and not args.rpe:
         raise InputError(f"{', '.join(rpe_only)} only apply to the relative pose error: add --rpe")
     if not args.rpe and args.pose_relation not in APE_RELATIONS:

@@ -34,9 +34,11 @@ def register(sub) -> None:
                         "cluster address (ray://head:10001). Default: no Ray, a local process pool")
     p.add_argument("--force", action="store_true",
                    help="redo logs whose complete outputs exist (default: skip them)")
-    p.add_argument("--image-topic", default=None, help="camera image topic of every log (default: auto-detected per log)")
+    p.add_argument("--image-topic", default=None,
+                   help="camera image topic of every log (default: auto-detected per log)")
     p.add_argument("--odom-topic", default=None, help="odometry topic of every log (default: auto-detected per log)")
-    p.add_argument("--depth-topic", default=None, help="depth image topic of every log (default: auto-detected per log)")
+    p.add_argument("--depth-topic", default=None,
+                   help="depth image topic of every log (default: auto-detected per log)")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--gt-topic", dest="gt_topic", default=None, metavar="TOPIC",
                    help="ground-truth pose topic in every log (default: auto-detected per log, a pose topic named "

@@ -51,7 +51,8 @@ def register(sub) -> None:
     p.add_argument("--verify", choices=[*MODES, "all"], default="all",
                    help="verification chain (default: all four, one PR curve each)")
     p.add_argument("--vocab", default=None, help="trained vocabulary (.npz) (default: the online vocabulary)")
-    p.add_argument("--top-k", type=int, default=None, help="BoW candidates per query (default: the config's lcd.top_k, 5)")
+    p.add_argument("--top-k", type=int, default=None,
+                   help="BoW candidates per query (default: the config's lcd.top_k, 5)")
     p.add_argument("--exclude-recent", type=int, default=None,
                    help="skip the last N frames as candidates (default: the config's lcd.exclude_recent_n, 20)")
     p.add_argument("--focal-factor", type=float, default=None,
@@ -185,7 +186,10 @@ def _write_set(outputs, cfg, det, gt, names, results, src, args, kind, elapsed, 
 
 
 def _gt_from_trajectory(path, stamps, args) -> tuple[np.ndarray, np.ndarray]:
-    """Loop matrix and frame positions from a GT trajectory: poses associated to the frames by nearest stamp (within 50 ms)."""
+    """Loop matrix and frame positions from a GT trajectory.
+
+    Poses are associated to the frames by nearest stamp (within 50 ms).
+    """
     from ..io.trajectory_files import read_trajectory
     from ..lcd.evaluation import loops_from_poses
 

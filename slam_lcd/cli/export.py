@@ -27,7 +27,8 @@ def register(sub) -> None:
     p.add_argument("traj", metavar="TRAJ", help="input trajectory: file (format detected) or LOG:TOPIC")
     p.add_argument("--to", dest="to", required=True, choices=TARGETS, help="output format (required)")
     p.add_argument("out", metavar="OUT", nargs="?", default=None, help="output path (or give it with -o/--out)")
-    p.add_argument("-o", "--out", dest="out_opt", default=None, metavar="OUT", help="output path, as OUT (default: none; OUT or --out is required)")
+    p.add_argument("-o", "--out", dest="out_opt", default=None, metavar="OUT",
+                   help="output path, as OUT (default: none; OUT or --out is required)")
     p.add_argument("--format", dest="in_format", choices=FORMATS, default=None,
                    help="input format (default: detected from the file's contents and suffix)")
     p.add_argument("--times", default=None, metavar="FILE",
@@ -72,7 +73,8 @@ def run(args) -> int:
         if not args.topic.startswith("/"):
             raise InputError(f"--out-topic must start with '/', got {args.topic!r}")
         with write_guard(args.out):
-            counts = write_trajectory_log(args.out, traj, args.to, topic=args.topic, frame_id=frame, child_frame_id=child)
+            counts = write_trajectory_log(args.out, traj, args.to, topic=args.topic, frame_id=frame,
+                                          child_frame_id=child)
         print(f"wrote {args.out} ({len(traj)} poses; " + ", ".join(f"{k}: {v}" for k, v in counts.items()) + ")")
         return 0
     with write_guard(args.out):

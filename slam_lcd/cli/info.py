@@ -6,18 +6,20 @@ are real per-topic rates, not count / whole-log duration; ``--no-scan`` skips th
 from __future__ import annotations
 
 import sys
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 
 
 def register(sub) -> None:
     p = sub.add_parser("info", help="list topics, types, counts, duration and rates of a log")
     p.add_argument("log", help="ROS1 .bag, rosbag2 directory, or .mcap file")
-    p.add_argument("--no-scan", action="store_true", help="do not scan message times: rates from counts / log duration (default: scan, real per-topic rates)")
+    p.add_argument("--no-scan", action="store_true",
+                   help="do not scan message times: rates from counts / log duration "
+                        "(default: scan, real per-topic rates)")
     p.set_defaults(func=run)
 
 
 def _fmt_time(ns: int) -> str:
-    dt = datetime.fromtimestamp(ns / 1e9, tz=timezone.utc)
+    dt = datetime.fromtimestamp(ns / 1e9, tz=UTC)
     return f"{dt:%Y-%m-%d %H:%M:%S.%f}"[:-3] + f" UTC ({ns // 1_000_000_000}.{ns % 1_000_000_000:09d})"
 
 
@@ -55,7 +57,8 @@ def run(args) -> int:
         scanned = None if args.no_scan else topic_rates(r)
         out = sys.stdout
         print(f"Files:             {r.path}", file=out)
-        print(f"Format:            {r.format} ({r.storage})" + ("  [TRUNCATED: recovered part only]" if r.truncated else ""), file=out)
+        truncated = "  [TRUNCATED: recovered part only]" if r.truncated else ""
+        print(f"Format:            {r.format} ({r.storage})" + truncated, file=out)
         print(f"Bag size:          {_human(_size(r.path))}", file=out)
         n = r.message_count
         print(f"Duration:          {r.duration_ns / 1e9:.3f} s", file=out)

@@ -22,7 +22,8 @@ def register(sub) -> None:
     )
     p.add_argument("out", nargs="?", default=None, metavar="OUT",
                    help="output path (.mcap file, rosbag2 folder, .bag file, or folder); or give it with -o/--out")
-    p.add_argument("-o", "--out", dest="out_opt", default=None, metavar="OUT", help="output path, as OUT (default: none; OUT or --out is required)")
+    p.add_argument("-o", "--out", dest="out_opt", default=None, metavar="OUT",
+                   help="output path, as OUT (default: none; OUT or --out is required)")
     p.add_argument("--format", dest="fmt", choices=["mcap", "rosbag2", "rosbag1", "folder"], default=None,
                    help="output format (default: auto-detected from OUT's suffix: .mcap, .bag, otherwise rosbag2)")
     p.add_argument("--frames", type=int, default=None,
@@ -48,19 +49,23 @@ def register(sub) -> None:
                    help="global exposure factor of the renderer (default 1; with --session the preset's)")
     p.add_argument("--stereo", action="store_true", help="also write the rectified right camera (default: off)")
     p.add_argument("--depth", dest="depth", action="store_true", default=True, help="write /camera/depth (default: on)")
-    p.add_argument("--no-depth", dest="depth", action="store_false", help="do not write depth images (default: write them)")
+    p.add_argument("--no-depth", dest="depth", action="store_false",
+                   help="do not write depth images (default: write them)")
     p.add_argument("--compressed", action="store_true",
                    help="write JPEG sensor_msgs/CompressedImage instead of raw images (default: raw)")
     p.add_argument("--color", action="store_true", help="RGB images (rgb8) instead of mono8 (default: mono8)")
     p.add_argument("--trajectory", choices=["laps", "figure8", "laps-wide"], default=None,
                    help="laps of block A, a figure eight, or laps-wide: laps of block A with every second lap "
-                        "0.45 m to the side and the camera turned 30 deg (wide-baseline revisits) (default: laps; with --session the preset's)")
+                        "0.45 m to the side and the camera turned 30 deg (wide-baseline revisits) "
+                        "(default: laps; with --session the preset's)")
     p.add_argument("--laps", type=float, default=None,
                    help="laps to drive when --frames is not given (default 2; with --session the preset's)")
     p.add_argument("--size", default="640x480", type=parse_size, help="image size WxH (default 640x480)")
-    p.add_argument("--hfov", type=float, default=70.0, help="horizontal field of view in degrees (default 70: fx = 457 at 640 px)")
+    p.add_argument("--hfov", type=float, default=70.0,
+                   help="horizontal field of view in degrees (default 70: fx = 457 at 640 px)")
     p.add_argument("--rate", type=float, default=None,
-                   help="camera rate in Hz (default 10, odometry 50 Hz; with --layout the dataset's: EuRoC 20, TUM 30, KITTI 10)")
+                   help="camera rate in Hz (default 10, odometry 50 Hz; "
+                        "with --layout the dataset's: EuRoC 20, TUM 30, KITTI 10)")
     p.add_argument("--layout", choices=["demo", "euroc", "tum", "kitti"], default="demo",
                    help="topics, encodings, rates, ground truth and calibration as that dataset's bags: euroc = raw "
                         "distorted /cam0 /cam1 mono8 20 Hz, /leica/position, camchain-<name>.yaml beside the log; "

@@ -76,7 +76,7 @@ def export(args) -> int:
                 traj = m.session_trajectory(i)
                 comp = m.manifest.sessions[i]["component"]
                 frame = "map" if comp == m.manifest.sessions[0]["component"] else f"map_{comp}"
-                for st, T in zip(traj.stamps, traj.poses):
+                for st, T in zip(traj.stamps, traj.poses, strict=True):
                     w.write(f"/map/{_topic(name)}/pose", pose_stamped_msg(T, int(st), frame), int(st))
         print(f"{out}: {len(names)} sessions as /map/<session>/pose")
         return 0

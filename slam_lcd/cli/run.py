@@ -149,10 +149,11 @@ def run(args) -> int:
                  create=True)
     rc = 0
     try:
-        for log_path, out in zip(logs, outs):
+        for log_path, out in zip(logs, outs, strict=True):
             known = m.session_of_log(log_path)
             if known is not None:
-                print(f"{log_path}: already in the map {args.map} as session {known!r} (same sha256): not appended again")
+                print(f"{log_path}: already in the map {args.map} as session {known!r} (same sha256): "
+                      "not appended again")
                 continue
             res = _run_one(args, cfg, log_path, out, m, extractor=extractor)
             rc = _print_result(res)

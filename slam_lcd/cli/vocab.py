@@ -135,8 +135,8 @@ def run_train(args) -> int:
     if args.max_images is not None and args.max_images < 1:
         raise InputError(f"--max-images must be >= 1, got {args.max_images}")
     source, out = Path(args.source), Path(args.out)
-    check_no_clash({"--out": out}, {"SOURCE": source, "--config": args.config if args.config and Path(args.config).exists() else None,
-                                    "--weights": args.weights})
+    config = args.config if args.config and Path(args.config).exists() else None
+    check_no_clash({"--out": out}, {"SOURCE": source, "--config": config, "--weights": args.weights})
     check_writable_target(out)
     cfg = validate_config(config_from_args(args))
     tree = args.tree or cfg.vocab.tree

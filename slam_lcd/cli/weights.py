@@ -32,7 +32,8 @@ def register(sub) -> None:
                    help="preset name or YAML file whose features.weights / cache_dir / weights_url are used "
                         "(default: 'default')")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE",
-                   help="override one configuration key (repeatable), e.g. --set features.cache_dir=/data/cache (default: none)")
+                   help="override one configuration key (repeatable), "
+                        "e.g. --set features.cache_dir=/data/cache (default: none)")
     p.set_defaults(func=run)
 
 

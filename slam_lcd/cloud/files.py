@@ -23,8 +23,8 @@ _PLY_DT = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("red", "u1"), ("g
 def cloud_suffix(path: str | Path) -> str:
     suffix = Path(path).suffix.lower()
     if suffix not in SUFFIXES:
-        raise UnsupportedFormatError(f"cloud files are {' or '.join(SUFFIXES)}, not {suffix or 'a name without suffix'!r}",
-                                     path)
+        raise UnsupportedFormatError(
+            f"cloud files are {' or '.join(SUFFIXES)}, not {suffix or 'a name without suffix'!r}", path)
     return suffix
 
 

@@ -3,8 +3,9 @@
 Why a density image: a wall seen once is a thin bright line from above; a wall seen twice
 by a drifting trajectory is two lines (ghosting), which a person sees at a glance. Pixels
 count the points above them (log-scaled; only points in the middle of the height range, so
-floor and ceiling do not cover the walls: :func:`height_band`); the same bounds and scale for every cloud, so before and after can be
-laid side by side. Drawn with numpy and written as PNG with OpenCV (no matplotlib figure).
+floor and ceiling do not cover the walls: :func:`height_band`); the same bounds and scale
+for every cloud, so before and after can be laid side by side. Drawn with numpy and written
+as PNG with OpenCV (no matplotlib figure).
 """
 from __future__ import annotations
 

@@ -32,7 +32,7 @@ class Cloud:
         return len(self.points)
 
     @classmethod
-    def empty(cls) -> "Cloud":
+    def empty(cls) -> Cloud:
         return cls(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.uint8))
 
 
@@ -120,7 +120,7 @@ class VoxelGrid:
         parts = [(self._keys, self._sums, self._csums, self._counts, self._views), *self._pending]
         self._pending, self._n_pending = [], 0
         self._keys, self._sums, self._csums, self._counts, self._views = _reduce(
-            *(np.concatenate(p) for p in zip(*parts)))
+            *(np.concatenate(p) for p in zip(*parts, strict=True)))
 
     def __len__(self) -> int:
         self._merge()
@@ -129,7 +129,8 @@ class VoxelGrid:
     @property
     def nbytes(self) -> int:
         """Bytes the grid's arrays hold (pending batches included)."""
-        arrays = [self._keys, self._sums, self._csums, self._counts, self._views] + [a for b in self._pending for a in b]
+        arrays = [self._keys, self._sums, self._csums, self._counts, self._views]
+        arrays += [a for b in self._pending for a in b]
         return int(sum(a.nbytes for a in arrays))
 
     def cloud(self, min_views: int = 1) -> Cloud:

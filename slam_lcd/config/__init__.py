@@ -188,13 +188,15 @@ def _from_dict(cls, data: dict, where: str = ""):
                           f"keys are names such as {min(names)}")
     unknown = set(data) - names
     if unknown:
-        moved = [f"{where}.{u} moved to {MOVED_KEYS[f'{where}.{u}']}" for u in sorted(unknown) if f"{where}.{u}" in MOVED_KEYS]
+        moved = [f"{where}.{u} moved to {MOVED_KEYS[f'{where}.{u}']}" for u in sorted(unknown)
+                 if f"{where}.{u}" in MOVED_KEYS]
         if moved:
             raise ConfigError(f"unknown key(s) {sorted(unknown)} in section {where}: {'; '.join(moved)}")
         guesses = [f"{u!r} -> {near[0]!r}" for u in sorted(unknown)
                    if (near := difflib.get_close_matches(u, names, n=1))]
         hint = f"; did you mean {', '.join(guesses)}?" if guesses else ""
-        raise ConfigError(f"unknown key(s) {sorted(unknown)} in section {where or 'top'}{hint} (known: {sorted(names)})")
+        raise ConfigError(f"unknown key(s) {sorted(unknown)} in section {where or 'top'}{hint} "
+                          f"(known: {sorted(names)})")
     kwargs = {k: _coerce(v, hints[k], f"{where}.{k}".lstrip(".")) for k, v in data.items()}
     return cls(**kwargs)
 

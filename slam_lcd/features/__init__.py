@@ -1,4 +1,6 @@
-"""slam_lcd.features: SuperPoint (and an ORB baseline) behind one extractor interface, weights, the feature cache, matching.
+"""slam_lcd.features: SuperPoint (and an ORB baseline) behind one extractor interface.
+
+Also the weights, the feature cache and matching.
 May import: torch, cv2, vision.gray and the base modules; never io or another stage.
 
 ``load_extractor(conf, weights=..., device=...)`` returns an :class:`Extractor` whose

@@ -72,7 +72,8 @@ class FeatureCache:
             lk = self._log_keys[str(log)] = log_key(log)
         return self.base / lk / topic_key(topic) / f"{int(stamp)}.npz"
 
-    def get(self, log: str | Path, topic: str, stamp: int, image_size: tuple[int, int] | None = None) -> Features | None:
+    def get(self, log: str | Path, topic: str, stamp: int,
+            image_size: tuple[int, int] | None = None) -> Features | None:
         """The cached features, or None (a miss) when there are none or the entry cannot be used
         (``image_size``: (width, height) the entry must have been made from)."""
         p = self.path(log, topic, stamp)
@@ -145,12 +146,13 @@ class FeatureCache:
 
     def extract_batch(self, log: str | Path, topic: str, stamps: list[int], images: list[np.ndarray]) -> list[Features]:
         """Batched version: only the misses go through the network, in one batch."""
-        out: list[Features | None] = [self.get(log, topic, s, _size_of(im)) for s, im in zip(stamps, images)]
+        out: list[Features | None] = [self.get(log, topic, s, _size_of(im))
+                                      for s, im in zip(stamps, images, strict=True)]
         todo = [i for i, f in enumerate(out) if f is None]
         self.hits += len(stamps) - len(todo)
         self.misses += len(todo)
         if todo:
-            for i, f in zip(todo, self.extractor.extract_batch([images[i] for i in todo])):
+            for i, f in zip(todo, self.extractor.extract_batch([images[i] for i in todo]), strict=True):
                 self.put(log, topic, stamps[i], f)
                 out[i] = f
         return out  # type: ignore[return-value]

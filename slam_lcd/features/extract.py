@@ -11,7 +11,7 @@ from __future__ import annotations
 import hashlib
 import json
 from abc import ABC, abstractmethod
-from typing import Iterable
+from collections.abc import Iterable
 
 import cv2
 import numpy as np

@@ -133,7 +133,8 @@ class SuperPoint(nn.Module):
             raise ValueError(f"unknown SuperPoint option(s) {sorted(unknown)}")
         self.conf = {**self.default_conf, **(conf or {}), **kwargs}
         if self.conf["descriptor_sampling"] not in ("bilinear", "bicubic"):
-            raise ValueError(f"descriptor_sampling must be 'bilinear' or 'bicubic', got {self.conf['descriptor_sampling']!r}")
+            raise ValueError("descriptor_sampling must be 'bilinear' or 'bicubic', "
+                             f"got {self.conf['descriptor_sampling']!r}")
         if self.conf["backbone_precision"] not in ("float32", "bfloat16"):
             raise ValueError("backbone_precision must be 'float32' or 'bfloat16', "
                              f"got {self.conf['backbone_precision']!r}")

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import hashlib
 import logging
+from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import Iterable, Sequence
 
 import numpy as np
 import torch
@@ -128,10 +128,10 @@ class SuperPointExtractor(Extractor):
             # one device-to-host copy for the whole batch: [x, y, score, descriptor...] rows
             packed = torch.cat(
                 [torch.cat([k, s[:, None], d], dim=1) for k, s, d in
-                 zip(out["keypoints"], out["keypoint_scores"], out["descriptors"])]
+                 zip(out["keypoints"], out["keypoint_scores"], out["descriptors"], strict=True)]
             ).float().cpu().numpy()
         feats = []
-        for rows, full in zip(np.split(packed, np.cumsum(counts)[:-1]), full_sizes):
+        for rows, full in zip(np.split(packed, np.cumsum(counts)[:-1]), full_sizes, strict=True):
             feats.append(
                 Features(
                     keypoints=to_full_resolution(np.ascontiguousarray(rows[:, :2]), (w, h), full),
@@ -163,6 +163,7 @@ class SuperPointExtractor(Extractor):
         for idx in by_shape.values():
             for s in range(0, len(idx), bs):
                 chunk = idx[s : s + bs]
-                for i, f in zip(chunk, self._run([pairs[i][0] for i in chunk], [pairs[i][1] for i in chunk])):
+                feats = self._run([pairs[i][0] for i in chunk], [pairs[i][1] for i in chunk])
+                for i, f in zip(chunk, feats, strict=True):
                     result[i] = f
         return result  # type: ignore[return-value]

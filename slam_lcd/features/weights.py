@@ -24,10 +24,14 @@ import urllib.error
 import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..errors import DownloadError, WeightsError
 from ..files.atomic import atomic_path
 from .config import SUPERPOINT_SHA256, SUPERPOINT_URL
+
+if TYPE_CHECKING:
+    import torch
 
 ENV_WEIGHTS = "SLAM_LCD_SUPERPOINT_WEIGHTS"
 ENV_CACHE = "SLAM_LCD_CACHE_DIR"
@@ -84,7 +88,8 @@ def download_weights(url: str, target: Path, sha256: str | None, timeout: float 
             digest = h.hexdigest()
             if sha256 and digest != sha256.lower():
                 raise WeightsDownloadError(
-                    f"checksum mismatch for download from {url}: got sha256 {digest}, expected {sha256}; file discarded",
+                    f"checksum mismatch for download from {url}: got sha256 {digest}, expected {sha256}; "
+                    "file discarded",
                     target,
                 )
     except (urllib.error.URLError, OSError, ValueError) as e:
@@ -172,7 +177,7 @@ def _looks_like_text(path: Path) -> bool:
     return b"\x00" not in chunk
 
 
-def load_state_dict_checked(model: "torch.nn.Module", path: str | Path) -> None:
+def load_state_dict_checked(model: torch.nn.Module, path: str | Path) -> None:
     """Load ``path`` into ``model`` with ``strict=True``; any problem is a one-line WeightsError."""
     import torch  # here, not at import: `slam-lcd weights` and the resolver need no torch
 

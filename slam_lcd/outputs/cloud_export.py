@@ -145,7 +145,10 @@ def _rectifier(sensor: dict, log_path: Path):
 
 def export_map(run_dir, out, conf: MapCloudConfig | None = None, *, odometry: bool = False, log_path=None,
                io_conf=None) -> dict:
-    """Rebuild the map of ``run_dir`` into ``out`` (``.ply`` / ``.pcd``); a summary dict (points, keyframes, skipped)."""
+    """Rebuild the map of ``run_dir`` into ``out`` (``.ply`` / ``.pcd``).
+
+    Returns a summary dict (points, keyframes, skipped).
+    """
     run_dir, out = Path(run_dir), Path(out)
     cloud_suffix(out)
     report, stamps, poses = read_run(run_dir, odometry)

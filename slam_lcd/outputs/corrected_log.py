@@ -174,7 +174,7 @@ def _keyframe_paths(kf: Trajectory, frame: str):
     if n == 0:
         return []
     ends = np.unique(np.round(np.linspace(1, n, min(n, MAX_PATH_MESSAGES))).astype(int))
-    return [(int(kf.stamps[e - 1]), msg) for e, msg in zip(ends, M.growing_path_msgs(kf, ends, frame))]
+    return [(int(kf.stamps[e - 1]), msg) for e, msg in zip(ends, M.growing_path_msgs(kf, ends, frame), strict=True)]
 
 
 def _add_sessions(add, layer: SessionLayer, plan: TfPlan, s0: int) -> None:
@@ -240,12 +240,12 @@ def write_corrected_log(path: Path, *, odom: Trajectory, corrected: Trajectory, 
                 tfs = M.tf_messages(cp @ inv(odom_at), cs, plan.map_frame, plan.odom_frame)
             else:
                 tfs = M.tf_messages(cp, cs, plan.odom_frame, plan.corrected_body)
-            for s, pose, tf in zip(cs.tolist(), poses, tfs):
+            for s, pose, tf in zip(cs.tolist(), poses, tfs, strict=True):
                 add(s, POSE_TOPIC, pose)
                 add(s, "/tf", tf)
         if plan.publish_odom_body and len(odom):
-            for s, tf in zip(odom.stamps.tolist(), M.tf_messages(odom.poses, odom.stamps, plan.odom_frame,
-                                                                 plan.body_frame)):
+            odom_tfs = M.tf_messages(odom.poses, odom.stamps, plan.odom_frame, plan.body_frame)
+            for s, tf in zip(odom.stamps.tolist(), odom_tfs, strict=True):
                 add(s, "/tf", tf)
         s0 = int(cs[0]) if len(cs) else 0
         if plan.link_gt and gt_alignment is not None:
@@ -255,8 +255,8 @@ def write_corrected_log(path: Path, *, odom: Trajectory, corrected: Trajectory, 
                     (inv(T_gt_c), s0, plan.corrected_frame, plan.gt_frame))
             add(s0, "/tf_static", M.tf_message([link]))
         if gt_poses is not None:  # ground truth from a file: written here so that it can be overlaid
-            for s, msg in zip(gt_poses.stamps.tolist(), M.pose_stamped_msgs(gt_poses.poses, gt_poses.stamps,
-                                                                            plan.gt_frame) if len(gt_poses) else []):
+            gt_msgs = M.pose_stamped_msgs(gt_poses.poses, gt_poses.stamps, plan.gt_frame) if len(gt_poses) else []
+            for s, msg in zip(gt_poses.stamps.tolist(), gt_msgs, strict=True):
                 add(s, GT_TOPIC, msg)
         if sessions is not None:
             _add_sessions(add, sessions, plan, s0)

@@ -74,7 +74,8 @@ def _errors_table(ev: dict) -> list[str]:
     out = [f"<p>Alignment <b>{_e(ev['alignment'])}</b> (each trajectory its own, fitted on the associated poses); "
            f"association t_max_diff {ev['t_max_diff_s']} s, t_offset {ev['t_offset_s']} s; RPE pairs "
            f"{ev['rpe_delta']:g} {_e(ev['rpe_delta_unit'])} apart.</p>",
-           "<table id='errors'><tr><th class=t>metric</th><th>odometry</th><th>corrected</th><th>corrected / odometry</th></tr>"]
+           "<table id='errors'><tr><th class=t>metric</th><th>odometry</th><th>corrected</th>"
+           "<th>corrected / odometry</th></tr>"]
     for name, ba in (("ATE", ev["ate"]), ("RPE", ev["rpe"])):
         if ba is None:
             continue
@@ -83,7 +84,10 @@ def _errors_table(ev: dict) -> list[str]:
             b, a = ba["before"][key], ba["after"][key]
             if b is None:  # position-only ground truth: no rotation error
                 continue
-            r = "" if part == "rotation" else ("odometry error ~0: no ratio" if ratio is None else f"{100 * ratio:.1f}%")
+            if part == "rotation":
+                r = ""
+            else:
+                r = "odometry error ~0: no ratio" if ratio is None else f"{100 * ratio:.1f}%"
             if part == "rotation" and b["rmse"] >= 1e-6:
                 r = f"{100 * a['rmse'] / b['rmse']:.1f}%"
             out.append(f"<tr><td class=t>{name} {part} RMSE ({unit})</td><td>{b['rmse']:.4f}</td>"
@@ -125,8 +129,8 @@ def _loop_table(rows: list[dict], out_dir: Path, pictures: set[str], thumbs: dic
         cells = []
         for _, key, txt in _LOOP_COLUMNS:
             if key is None:
-                name = next((n for n in (picture_name(r["query_id"], r["match_id"], v) for v in ("accepted", "rejected"))
-                             if n in pictures), None)
+                names = (picture_name(r["query_id"], r["match_id"], v) for v in ("accepted", "rejected"))
+                name = next((n for n in names if n in pictures), None)
                 if name and thumbs and name in thumbs:  # drawn this run: its thumbnail is at hand
                     uri = "data:image/jpeg;base64," + base64.b64encode(thumbs[name]).decode()
                 else:
@@ -175,7 +179,8 @@ def write_html_report(out_dir: Path, facts: dict, summary_lines: list[str], rows
     body += _loop_table(rows, out_dir, set(pictures), thumbs)
     body += _map_section(facts.get("map"), facts.get("localization"))
     body += _cloud_section(facts.get("map_cloud"), out_dir)
-    body.append("<h2>Time per stage</h2><table id='stages'><tr><th class=t>stage</th><th>seconds</th><th>calls</th></tr>")
+    body.append("<h2>Time per stage</h2>"
+                "<table id='stages'><tr><th class=t>stage</th><th>seconds</th><th>calls</th></tr>")
     body += [f"<tr><td class=t>{_e(k)}</td><td>{v['seconds']:.2f}</td><td>{v['calls']}</td></tr>"
              for k, v in facts["stages"].items()]
     body.append(f"</table><p>{facts['wall_s']:.1f} s wall for {facts['log_duration_s']:.1f} s of log.</p>")

@@ -131,7 +131,7 @@ def _graph_edges(kq: np.ndarray, matches: np.ndarray, kept: np.ndarray, conf) ->
     return planar_graph(kq[matches[kept, 0]].astype(np.float64), conf.graph_max_edge_factor)[1]
 
 
-def _loop_arrays(rec_row: dict, q, m, conf, album: "KeyframeAlbum"):
+def _loop_arrays(rec_row: dict, q, m, conf, album: KeyframeAlbum):
     """Matches, kept rows and graph edges: as the detector kept them for its loops, else recomputed."""
     kept_loop = album.load_loop(int(rec_row["query_id"]), int(rec_row["match_id"]))
     if kept_loop is None:
@@ -257,7 +257,8 @@ def _caption(row: dict, verdict: str) -> list[str]:
 
 
 def write_loop_pictures(out_dir: Path, album: KeyframeAlbum, rows: list[dict], lcd_conf,
-                        n_rejected: int, stop=None, thumbnails: dict | None = None, thumb_width: int = 240) -> list[str]:
+                        n_rejected: int, stop=None, thumbnails: dict | None = None,
+                        thumb_width: int = 240) -> list[str]:
     """Draw the chosen loops into ``out_dir/loops``; returns the picture names written (contact sheet last).
 
     ``stop``: a :class:`threading.Event` checked before each picture (the outputs are being abandoned).

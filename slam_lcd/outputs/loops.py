@@ -54,7 +54,7 @@ def gt_at_keyframes(gt: Trajectory, kf_stamp: dict[int, int]) -> dict[int, np.nd
     if not ids:
         return {}
     P = interpolate_poses(gt.stamps, gt.poses, np.array([kf_stamp[i] for i in ids], np.int64))
-    return dict(zip(ids, P))
+    return dict(zip(ids, P, strict=True))
 
 
 def _position_only_frames(gt_pose: dict, keyframe_poses: Trajectory | None, kf_stamp: dict) -> dict | None:
@@ -64,7 +64,7 @@ def _position_only_frames(gt_pose: dict, keyframe_poses: Trajectory | None, kf_s
 
     if keyframe_poses is None or len(keyframe_poses) < 3:
         return None
-    by_stamp = {int(s): T for s, T in zip(keyframe_poses.stamps, keyframe_poses.poses)}
+    by_stamp = {int(s): T for s, T in zip(keyframe_poses.stamps, keyframe_poses.poses, strict=True)}
     ids = [i for i in gt_pose if kf_stamp[i] in by_stamp]
     if len(ids) < 3:
         return None

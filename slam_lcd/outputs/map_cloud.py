@@ -56,7 +56,7 @@ def keyframe_poses(pipe) -> tuple[dict, dict]:
     """``(odometry, corrected)``: keyframe id -> 4x4 pose."""
     odo = {k.id: k.T_world_body for k in pipe.keyframes}
     kf_corr = pipe.keyframe_trajectory()
-    by_stamp = {int(s): T for s, T in zip(kf_corr.stamps, kf_corr.poses)}
+    by_stamp = {int(s): T for s, T in zip(kf_corr.stamps, kf_corr.poses, strict=True)}
     corr = {k.id: by_stamp[int(k.stamp)] for k in pipe.keyframes if int(k.stamp) in by_stamp}
     return odo, corr
 

@@ -35,8 +35,8 @@ import shutil
 import socket
 import tempfile
 import time
+from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Iterable, Mapping
 
 from ..errors import InputError
 from ..files.atomic import check_no_clash, check_writable_target

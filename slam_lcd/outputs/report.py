@@ -22,7 +22,8 @@ from .result import RunResult
 
 def _errors_dict(translation, rotation, n: int) -> dict:
     """``rotation`` None: not measured (position-only ground truth), null in report.json."""
-    return {"translation_m": translation.to_dict(), "rotation_deg": rotation.to_dict() if rotation is not None else None,
+    return {"translation_m": translation.to_dict(),
+            "rotation_deg": rotation.to_dict() if rotation is not None else None,
             "pairs": int(n)}
 
 
@@ -97,7 +98,8 @@ def command_text(command_line) -> str:
 def _stats_line(name: str, ba: dict, unit_t="m", unit_r="deg") -> list[str]:
     b, a = ba["before"], ba["after"]
     ratio = ba["ratio_after_before"]
-    lines = [f"| {name} translation RMSE ({unit_t}) | {b['translation_m']['rmse']:.4f} | {a['translation_m']['rmse']:.4f} | "
+    lines = [f"| {name} translation RMSE ({unit_t}) | {b['translation_m']['rmse']:.4f} | "
+             f"{a['translation_m']['rmse']:.4f} | "
              + (f"{100 * ratio:.1f}% |" if ratio is not None else "(odometry error ~0) |")]
     if b["rotation_deg"] is not None:  # None: position-only ground truth
         lines.append(f"| {name} rotation RMSE ({unit_r}) | {b['rotation_deg']['rmse']:.3f} | "

@@ -19,7 +19,8 @@ _STATS = {"type": "object", "required": ["rmse", "mean", "median", "std", "min",
           "properties": {k: _NUM for k in ("rmse", "mean", "median", "std", "min", "max")}}
 _ERRORS = {  # one trajectory's ATE or RPE: translation (m) and rotation (deg) statistics
     "type": "object", "required": ["translation_m", "rotation_deg", "pairs"],
-    "properties": {"translation_m": _STATS, "rotation_deg": {**_STATS, "type": ["object", "null"]},  # null: position-only GT
+    "properties": {"translation_m": _STATS,
+                   "rotation_deg": {**_STATS, "type": ["object", "null"]},  # null: position-only GT
                    "pairs": {"type": "integer", "minimum": 0}},
 }
 _BEFORE_AFTER = {

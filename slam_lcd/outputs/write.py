@@ -30,8 +30,8 @@ log = logging.getLogger(__name__)
 
 # every name `run` may write into --out (the set is published as a whole: slam_lcd.outputs.output_set)
 RUN_OUTPUTS = ("config.yaml", "odometry.tum", "corrected.tum", "keyframes_corrected.tum", "graph.g2o", "loops.csv",
-               "corrected.mcap", "trajectory.png", "ate_over_time.png", "report.json", "report.md", "report.html", LOOPS_DIR,
-               MAP_DIR, *LOCALIZATION_FILES, *MAP_CLOUD_FILES)
+               "corrected.mcap", "trajectory.png", "ate_over_time.png", "report.json", "report.md", "report.html",
+               LOOPS_DIR, MAP_DIR, *LOCALIZATION_FILES, *MAP_CLOUD_FILES)
 
 
 def partial_text(result: RunResult, notes=(), *, read_to_end: bool, while_writing: bool = False) -> str:
@@ -274,7 +274,8 @@ class _PictureThread:
 
 def _appended_to_map(pipe, result) -> bool:
     """The run appended its log to a map as a new session (``run --map``, not ``localize``)."""
-    return (result.map is not None and bool(result.map.get("appended")) and result.map.get("current_session") is not None
+    return (result.map is not None and bool(result.map.get("appended"))
+            and result.map.get("current_session") is not None
             and getattr(pipe, "map", None) is not None)
 
 

@@ -55,7 +55,10 @@ def limits() -> list[str]:
 
 
 def machine_line(device: str | None = None) -> str:
-    """``machine: <CPU> (<flags>), <n> cores[ of <m>], torch <v> CPU capability <cap>[ limited by ...], <t> threads[, GPU <name>]``.
+    """The machine line.
+
+    ``machine: <CPU> (<flags>), <n> cores[ of <m>], torch <v> CPU capability <cap>[ limited by ...],
+    <t> threads[, GPU <name>]`` (one line).
 
     ``device``: the device a benchmark ran on; a CUDA device adds the GPU's name. torch is
     imported here (a few seconds on a small machine); without torch the line says so.
@@ -71,7 +74,8 @@ def machine_line(device: str | None = None) -> str:
     else:
         cap = torch.backends.cpu.get_cpu_capability()
         lim = limits()
-        parts.append(f"torch {torch.__version__} CPU capability {cap}" + (f" (limited: {' '.join(lim)})" if lim else ""))
+        limited = f" (limited: {' '.join(lim)})" if lim else ""
+        parts.append(f"torch {torch.__version__} CPU capability {cap}" + limited)
         parts.append(f"{torch.get_num_threads()} torch threads")
         if device is not None and str(device).startswith("cuda") and torch.cuda.is_available():
             parts.append(f"GPU {torch.cuda.get_device_name(torch.device(device))}")

@@ -5,8 +5,9 @@ Public API (docs/CONTRACTS.md): :func:`train_vocabulary`, :func:`train_hkmeans`,
 :class:`Vocabulary` (``quantize``, ``save``, ``load``, ``len``), :class:`BowDatabase`
 (``add``, ``query``) and :class:`BowVector`.
 """
+from .bow import BowVector, bow_similarity
 from .config import VocabConfig
-from .database import BowDatabase, BowVector, bow_similarity
+from .database import BowDatabase
 from .descriptors import as_unit_vectors
 from .vocabulary import Vocabulary, train_hkmeans, train_vocabulary
 from .words import IncrementalWords

@@ -74,8 +74,9 @@ class VocabConfig:
     ann_hint_gap: bool = True
     # ... and a feature still to search whose best word among those of the keyframes around the previous
     # keyframe's best query result lies within online_word_radius takes it (a revisit: landmarks entering the view);
-    # float descriptors (SuperPoint) only: ORB words are less distinct, the corridor's ORB run took a false loop with it;
-    # a pool that decides under 20 % of the rows it scores (a new route) pauses for the next three images
+    # float descriptors (SuperPoint) only: ORB words are less distinct, the corridor's ORB run took a
+    # false loop with it; a pool that decides under 20 % of the rows it scores (a new route) pauses for
+    # the next three images
     ann_pool: bool = True
     # re-fit the projection and rebuild the graph when the vocabulary has grown by this factor (0: never)
     ann_rebuild_growth: float = 0.0

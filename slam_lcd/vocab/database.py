@@ -15,243 +15,34 @@ keyframes are added.
 Cost per keyframe: a query visits the postings of its words, and an insert refreshes the
 normalisers of exactly the keyframes on those postings (the same entries), so neither touches
 keyframes that share no word with it; both are vectorised over the postings (one flat arena,
-:class:`_Postings`: the only Python steps are a slice copy per long posting list). In online mode the
-nearest-word search is sub-linear in the word count above ``ann_min_words``
-(:mod:`slam_lcd.vocab.word_index`).
+:class:`~slam_lcd.vocab.postings._Postings`: the only Python steps are a slice copy per long
+posting list). In online mode the nearest-word search is sub-linear in the word count above
+``ann_min_words`` (:mod:`slam_lcd.vocab.word_index`).
+
+The bag of words (:mod:`slam_lcd.vocab.bow`), the inverted index (:mod:`slam_lcd.vocab.postings`)
+and the map snapshot (:mod:`slam_lcd.vocab.snapshot`) have their own modules; their names are
+importable from here too.
 """
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import InputError
 from ..types import LoopCandidate
-from .arrays import grow_in_place
+from .bow import BowVector, bow_similarity
 from .config import VocabConfig
 from .descriptors import as_unit_vectors, descriptor_kind
+from .postings import _Growable, _Postings
+from .snapshot import restore_bows, restore_into, restore_words, snapshot
 from .vocabulary import Vocabulary
 from .word_index import WordIndex
 from .words import IncrementalWords
 
+__all__ = ["BowDatabase", "BowVector", "bow_similarity", "restore_bows", "restore_into", "restore_words", "snapshot"]
+
 # keyframes before / after the previous query's best whose words form the next search's pool (_pool)
 _POOL_BEFORE = 1
 _POOL_AFTER = 2
-
-
-@dataclass
-class BowVector:
-    """Sparse bag of words: sorted unique word ids and their term counts."""
-
-    words: np.ndarray  # (M,) int64, sorted unique
-    counts: np.ndarray  # (M,) float64
-
-    @classmethod
-    def from_word_ids(cls, ids: np.ndarray) -> "BowVector":
-        w, c = np.unique(np.asarray(ids, dtype=np.int64), return_counts=True)
-        return cls(w, c.astype(np.float64))
-
-    def weights(self, idf: np.ndarray) -> np.ndarray:
-        """L1-normalised tf-idf weights aligned with ``words``."""
-        v = self.counts * idf[self.words]
-        s = v.sum()
-        return v / s if s > 0 else v
-
-    def __len__(self) -> int:
-        return len(self.words)
-
-
-def bow_similarity(a: BowVector, b: BowVector, idf: np.ndarray) -> float:
-    """Direct ``1 - 0.5 * ||va - vb||_1`` (reference for the inverted-index scores)."""
-    n = int(max(a.words.max(initial=-1), b.words.max(initial=-1))) + 1
-    va, vb = np.zeros(n), np.zeros(n)
-    va[a.words] = a.weights(idf)
-    vb[b.words] = b.weights(idf)
-    if va.sum() == 0 or vb.sum() == 0:
-        return 0.0
-    return float(1.0 - 0.5 * np.abs(va - vb).sum())
-
-
-def _ranges(starts: np.ndarray, lens: np.ndarray) -> np.ndarray:
-    """Concatenation of ``arange(s, s + n)`` for every (s, n) pair, without a Python loop."""
-    ends = np.cumsum(lens)
-    idx = np.repeat(starts - (ends - lens), lens)
-    idx += np.arange(len(idx))
-    return idx
-
-
-class _Postings:
-    """Inverted index in one flat arena: word ``w``'s postings are ``kf[start[w] : start[w] + size[w]]``
-    (keyframe index, int32) and ``val[...]`` (a number per posting: the database chooses), in
-    insertion order, i.e. keyframe order.
-
-    Each word owns a block of ``cap[w]`` slots; appending to a full block moves it to the arena's end
-    with 1.5 times the room (so an entry is copied about twice on average), leaving a hole behind;
-    when the holes exceed 1/8 of the blocks' room one compacting copy closes them. The slots written
-    are then ~1.3 (at most ~1.4) times the postings, against ~1.4 times plus two numpy objects per
-    word for per-word growable arrays. Appending a keyframe is a few vectorised numpy
-    operations whatever its number of words, and a query's postings are copied out of contiguous
-    blocks (see :meth:`gather`).
-
-    Values are stored as uint16 while every value is an integer in 0..65535 (term counts always
-    are), else as float64 (the first other value widens the arena, exactly); either way they take
-    part in float64 arithmetic unchanged, so results do not depend on the storage.
-    """
-
-    _MIN_ROOM = 2  # slots of a word's first block
-    _HOLES_DEN = 8  # compact when the holes exceed 1/8 of the blocks' room
-    _LONG_RUN = 384  # postings from which one slice copy of a word beats its share of an index array
-    _COPY_CHUNK = 1 << 18  # arena slots per step of a compaction
-
-    def __init__(self):
-        self.start = np.zeros(0, dtype=np.int64)  # per word: first slot of its block
-        self.size = np.zeros(0, dtype=np.int64)  # per word: entries
-        self.cap = np.zeros(0, dtype=np.int64)  # per word: slots of its block
-        self.kf = np.empty(1024, dtype=np.int32)
-        self.val = np.empty(1024, dtype=np.uint16)
-        self.end = 0  # arena slots in use (blocks and holes)
-        self.held = 0  # slots owned by blocks (sum of cap); end - held are holes
-
-    @property
-    def nbytes(self) -> int:
-        """Memory the index holds: per-word arrays and the arena (all of it: a grown arena's tail is zeroed)."""
-        return sum(a.nbytes for a in (self.start, self.size, self.cap, self.kf, self.val))
-
-    def append(self, kf_index: int, words: np.ndarray, values: np.ndarray) -> None:
-        """Postings of keyframe ``kf_index`` (newer than every keyframe so far): ``words`` sorted unique."""
-        if not len(words):
-            return
-        top = int(words[-1]) + 1
-        if top > len(self.size):
-            grow = max(top, 2 * len(self.size)) - len(self.size)
-            self.start, self.size, self.cap = (np.concatenate([a, np.zeros(grow, np.int64)])
-                                               for a in (self.start, self.size, self.cap))
-        if self.val.dtype == np.uint16 and not (values.min() >= 0 and values.max() <= 65535
-                                                and np.array_equal(values, np.floor(values))):
-            self.val = self.val.astype(np.float64)
-        n = self.size[words]
-        full = n == self.cap[words]
-        if full.any():
-            self._move(words[full], n[full])
-        at = self.start[words] + n
-        self.kf[at] = kf_index
-        self.val[at] = values
-        self.size[words] = n + 1
-
-    def _move(self, words: np.ndarray, n: np.ndarray) -> None:
-        """Move the full blocks of ``words`` (``n`` entries each) to the arena's end, with 1.5 times the room."""
-        room = np.maximum(n + np.maximum(n >> 1, 1), self._MIN_ROOM)
-        need = int(room.sum())
-        if self._HOLES_DEN * (self.end - self.held) > self.held:
-            self._compact()
-        if self.end + need > len(self.kf):
-            self._grow(need)
-        new_start = self.end + np.cumsum(room) - room
-        some = n > 0
-        if some.any():
-            src, dst = _ranges(self.start[words[some]], n[some]), _ranges(new_start[some], n[some])
-            self.kf[dst] = self.kf[src]
-            self.val[dst] = self.val[src]
-        self.start[words] = new_start
-        self.held += need - int(self.cap[words].sum())
-        self.cap[words] = room
-        self.end += need
-
-    def _grow(self, need: int) -> None:
-        """Room for ``need`` more slots: the arena grows by a quarter (or what is needed), in place.
-
-        In place (:mod:`slam_lcd.vocab.arrays`) because a fresh array of this size is slow to fill:
-        measured 140-360 ms at 3-4 million slots against 5-12 ms. The zeroed tail is resident at
-        once, hence the small step."""
-        length = max(self.end + need, int(1.25 * len(self.kf)))
-        grow_in_place(self, "kf", (length,), self.end)
-        grow_in_place(self, "val", (length,), self.end)
-
-    def _compact(self) -> None:
-        """Close the holes in place: blocks slide down in arena order with their room.
-
-        A chunk of the arena at a time: mark the slots inside blocks, copy those down. No Python step
-        per block (online, tens of thousands of small blocks move between compactions) and no large
-        fresh array (first-touch page faults cost more than the copy itself).
-        """
-        owned = np.flatnonzero(self.cap)
-        owned = owned[np.argsort(self.start[owned])]
-        starts, caps = self.start[owned], self.cap[owned]
-        ends = starts + caps
-        to, inside_before = 0, 0
-        for lo in range(0, self.end, self._COPY_CHUNK):
-            hi = min(self.end, lo + self._COPY_CHUNK)
-            edge = np.zeros(hi - lo + 1, dtype=np.int8)  # +1 where a block begins, -1 where one ends
-            edge[0] = inside_before
-            edge[starts[np.searchsorted(starts, lo):np.searchsorted(starts, hi)] - lo] += 1
-            edge[ends[np.searchsorted(ends, lo):np.searchsorted(ends, hi)] - lo] -= 1
-            inside = np.cumsum(edge[:-1], dtype=np.int8).view(bool)
-            inside_before = int(inside[-1])
-            kf, val = self.kf[lo:hi][inside], self.val[lo:hi][inside]
-            self.kf[to:to + len(kf)] = kf
-            self.val[to:to + len(kf)] = val
-            to += len(kf)
-        self.start[owned] = np.cumsum(caps) - caps
-        self.end = self.held
-
-    def gather(self, words: np.ndarray):
-        """Concatenated postings of ``words`` (sorted): (keyframe index int64, value, at, runs).
-
-        Word by word in the order of ``words``, each word's postings in keyframe order; ``runs[j]``
-        postings belong to ``words[at[j]]`` (words without postings are left out). A word with many
-        postings is one slice copy; the others share one vectorised index array (a Python step per
-        word would cost more than their copy, an index array over long lists costs more memory
-        traffic than the slices).
-        """
-        size = self.size
-        if len(words) and words[-1] < len(size):
-            lens = size[words]
-        else:
-            lens = np.zeros(len(words), dtype=np.int64)
-            inside = words < len(size)
-            lens[inside] = size[words[inside]]
-        at = np.flatnonzero(lens)
-        runs = lens[at]
-        starts = self.start[words[at]]
-        long = runs >= self._LONG_RUN
-        if not long.any():
-            src = _ranges(starts, runs)
-            return self.kf[src].astype(np.int64), self.val[src], at, runs
-        ends = np.cumsum(runs)
-        offs = ends - runs
-        kf = np.empty(int(ends[-1]), dtype=np.int64)
-        val = np.empty(len(kf), dtype=self.val.dtype)
-        for s, o, m in zip(starts[long].tolist(), offs[long].tolist(), runs[long].tolist()):
-            kf[o:o + m] = self.kf[s:s + m]
-            val[o:o + m] = self.val[s:s + m]
-        short = ~long
-        if short.any():
-            src, dst = _ranges(starts[short], runs[short]), _ranges(offs[short], runs[short])
-            kf[dst] = self.kf[src]
-            val[dst] = self.val[src]
-        return kf, val, at, runs
-
-
-class _Growable:
-    def __init__(self, dtype, fill=0):
-        self.a = np.full(64, fill, dtype=dtype)
-        self.fill = fill
-        self.n = 0
-
-    def ensure(self, n: int) -> None:
-        if n > len(self.a):
-            b = np.full(max(n, 2 * len(self.a)), self.fill, dtype=self.a.dtype)
-            b[: len(self.a)] = self.a
-            self.a = b
-
-    def push(self, v) -> None:
-        self.ensure(self.n + 1)
-        self.a[self.n] = v
-        self.n += 1
-
-    @property
-    def view(self) -> np.ndarray:
-        return self.a[: self.n]
 
 
 class BowDatabase:
@@ -550,106 +341,3 @@ class BowDatabase:
         self._query_best = int(cand[0])
         qid = -1 if query_id is None else int(query_id)
         return [LoopCandidate(query_id=qid, match_id=int(self.kf_ids[i]), bow_score=float(s[i])) for i in cand]
-
-
-# ----------------------------------------------------------------------------- snapshot (maps)
-def snapshot(db: BowDatabase, centres: str = "int8") -> dict[str, np.ndarray] | None:
-    """The online database's state as plain arrays (no pickle): words and every keyframe's bag of words.
-
-    ``centres``: ``int8`` (one scale per word: 260 B a word) or ``float16`` (512 B). The word
-    index's graph (faiss) is kept as its serialised bytes, so a restored database searches the same
-    graph instead of re-inserting every word. None for a database over a trained vocabulary (its
-    bags of words are recomputed cheaply by the tree) or an empty one.
-    """
-    if not db.online or db.words is None or not len(db):
-        return None
-    w = db.words
-    c = w.centres
-    if centres == "int8":
-        peak = np.abs(c).max(axis=1) if len(c) else np.zeros(0, np.float32)
-        scale = np.where(peak > 0, 127.0 / np.maximum(peak, 1e-12), 1.0).astype(np.float32)
-        q = np.clip(np.rint(c * scale[:, None]), -127, 127).astype(np.int8)
-        f16 = np.zeros((0, c.shape[1]), np.float16)
-    elif centres == "float16":
-        q, scale, f16 = np.zeros((0, c.shape[1]), np.int8), np.zeros(0, np.float32), c.astype(np.float16)
-    else:
-        raise InputError(f"vocabulary snapshot: centres {centres!r} is not int8 or float16")
-    lens = np.array([len(b) for b in db._bow_words], np.int64)
-    idx = w.index
-    graph = np.zeros(0, np.uint8)
-    proj = np.zeros((0, 0), np.float32)
-    state = np.zeros(3, np.int64)
-    ends = np.zeros(0, np.int64)
-    if idx is not None and idx.active:
-        import faiss
-
-        graph = faiss.serialize_index(idx.graph)
-        proj = idx.proj
-        state = np.array([idx.n_indexed, idx.built_at, idx.n_builds], np.int64)
-        ends = np.array(list(idx._image_ends), np.int64)
-    counts = np.concatenate(db._bow_counts) if lens.sum() else np.zeros(0)
-    return {"kf_ids": np.array(db.kf_ids, np.int64), "desc_kind": np.array(db._desc_kind or "float"),
-            "dim": np.array(w.dim, np.int64), "n_images": np.array(w.n_images, np.int64),
-            "centres_q": q, "centres_scale": scale, "centres_f16": f16,
-            "lengths": w._lengths[: w.n_words].astype(np.float32), "counts": w.counts.astype(np.int32),
-            "images": w.image_counts.astype(np.int32),
-            "bow_offsets": np.concatenate([[0], np.cumsum(lens)]).astype(np.int64),
-            "bow_words": (np.concatenate(db._bow_words) if lens.sum() else np.zeros(0)).astype(np.int32),
-            "bow_counts": counts.astype(np.uint16) if counts.size and counts.max() <= 65535 else counts.astype(np.float64),
-            "proj": proj, "graph": graph, "index_state": state, "image_ends": ends}
-
-
-def restore_words(state: dict[str, np.ndarray], conf: VocabConfig | None = None) -> tuple[IncrementalWords, str]:
-    """(the online words, descriptor kind) of a :func:`snapshot`; raises ``ValueError`` on arrays that do not fit."""
-    conf = conf or VocabConfig()
-    dim, kind = int(state["dim"]), str(state["desc_kind"])
-    q, f16 = state["centres_q"], state["centres_f16"]
-    n = len(q) if len(q) else len(f16)
-    if not (q.shape in ((n, dim), (0, dim)) and f16.shape in ((n, dim), (0, dim)) and len(state["lengths"]) == n
-            and len(state["counts"]) == n and len(state["images"]) == n):
-        raise ValueError("the word arrays do not fit together")
-    w = IncrementalWords(dim, conf.match_ratio, conf.match_max_distance, kind, radius=conf.online_word_radius,
-                         index=WordIndex.from_config(dim, conf))
-    w._grow(n)
-    for a in range(0, n, 65536):  # straight into the words' array, a block at a time (no full-size temporaries)
-        b = min(n, a + 65536)
-        if len(q):
-            np.divide(q[a:b], state["centres_scale"][a:b, None], out=w._centres[a:b], casting="unsafe")
-        else:
-            w._centres[a:b] = f16[a:b]
-    w._lengths[:n] = state["lengths"]
-    w._counts[:n] = state["counts"]
-    w._images[:n] = state["images"]
-    w.n_words, w.n_images = n, int(state["n_images"])
-    w.version += 1
-    if len(state["graph"]):
-        import faiss
-
-        idx = w.index
-        idx.proj = np.ascontiguousarray(state["proj"], np.float32)
-        idx.graph = faiss.deserialize_index(np.ascontiguousarray(state["graph"], np.uint8))
-        idx.n_indexed, idx.built_at, idx.n_builds = (int(v) for v in state["index_state"])
-        if idx.graph.ntotal != idx.n_indexed or idx.proj.shape != (dim, idx.pca_dims) or idx.n_indexed > n:
-            raise ValueError("the word index does not fit the words (another vocab configuration?)")
-        idx._image_ends.extend(int(v) for v in state["image_ends"])
-    return w, kind
-
-
-def restore_bows(state: dict[str, np.ndarray]) -> list[BowVector]:
-    """Every keyframe's bag of words of a :func:`snapshot`, in the snapshot's keyframe order."""
-    off, words, counts = state["bow_offsets"], state["bow_words"], state["bow_counts"]
-    if off.shape != (len(state["kf_ids"]) + 1,) or int(off[-1]) != len(words) or len(counts) != len(words):
-        raise ValueError("the bags of words do not fit together")
-    return [BowVector(words[a:b].astype(np.int64), counts[a:b].astype(np.float64))
-            for a, b in zip(off[:-1].tolist(), off[1:].tolist())]
-
-
-def restore_into(db: BowDatabase, state: dict[str, np.ndarray]) -> list[BowVector]:
-    """Give an empty online ``db`` the snapshot's words; returns the bags of words to insert with
-    :meth:`BowDatabase.add_bow` (in the snapshot's order, sessions marked by the caller)."""
-    if not db.online or len(db) or db.words is not None:
-        raise InputError("a vocabulary snapshot restores into an empty online database only")
-    words, _ = restore_words(state, db.conf)
-    bows = restore_bows(state)
-    db.words = words  # the descriptor kind and size are taken from the next descriptors (_check)
-    return bows

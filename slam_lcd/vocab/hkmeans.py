@@ -13,7 +13,8 @@ from .kmeans import spherical_kmeans
 from .tree import VocabTree
 
 
-def build_hkmeans_tree(x: np.ndarray, k: int, depth: int, seed: int = 0, iters: int = 10) -> tuple[VocabTree, np.ndarray]:
+def build_hkmeans_tree(x: np.ndarray, k: int, depth: int, seed: int = 0,
+                       iters: int = 10) -> tuple[VocabTree, np.ndarray]:
     """Returns (tree, leaf of every training descriptor)."""
     if k < 2 or depth < 1:
         raise ValueError(f"hierarchical k-means needs k >= 2 and L >= 1, got k={k}, L={depth}")
@@ -23,7 +24,7 @@ def build_hkmeans_tree(x: np.ndarray, k: int, depth: int, seed: int = 0, iters: 
     n_prev = 1
     prev_centres = None
     centres, parents = [], []
-    for lvl in range(depth):
+    for _ in range(depth):
         order = np.argsort(assign, kind="stable")
         bounds = np.searchsorted(assign[order], np.arange(n_prev + 1))
         lvl_c, lvl_p = [], []

@@ -26,7 +26,7 @@ class VocabTree:
         self.centres = [np.ascontiguousarray(c, dtype=np.float32) for c in centres]
         self.parents = [np.asarray(p, dtype=np.int64) for p in parents]
         n_prev = 1
-        for lvl, (c, p) in enumerate(zip(self.centres, self.parents), start=1):
+        for lvl, (c, p) in enumerate(zip(self.centres, self.parents, strict=True), start=1):
             if c.ndim != 2 or len(c) != len(p):
                 raise ValueError(f"level {lvl}: {len(c)} centres but {len(p)} parents")
             if len(p) and (p.min() < 0 or p.max() >= n_prev or np.any(np.diff(p) < 0)):
@@ -40,7 +40,7 @@ class VocabTree:
     # ------------------------------------------------------------------ layout
     def _build_padded(self) -> None:
         self._padded = []  # per level: (child_centres (P,B,D), child_index (P,B), valid (P,B))
-        for lvl, (c, p) in enumerate(zip(self.centres, self.parents)):
+        for lvl, (c, p) in enumerate(zip(self.centres, self.parents, strict=True)):
             n_par = 1 if lvl == 0 else len(self.centres[lvl - 1])
             counts = np.bincount(p, minlength=n_par)
             b = int(counts.max())
@@ -81,7 +81,7 @@ class VocabTree:
         if n == 0:
             return cur
         rows = np.arange(n)
-        for lvl, (cc, index, valid) in enumerate(self._padded):
+        for lvl, (cc, index, _valid) in enumerate(self._padded):
             n_nodes, b = len(self.centres[lvl]), cc.shape[1]
             if n_nodes <= _DENSE_FACTOR * b:
                 # small level: one dense product, then look up each descriptor's children

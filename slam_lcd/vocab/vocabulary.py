@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import json
 import zipfile
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Iterable
 
 import numpy as np
 
@@ -95,14 +95,14 @@ class Vocabulary:
             "desc_kind": np.array(self.desc_kind), "desc_dim": np.array(self.desc_dim),
             "meta": np.array(json.dumps(self.meta)),
         }
-        for lvl, (c, p) in enumerate(zip(self.tree.centres, self.tree.parents), start=1):
+        for lvl, (c, p) in enumerate(zip(self.tree.centres, self.tree.parents, strict=True), start=1):
             arrays[f"centres_{lvl}"] = c
             arrays[f"parents_{lvl}"] = p.astype(np.int32)
         with atomic_write(path, "wb") as fh:
             np.savez(fh, **arrays)
 
     @classmethod
-    def load(cls, path: str | Path) -> "Vocabulary":
+    def load(cls, path: str | Path) -> Vocabulary:
         """Read a file written by :meth:`save`; any other or damaged file raises VocabularyError."""
         path = Path(path)
         if not path.is_file():

@@ -15,9 +15,9 @@ proposes a few candidate words per descriptor and the winner is chosen exactly a
   ``ann_ef_search``; cost per query ~log(words). The graph keeps each projected word as 8-bit
   codes (``ann_storage: sq8``; ``flat`` keeps float32): a search waits on memory more than it
   computes, and a quarter of the bytes searched ~15% faster for the same candidates, 0.001 less
-  agreement with exhaustive search on real SuperPoint words (docs/vocab_online.md). Graph search suits SuperPoint descriptors,
-  whose words lie on a low-dimensional set (intrinsic dimension ~11 measured on real words):
-  on real words it beat an inverted file (faiss ``IndexIVFFlat``) of the same cost by 4-5
+  agreement with exhaustive search on real SuperPoint words (docs/vocab_online.md). Graph search
+  suits SuperPoint descriptors, whose words lie on a low-dimensional set (intrinsic dimension
+  ~11 measured on real words): on real words it beat an inverted file (faiss ``IndexIVFFlat``) of the same cost by 4-5
   points of recall (docs/vocab_online.md).
 - **Exact re-ranking.** The ``ann_candidates`` best words by projected similarity are scored
   by the full dot product with the current centres; ties go to the lowest word id, as the
@@ -60,17 +60,14 @@ pool scoring or move), and a search does not depend on the thread count.
 """
 from __future__ import annotations
 
-import os
-import threading
-import time
 from collections import deque
-from concurrent.futures import Future, ThreadPoolExecutor
-from contextlib import contextmanager
+from concurrent.futures import Future
 
 import numpy as np
 
 from ..errors import ConfigError
 from .descriptors import nearest_by_dot
+from .faiss_threads import _add_on_one_thread, _insertion_thread, _one_faiss_thread
 
 # the graph is built once at least this many settled words exist (the projection needs data)
 _MIN_BUILD_WORDS = 64
@@ -79,58 +76,6 @@ _HINT_CANDIDATES = 4
 # how the graph stores each word's projected position: 8-bit codes (a quarter of the memory, searched
 # ~15% faster: the search waits on memory) or float32
 _STORAGES = ("sq8", "flat")
-
-
-@contextmanager
-def _one_faiss_thread():
-    """faiss on one OpenMP thread for the duration.
-
-    Why for searches too: a keyframe's few hundred graph searches take ~10 ms; split over
-    OpenMP threads they wait on each other whenever a core is busy with something else (the
-    extraction workers of a run, another process), which measured twice as slow as one thread
-    (18.9 vs 9.2 ms for 470 searches at 72k words, a loaded 2-core machine). The answer does not
-    depend on the thread count.
-    """
-    import faiss
-
-    threads = faiss.omp_get_max_threads()
-    faiss.omp_set_num_threads(1)
-    try:
-        yield
-    finally:
-        faiss.omp_set_num_threads(threads)
-
-
-_inserter: ThreadPoolExecutor | None = None
-_inserter_lock = threading.Lock()
-
-
-def _forget_inserter() -> None:
-    """In a forked child: the parent's worker thread does not exist there; the child starts its own."""
-    global _inserter, _inserter_lock
-    _inserter, _inserter_lock = None, threading.Lock()
-
-
-if hasattr(os, "register_at_fork"):
-    os.register_at_fork(after_in_child=_forget_inserter)
-
-
-def _insertion_thread() -> ThreadPoolExecutor:
-    """The one worker thread that inserts words into graphs (shared by every index of the process:
-    an insertion is ~10 ms and one index waits for its own before the next use)."""
-    global _inserter
-    with _inserter_lock:
-        if _inserter is None:
-            _inserter = ThreadPoolExecutor(max_workers=1, thread_name_prefix="slam-lcd-words")
-        return _inserter
-
-
-def _add_on_one_thread(graph, rows: np.ndarray) -> float:
-    """Insert ``rows`` (node i = word i) on one faiss thread; returns the CPU seconds it took."""
-    t = time.thread_time()
-    with _one_faiss_thread():  # the graph's links do not depend on scheduling
-        graph.add(rows)
-    return time.thread_time() - t
 
 
 def exact_nearest(centres: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -181,10 +126,10 @@ class WordIndex:
                  ef_search: int = 16, candidates: int = 12, fresh_images: int = 2, hint_images: int = 16,
                  hint_max_distance: float = 0.5, rebuild_growth: float = 0.0, storage: str = "sq8",
                  hint_gap: bool = True, ef_construction: int = 40, background_insert: bool = True):
-        if pca_dims < 1 or hnsw_m < 2 or ef_search < 1 or ef_construction < 1 or candidates < 1 or fresh_images < 0 or hint_images < 0 \
-                or not (rebuild_growth == 0 or rebuild_growth > 1):
-            raise ConfigError("vocab.ann_*: pca_dims, ef_search, ef_construction and candidates must be >= 1, hnsw_m >= 2, "
-                              "fresh_images and hint_images >= 0, rebuild_growth 0 (never) or > 1")
+        if (pca_dims < 1 or hnsw_m < 2 or ef_search < 1 or ef_construction < 1 or candidates < 1
+                or fresh_images < 0 or hint_images < 0 or not (rebuild_growth == 0 or rebuild_growth > 1)):
+            raise ConfigError("vocab.ann_*: pca_dims, ef_search, ef_construction and candidates must be >= 1, "
+                              "hnsw_m >= 2, fresh_images and hint_images >= 0, rebuild_growth 0 (never) or > 1")
         if storage not in _STORAGES:
             raise ConfigError(f"vocab.ann_storage: {storage!r} is not one of {', '.join(_STORAGES)}")
         self.dim = dim
@@ -215,7 +160,7 @@ class WordIndex:
         self._image_ends: deque[int] = deque(maxlen=self.fresh_images + 1)  # word count after each image
 
     @classmethod
-    def from_config(cls, dim: int, conf) -> "WordIndex":
+    def from_config(cls, dim: int, conf) -> WordIndex:
         return cls(dim, min_words=conf.ann_min_words, pca_dims=conf.ann_pca_dims, hnsw_m=conf.ann_hnsw_m,
                    ef_search=conf.ann_ef_search, candidates=conf.ann_candidates, fresh_images=conf.ann_fresh_images,
                    hint_images=conf.ann_hint_images, hint_max_distance=conf.ann_hint_max_distance,

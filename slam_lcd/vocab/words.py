@@ -165,7 +165,10 @@ class IncrementalWords:
         return cached is pool or (cached is not None and pool is not None and cls._same(cached, pool))
 
     def _match(self, desc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Matches (row, previous row) of ``desc`` to the previous image and their distances (kept for the same image)."""
+        """Matches (row, previous row) of ``desc`` to the previous image and their distances.
+
+        Kept for the same image.
+        """
         c = self._match_cache
         if c is not None and c[0] == self.n_images and self._same(c[1], desc):
             return c[2], c[3]

@@ -1,0 +1,124 @@
+"""The online database as plain arrays for a map, and back.
+
+:func:`snapshot` turns an online :class:`~slam_lcd.vocab.database.BowDatabase` into arrays (no
+pickle): its words and every keyframe's bag of words; :func:`restore_words`,
+:func:`restore_bows` and :func:`restore_into` read them back.
+"""
+from __future__ import annotations
+
+from itertools import pairwise
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..errors import InputError
+from .bow import BowVector
+from .config import VocabConfig
+from .word_index import WordIndex
+from .words import IncrementalWords
+
+if TYPE_CHECKING:
+    from .database import BowDatabase
+
+
+def snapshot(db: BowDatabase, centres: str = "int8") -> dict[str, np.ndarray] | None:
+    """The online database's state as plain arrays (no pickle): words and every keyframe's bag of words.
+
+    ``centres``: ``int8`` (one scale per word: 260 B a word) or ``float16`` (512 B). The word
+    index's graph (faiss) is kept as its serialised bytes, so a restored database searches the same
+    graph instead of re-inserting every word. None for a database over a trained vocabulary (its
+    bags of words are recomputed cheaply by the tree) or an empty one.
+    """
+    if not db.online or db.words is None or not len(db):
+        return None
+    w = db.words
+    c = w.centres
+    if centres == "int8":
+        peak = np.abs(c).max(axis=1) if len(c) else np.zeros(0, np.float32)
+        scale = np.where(peak > 0, 127.0 / np.maximum(peak, 1e-12), 1.0).astype(np.float32)
+        q = np.clip(np.rint(c * scale[:, None]), -127, 127).astype(np.int8)
+        f16 = np.zeros((0, c.shape[1]), np.float16)
+    elif centres == "float16":
+        q, scale, f16 = np.zeros((0, c.shape[1]), np.int8), np.zeros(0, np.float32), c.astype(np.float16)
+    else:
+        raise InputError(f"vocabulary snapshot: centres {centres!r} is not int8 or float16")
+    lens = np.array([len(b) for b in db._bow_words], np.int64)
+    idx = w.index
+    graph = np.zeros(0, np.uint8)
+    proj = np.zeros((0, 0), np.float32)
+    state = np.zeros(3, np.int64)
+    ends = np.zeros(0, np.int64)
+    if idx is not None and idx.active:
+        import faiss
+
+        graph = faiss.serialize_index(idx.graph)
+        proj = idx.proj
+        state = np.array([idx.n_indexed, idx.built_at, idx.n_builds], np.int64)
+        ends = np.array(list(idx._image_ends), np.int64)
+    counts = np.concatenate(db._bow_counts) if lens.sum() else np.zeros(0)
+    return {"kf_ids": np.array(db.kf_ids, np.int64), "desc_kind": np.array(db._desc_kind or "float"),
+            "dim": np.array(w.dim, np.int64), "n_images": np.array(w.n_images, np.int64),
+            "centres_q": q, "centres_scale": scale, "centres_f16": f16,
+            "lengths": w._lengths[: w.n_words].astype(np.float32), "counts": w.counts.astype(np.int32),
+            "images": w.image_counts.astype(np.int32),
+            "bow_offsets": np.concatenate([[0], np.cumsum(lens)]).astype(np.int64),
+            "bow_words": (np.concatenate(db._bow_words) if lens.sum() else np.zeros(0)).astype(np.int32),
+            "bow_counts": (counts.astype(np.uint16) if counts.size and counts.max() <= 65535
+                           else counts.astype(np.float64)),
+            "proj": proj, "graph": graph, "index_state": state, "image_ends": ends}
+
+
+def restore_words(state: dict[str, np.ndarray], conf: VocabConfig | None = None) -> tuple[IncrementalWords, str]:
+    """(the online words, descriptor kind) of a :func:`snapshot`; raises ``ValueError`` on arrays that do not fit."""
+    conf = conf or VocabConfig()
+    dim, kind = int(state["dim"]), str(state["desc_kind"])
+    q, f16 = state["centres_q"], state["centres_f16"]
+    n = len(q) if len(q) else len(f16)
+    if not (q.shape in ((n, dim), (0, dim)) and f16.shape in ((n, dim), (0, dim)) and len(state["lengths"]) == n
+            and len(state["counts"]) == n and len(state["images"]) == n):
+        raise ValueError("the word arrays do not fit together")
+    w = IncrementalWords(dim, conf.match_ratio, conf.match_max_distance, kind, radius=conf.online_word_radius,
+                         index=WordIndex.from_config(dim, conf))
+    w._grow(n)
+    for a in range(0, n, 65536):  # straight into the words' array, a block at a time (no full-size temporaries)
+        b = min(n, a + 65536)
+        if len(q):
+            np.divide(q[a:b], state["centres_scale"][a:b, None], out=w._centres[a:b], casting="unsafe")
+        else:
+            w._centres[a:b] = f16[a:b]
+    w._lengths[:n] = state["lengths"]
+    w._counts[:n] = state["counts"]
+    w._images[:n] = state["images"]
+    w.n_words, w.n_images = n, int(state["n_images"])
+    w.version += 1
+    if len(state["graph"]):
+        import faiss
+
+        idx = w.index
+        idx.proj = np.ascontiguousarray(state["proj"], np.float32)
+        idx.graph = faiss.deserialize_index(np.ascontiguousarray(state["graph"], np.uint8))
+        idx.n_indexed, idx.built_at, idx.n_builds = (int(v) for v in state["index_state"])
+        if idx.graph.ntotal != idx.n_indexed or idx.proj.shape != (dim, idx.pca_dims) or idx.n_indexed > n:
+            raise ValueError("the word index does not fit the words (another vocab configuration?)")
+        idx._image_ends.extend(int(v) for v in state["image_ends"])
+    return w, kind
+
+
+def restore_bows(state: dict[str, np.ndarray]) -> list[BowVector]:
+    """Every keyframe's bag of words of a :func:`snapshot`, in the snapshot's keyframe order."""
+    off, words, counts = state["bow_offsets"], state["bow_words"], state["bow_counts"]
+    if off.shape != (len(state["kf_ids"]) + 1,) or int(off[-1]) != len(words) or len(counts) != len(words):
+        raise ValueError("the bags of words do not fit together")
+    return [BowVector(words[a:b].astype(np.int64), counts[a:b].astype(np.float64))
+            for a, b in pairwise(off.tolist())]
+
+
+def restore_into(db: BowDatabase, state: dict[str, np.ndarray]) -> list[BowVector]:
+    """Give an empty online ``db`` the snapshot's words; returns the bags of words to insert with
+    :meth:`BowDatabase.add_bow` (in the snapshot's order, sessions marked by the caller)."""
+    if not db.online or len(db) or db.words is not None:
+        raise InputError("a vocabulary snapshot restores into an empty online database only")
+    words, _ = restore_words(state, db.conf)
+    bows = restore_bows(state)
+    db.words = words  # the descriptor kind and size are taken from the next descriptors (_check)
+    return bows
