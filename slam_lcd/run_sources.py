@@ -176,7 +176,8 @@ def map_cloud_builder(cfg, topics: Topics, stereo, outputs: OutputSet, result: R
         return None
     if topics.depth is None and stereo is None:
         reason = "the log has no depth image and no stereo pair with a baseline"
-        log.warning("%s: no map cloud (map.ply): %s", log_path, reason)
+        # said in the run's summary and report (not a warning: nothing is wrong with the log)
+        log.info("%s: no map cloud (map.ply): %s", log_path, reason)
         result.map_cloud = {"built": False, "reason": reason}
         return None
     from .cloud import MapCloudBuilder

@@ -57,12 +57,29 @@ class Skips:
     def __init__(self, source: str = ""):
         self.source = source
         self.counts: dict[str, int] = {}
+        self._pending: list[str] = []
 
-    def add(self, reason: str) -> None:
+    def add(self, reason: str, *, later: bool = False) -> None:
+        """Count a keyframe left out; the first of a reason is said now, or (``later``) when the map is built.
+
+        ``later`` is for a failure of the builder itself (its store's disk full, say): the run
+        meets the same cause writing its own files and says it in its one line; the map's warning
+        is only worth a line when the run goes on to build the map."""
         if reason not in self.counts:
-            log.warning("%smap cloud: %s; such keyframes are left out of the map", f"{self.source}: " if self.source
-                        else "", reason)
+            if later:
+                self._pending.append(reason)
+            else:
+                self._say(reason)
         self.counts[reason] = self.counts.get(reason, 0) + 1
+
+    def say_pending(self) -> None:
+        for reason in self._pending:
+            self._say(reason)
+        self._pending.clear()
+
+    def _say(self, reason: str) -> None:
+        log.warning("%smap cloud: %s; such keyframes are left out of the map", f"{self.source}: " if self.source
+                    else "", reason)
 
     def points_of(self, kf: Keyframe, conf: MapCloudConfig) -> SensorPoints | None:
         """:func:`keyframe_points`, or None (counted) when the keyframe gives none."""
@@ -124,7 +141,7 @@ class MapCloudBuilder:
             if self._queue is None:
                 return self._take(kf)
             if self.failed is not None:
-                self.skips.add(self.failed)
+                self.skips.add(self.failed, later=True)
                 return False
             self._queue.put(_snapshot(kf))
             return True
@@ -153,10 +170,10 @@ class MapCloudBuilder:
                 if self.failed is None:
                     self._take(kf)
                 else:
-                    self.skips.add(self.failed)
+                    self.skips.add(self.failed, later=True)
             except Exception as e:  # noqa: BLE001 - the map is a view of the run: said once, never raised into it
                 self.failed = f"failed from keyframe {kf.id} on ({e.__class__.__name__}: {e})"
-                self.skips.add(self.failed)
+                self.skips.add(self.failed, later=True)
             finally:
                 self._queue.task_done()
 
@@ -176,6 +193,7 @@ class MapCloudBuilder:
     def cloud(self, poses: dict[int, np.ndarray], voxel: float | None = None) -> Cloud:
         """The map with ``poses`` (keyframe id -> 4x4 ``T_world_body``); keyframes without a pose are left out."""
         self.drain()
+        self.skips.say_pending()
         grid = VoxelGrid(voxel or self.conf.voxel_m)
         for i, (kf_id, _, _, _) in enumerate(self.store.index):
             T = poses.get(kf_id)
