@@ -73,8 +73,7 @@ def test_unset_is_bit_identical_to_the_network_on_the_full_image():
     # an image that already fits: the same bits, only the cache key names the knob
     g = random_extractor(resize_max=160).extract(img)
     assert np.array_equal(f.keypoints, g.keypoints) and np.array_equal(f.descriptors, g.descriptors)
-    batch = ex.extract_batch([img, img])
-    assert all(np.array_equal(b.keypoints, f.keypoints) for b in batch)
+    # batched against single extraction: test_features_superpoint (float rounding may differ by batch size)
 
 
 def test_feature_cache_is_keyed_on_resize_max(tmp_path):
