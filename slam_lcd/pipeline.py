@@ -268,6 +268,7 @@ class Pipeline:
                 self.map_cloud.add_keyframe(kf)
         except Exception as e:  # the map is a view of the run: never cost the run (said once)
             log.warning("keyframe %d not added to the map cloud (%s); no more are added", kf.id, e)
+            self.map_cloud.close()
             self.map_cloud = None
 
     def _detect_loops(self, kf: Keyframe) -> list[LoopClosure]:

@@ -143,7 +143,7 @@ def run_log(
                        overrides=list(overrides or []))
     gt_traj = read_trajectory(gt_file) if gt_file is not None else None
 
-    album = spool = None
+    album = spool = map_cloud = None
     try:  # the staging folder may exist from here on (the loop pictures' keyframe album, the copy spool)
         with open_log(log_path, conf=cfg.io) as reader:
             if reader.message_count == 0:
@@ -222,10 +222,16 @@ def run_log(
     except BaseException:
         if spool is not None:
             spool.discard()
+        if map_cloud is not None:  # its anonymous file lives in the staging folder: closed before that goes
+            map_cloud.close()
         outputs.discard()  # a run that fails before its outputs leaves no staging folder behind
         raise
-    write_set(outputs, pipe, result, gt_traj, log_path if mcap_wanted else None, copy_topics, notes, read_to_end,
-              album=album, spool=spool, surfaces=surfaces)
+    try:
+        write_set(outputs, pipe, result, gt_traj, log_path if mcap_wanted else None, copy_topics, notes, read_to_end,
+                  album=album, spool=spool, surfaces=surfaces)
+    finally:  # also when writing failed (a full disk) before the map cloud was written
+        if map_cloud is not None:
+            map_cloud.close()
     return result
 
 
