@@ -135,34 +135,6 @@ def test_the_builders_thread_gives_the_same_map_and_survives_a_failure(caplog):
     b.close()
 
 
-@pytest.mark.parametrize("queue", [0, 3])
-def test_the_map_at_the_arrival_poses_is_merged_as_keyframes_come_and_equals_a_late_merge(queue):
-    """The odometry map is merged while the keyframes are taken in: bit for bit the map :meth:`cloud` merges
-    at the end with the same poses; any other poses (one changed, one missing) are merged at the end."""
-    rng = np.random.default_rng(5)
-    b = MapCloudBuilder(MapCloudConfig(queue_keyframes=queue, min_keyframes_per_voxel=1))
-    poses = {}
-    for i in range(10):
-        kf = _kf(i, rng.uniform(1.0, 4.0, (CAM.height, CAM.width)).astype(np.float32))
-        kf.T_world_body = np.eye(4)
-        kf.T_world_body[:3, 3] = rng.normal(scale=0.3, size=3)
-        poses[i] = kf.T_world_body.copy()
-        b.add_keyframe(kf)
-    late = b.cloud(poses)
-    moved = {**poses, 3: np.eye(4)}
-    missing = {k: v for k, v in poses.items() if k != 7}
-    for other in (moved, missing):
-        np.testing.assert_array_equal(b.cloud_at_arrival_poses(other).points, b.cloud(other).points)
-        assert len(b.cloud(other)) != len(late) or not np.array_equal(b.cloud(other).points, late.points)
-    early = b.cloud_at_arrival_poses(poses)
-    assert len(early) > 1000
-    np.testing.assert_array_equal(early.points, late.points)
-    np.testing.assert_array_equal(early.colours, late.colours)
-    # handed over once (its memory freed): asked again, the map is merged from the store, the same
-    np.testing.assert_array_equal(b.cloud_at_arrival_poses(poses).points, late.points)
-    b.close()
-
-
 def _plane(rng, n, offset=0.0, noise=0.002):
     p = np.column_stack([rng.uniform(0, 4, n), rng.uniform(0, 3, n), offset + rng.normal(0, noise, n)])
     return p

@@ -116,10 +116,6 @@ class MapCloudBuilder:
     def __init__(self, conf: MapCloudConfig | None = None, *, source: str = "", folder=None):
         self.conf = conf or MapCloudConfig()
         self.store = KeyframeCloudStore(self.conf.voxel_m, folder)
-        # the map with the poses the keyframes came with (odometry), merged as they are taken in: at the end
-        # only the corrected map is left to merge (:meth:`cloud_at_arrival_poses`)
-        self._arrival_grid = VoxelGrid(self.conf.voxel_m)
-        self._arrival_poses: dict[int, np.ndarray] = {}
         self.skips = Skips(source)
         self.seconds = 0.0  # time spent taking keyframes in (in the builder's thread when it has one)
         self.wait_seconds = 0.0  # the caller's time in add_keyframe (handing over, waiting on a full queue)
@@ -160,12 +156,7 @@ class MapCloudBuilder:
                 return False
             self.points_in += len(sp)
             pts, col = _to_body(sp, kf.T_body_camera, self.conf.voxel_m)
-            stored, col = self.store.add(kf.id, kf.stamp, pts, col)
-            T = np.array(kf.T_world_body, np.float64)
-            if self._arrival_grid is None:  # handed over already: a later map is merged from the store
-                return True
-            self._arrival_poses[kf.id] = T
-            self._arrival_grid.add(stored @ T[:3, :3].T + T[:3, 3], col)  # as :meth:`cloud` merges it
+            self.store.add(kf.id, kf.stamp, pts, col)
             return True
         finally:
             self.seconds += time.perf_counter() - t0
@@ -210,19 +201,6 @@ class MapCloudBuilder:
                 continue
             pts, col = self.store.read(i)
             grid.add(pts @ T[:3, :3].T + T[:3, 3], col)
-        return grid.cloud(self.conf.min_keyframes_per_voxel)
-
-    def cloud_at_arrival_poses(self, poses: dict[int, np.ndarray]) -> Cloud:
-        """:meth:`cloud` for ``poses`` that are those the keyframes came with (the odometry): the map merged
-        while they were taken in, point for point what :meth:`cloud` gives; other poses are merged now.
-        The merged grid is handed over once (its memory is freed for the corrected map); a second call merges."""
-        self.drain()
-        grid = self._arrival_grid
-        if self.failed is not None or grid is None or not all(
-                kf_id in poses and np.array_equal(poses[kf_id], T) for kf_id, T in self._arrival_poses.items()):
-            return self.cloud(poses)
-        self.skips.say_pending()
-        self._arrival_grid, self._arrival_poses = None, {}
         return grid.cloud(self.conf.min_keyframes_per_voxel)
 
     def close(self) -> None:

@@ -28,9 +28,7 @@ class KeyframeCloudStore:
         self.index: list[tuple[int, int, int, int]] = []  # (keyframe id, stamp, offset, count)
         self._end = 0
 
-    def add(self, kf_id: int, stamp: int, points_body: np.ndarray,
-            colours: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Append a keyframe's points; returns them as :meth:`read` will give them back (quantised)."""
+    def add(self, kf_id: int, stamp: int, points_body: np.ndarray, colours: np.ndarray) -> None:
         q = np.rint(np.asarray(points_body, np.float64) / self.unit)
         keep = np.all(np.abs(q) <= np.iinfo(np.int16).max, axis=1)
         rec = np.empty(int(keep.sum()), _DT)
@@ -40,7 +38,6 @@ class KeyframeCloudStore:
         self._fh.write(rec.tobytes())
         self.index.append((int(kf_id), int(stamp), self._end, len(rec)))
         self._end += rec.nbytes
-        return rec["xyz"].astype(np.float64) * self.unit, rec["rgb"]
 
     def read(self, i: int) -> tuple[np.ndarray, np.ndarray]:
         """Points (N, 3) float64 in the body frame and colours of entry ``i``."""

@@ -72,10 +72,11 @@ def write_map_clouds(out_dir: Path, pipe, conf, ate_before=None, ate_after=None,
             return not_built(f"no keyframe gave points ({reasons})"), None
         t0 = time.perf_counter()
         odo_poses, corr_poses = keyframe_poses(pipe)
-        clouds = {"odometry": builder.cloud_at_arrival_poses(odo_poses)}
+        clouds = {"odometry": builder.cloud(odo_poses)}
         with_truth = surfaces is not None and ate_before is not None and ate_after is not None
         # the odometry map's figures on a second core while the corrected map is merged (numpy and scipy's
-        # k-d tree release the GIL): the map's share of a run's wall is mostly this step
+        # k-d tree release the GIL); not both merges at once: the larger (odometry) merge is the map's peak of
+        # memory, and two at once would add the other's to it
         with ThreadPoolExecutor(1, thread_name_prefix="slam-lcd-map-figures") as pool:
             odo_figures = pool.submit(_figures, clouds["odometry"], conf, ate_before if with_truth else None,
                                       surfaces)
