@@ -3,9 +3,9 @@
 Why a sorted-key grid merged in batches: a map must not grow with the log's length, only with
 the space it covers. Each batch of points is reduced to one entry per voxel at once (a
 keyframe's tens of thousands of points become a few thousand), and batches are merged into
-the grid's sorted arrays only when they add up to as many entries as the grid holds, so the
-merging costs O(n log n) in all (amortised) and the memory is the grid's plus at most as much
-again. Voxel keys pack three 21-bit signed indices into one int64 (+-1,048,575 voxels per
+the grid's sorted arrays (a binary search, sums in place, new voxels inserted) only when they
+add up to as many entries as the grid holds, so the merging costs O(n log n) in all (amortised)
+and the memory is the grid's plus at most as much again. Voxel keys pack three 21-bit signed indices into one int64 (+-1,048,575 voxels per
 axis: +-52 km at 5 cm); points beyond that are dropped, never wrapped. Each voxel also counts
 the batches that reached it (the map adds one batch per keyframe), so that a voxel seen by a
 single keyframe (more often a sensor outlier than a surface) can be left out of the cloud.
@@ -115,12 +115,28 @@ class VoxelGrid:
             self._merge()
 
     def _merge(self) -> None:
+        """The pending batches reduced among themselves, then merged into the grid's sorted arrays in place:
+        voxels the grid holds are summed where they lie, new ones inserted at their sorted places (one array
+        copied at a time). Why not one sort of grid and batches together: that holds several copies of
+        the whole grid at once, the map's peak of memory on a long log."""
         if not self._pending:
             return
-        parts = [(self._keys, self._sums, self._csums, self._counts, self._views), *self._pending]
+        keys, *values = _reduce(*(np.concatenate(p) for p in zip(*self._pending, strict=True)))
         self._pending, self._n_pending = [], 0
-        self._keys, self._sums, self._csums, self._counts, self._views = _reduce(
-            *(np.concatenate(p) for p in zip(*parts, strict=True)))
+        pos = np.searchsorted(self._keys, keys)
+        held = np.zeros(len(keys), bool)
+        inside = pos < len(self._keys)
+        held[inside] = self._keys[pos[inside]] == keys[inside]
+        at = pos[held]
+        fields = ("_sums", "_csums", "_counts", "_views")
+        for name, v in zip(fields, values, strict=True):
+            getattr(self, name)[at] += v[held]  # unique keys: no index twice
+        new = ~held
+        if new.any():
+            at = pos[new]
+            self._keys = np.insert(self._keys, at, keys[new])
+            for name, v in zip(fields, values, strict=True):
+                setattr(self, name, np.insert(getattr(self, name), at, v[new], axis=0))
 
     def __len__(self) -> int:
         self._merge()
