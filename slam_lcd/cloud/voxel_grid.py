@@ -5,10 +5,11 @@ the space it covers. Each batch of points is reduced to one entry per voxel at o
 keyframe's tens of thousands of points become a few thousand), and batches are merged into
 the grid's sorted arrays (a binary search, sums in place, new voxels inserted) only when they
 add up to as many entries as the grid holds, so the merging costs O(n log n) in all (amortised)
-and the memory is the grid's plus at most as much again. Voxel keys pack three 21-bit signed indices into one int64 (+-1,048,575 voxels per
-axis: +-52 km at 5 cm); points beyond that are dropped, never wrapped. Each voxel also counts
-the batches that reached it (the map adds one batch per keyframe), so that a voxel seen by a
-single keyframe (more often a sensor outlier than a surface) can be left out of the cloud.
+and the memory is the grid's plus at most as much again. Voxel keys pack three 21-bit signed
+indices into one int64 (+-1,048,575 voxels per axis: +-52 km at 5 cm); points beyond that are
+dropped, never wrapped. Each voxel also counts the batches that reached it (the map adds one
+batch per keyframe), so that a voxel seen by a single keyframe (more often a sensor outlier
+than a surface) can be left out of the cloud.
 """
 from __future__ import annotations
 
