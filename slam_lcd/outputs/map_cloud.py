@@ -72,18 +72,17 @@ def write_map_clouds(out_dir: Path, pipe, conf, ate_before=None, ate_after=None,
             return not_built(f"no keyframe gave points ({reasons})"), None
         t0 = time.perf_counter()
         odo_poses, corr_poses = keyframe_poses(pipe)
+        clouds = {"odometry": builder.cloud(odo_poses)}
         with_truth = surfaces is not None and ate_before is not None and ate_after is not None
-        # the two maps merged and measured side by side, the odometry map in a second thread (numpy's sorts and
-        # scipy's k-d tree release the GIL); the grid merges in place, so two merges at once stay well below
-        # the memory of a merge by one sort (docs/map_cloud.md)
-        with ThreadPoolExecutor(1, thread_name_prefix="slam-lcd-map-cloud") as pool:
-            odometry = pool.submit(_merged_and_measured, builder, odo_poses, conf, ate_before if with_truth else None,
-                                   surfaces)
-            corrected = builder.cloud(corr_poses)
+        # the odometry map's figures on a second core while the corrected map is merged (numpy and scipy's
+        # k-d tree release the GIL); not both merges at once: measured, two threads of many small numpy
+        # calls contend for the GIL and cost more CPU than they overlap (docs/map_cloud.md)
+        with ThreadPoolExecutor(1, thread_name_prefix="slam-lcd-map-figures") as pool:
+            odo_figures = pool.submit(_figures, clouds["odometry"], conf, ate_before if with_truth else None,
+                                      surfaces)
+            clouds["corrected"] = builder.cloud(corr_poses)
             t1 = time.perf_counter()
-            corr_figures = _figures(corrected, conf, ate_after if with_truth else None, surfaces)
-            odo_cloud, odo_figures = odometry.result()
-            clouds = {"odometry": odo_cloud, "corrected": corrected}
+            corr_figures = _figures(clouds["corrected"], conf, ate_after if with_truth else None, surfaces)
             t2 = time.perf_counter()
             write_cloud(out_dir / MAP_FILE, clouds["corrected"], "slam-lcd map: keyframe points, corrected poses")
             write_cloud(out_dir / MAP_ODOMETRY_FILE, clouds["odometry"],
@@ -95,7 +94,7 @@ def write_map_clouds(out_dir: Path, pipe, conf, ate_before=None, ate_after=None,
                 with atomic_write(out_dir / name, "wb") as fh:
                     fh.write(png)
             t3 = time.perf_counter()
-            figures = {"odometry": odo_figures, "corrected": corr_figures}
+            figures = {"odometry": odo_figures.result(), "corrected": corr_figures}
         sharp = {k: f[0] for k, f in figures.items()}
         truth = None
         if with_truth:
@@ -125,12 +124,6 @@ def write_map_clouds(out_dir: Path, pipe, conf, ate_before=None, ate_after=None,
         return facts, clouds["corrected"]
     finally:
         builder.close()
-
-
-def _merged_and_measured(builder, poses, conf, ate, surfaces) -> tuple[object, tuple[dict, dict | None]]:
-    """``(the map merged with poses, its figures)``: :meth:`MapCloudBuilder.cloud` and :func:`_figures`."""
-    cloud = builder.cloud(poses)
-    return cloud, _figures(cloud, conf, ate, surfaces)
 
 
 def _figures(cloud, conf, ate, surfaces) -> tuple[dict, dict | None]:
