@@ -42,6 +42,15 @@ def write_demo_log(out, fmt, sc: _Scenario, frames_iter, *, depth, stereo, compr
         types.setdefault(topic, msg.__msgtype__)
         w.write(topic, msg, int(stamp))
 
+    def put_camera(w, prefix, cam, img, stamp, frame):
+        """``<prefix>/camera_info`` and the image, raw or JPEG-compressed."""
+        put(w, f"{prefix}/camera_info", M.camera_info_msg(cam, stamp, frame), stamp)
+        if compressed:
+            put(w, f"{prefix}/image_raw/compressed",
+                M.compressed_image_msg(img, stamp, frame, "jpeg", conf.jpeg_quality), stamp)
+        else:
+            put(w, f"{prefix}/image_raw", M.image_msg(img, stamp, frame), stamp)
+
     with open_writer(out, fmt, conf=conf) as w:
         t0 = int(min(sc.cam_stamps[0], sc.odo_stamps[0]))
         statics = [(sc.T_bc, t0, rig.BODY_FRAME, cam_frame)]
@@ -59,21 +68,11 @@ def write_demo_log(out, fmt, sc: _Scenario, frames_iter, *, depth, stereo, compr
             if kind == 0:
                 fi, img, dep, right = next(frames_iter)
                 assert fi == cam_index[stamp]
-                put(w, "/camera/camera_info", M.camera_info_msg(left_cam, stamp, cam_frame), stamp)
-                if compressed:
-                    put(w, "/camera/image_raw/compressed",
-                        M.compressed_image_msg(img, stamp, cam_frame, "jpeg", conf.jpeg_quality), stamp)
-                else:
-                    put(w, "/camera/image_raw", M.image_msg(img, stamp, cam_frame), stamp)
+                put_camera(w, "/camera", left_cam, img, stamp, cam_frame)
                 if dep is not None:
                     put(w, "/camera/depth", M.image_msg(dep, stamp, cam_frame, "32FC1"), stamp)
                 if right is not None:
-                    put(w, "/camera/right/camera_info", M.camera_info_msg(right_cam, stamp, right_frame), stamp)
-                    if compressed:
-                        put(w, "/camera/right/image_raw/compressed",
-                            M.compressed_image_msg(right, stamp, right_frame, "jpeg", conf.jpeg_quality), stamp)
-                    else:
-                        put(w, "/camera/right/image_raw", M.image_msg(right, stamp, right_frame), stamp)
+                    put_camera(w, "/camera/right", right_cam, right, stamp, right_frame)
             else:
                 put(w, "/odom",
                     M.odometry_msg(odo.poses[i], odo.covariances[i], stamp, rig.ODOM_FRAME, rig.BODY_FRAME), stamp)
