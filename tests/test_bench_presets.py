@@ -1,11 +1,11 @@
 """tools/bench_presets.py: a preset laid over another, and one part end to end (the figures come from running it)."""
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
 import torch
+from module_files import load_module  # tests/ is on sys.path (pytest rootdir import)
 
 from slam_lcd.config import load_config
 
@@ -13,10 +13,7 @@ TOOL = Path(__file__).resolve().parent.parent / "tools" / "bench_presets.py"
 
 
 def load_tool():
-    spec = importlib.util.spec_from_file_location("bench_presets", TOOL)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_module(TOOL, "bench_presets")
 
 
 def test_a_preset_is_laid_over_another_by_its_own_keys():

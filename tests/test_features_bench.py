@@ -1,20 +1,17 @@
 """tools/bench_features.py runs end to end (tiny sizes; the real figures come from running it)."""
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
 import torch
+from module_files import load_module  # tests/ is on sys.path (pytest rootdir import)
 
 TOOL = Path(__file__).resolve().parent.parent / "tools" / "bench_features.py"
 
 
 def load_tool():
-    spec = importlib.util.spec_from_file_location("bench_features", TOOL)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_module(TOOL, "bench_features")
 
 
 def test_bench_tool_reports_every_figure(tmp_path, capsys):

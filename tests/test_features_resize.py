@@ -9,18 +9,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from module_files import random_extractor  # tests/ is on sys.path (pytest rootdir import)
 
 from slam_lcd.config import load_config, preset_names
 from slam_lcd.errors import ConfigError
-from slam_lcd.features import FeatureCache, FeaturesConfig, SuperPoint, SuperPointExtractor, load_extractor
+from slam_lcd.features import FeatureCache, FeaturesConfig, load_extractor
 from slam_lcd.features.resize import downscale, resized_shape, to_full_resolution
 from slam_lcd.vision.gray import to_gray_float
-
-
-def random_extractor(seed=0, **changes) -> SuperPointExtractor:
-    conf = FeaturesConfig(**changes)
-    torch.manual_seed(seed)
-    return SuperPointExtractor(conf, device="cpu", model=SuperPoint(SuperPointExtractor.model_conf(conf)))
 
 
 def textured(h=120, w=160, seed=0) -> np.ndarray:

@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from module_files import random_extractor  # tests/ is on sys.path (pytest rootdir import)
 
 from slam_lcd.errors import SlamLcdError, WeightsError
 from slam_lcd.features import FeaturesConfig, SuperPoint, SuperPointExtractor, load_extractor
@@ -24,12 +25,6 @@ OFFICIAL_LAYOUT = {
 def random_model(seed=0, **conf) -> SuperPoint:
     torch.manual_seed(seed)
     return SuperPoint(conf).eval()
-
-
-def random_extractor(seed=0, **changes) -> SuperPointExtractor:
-    conf = FeaturesConfig(**changes)
-    torch.manual_seed(seed)
-    return SuperPointExtractor(conf, device="cpu", model=SuperPoint(SuperPointExtractor.model_conf(conf)))
 
 
 def textured_image(h=120, w=160, seed=0) -> np.ndarray:

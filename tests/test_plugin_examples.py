@@ -1,13 +1,12 @@
 """The plugin on demo-world keyframes: the examples run, loop information is honest (NEES)."""
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
 
 import gtsam
 import numpy as np
 import pytest
+from module_files import load_module  # tests/ is on sys.path (pytest rootdir import)
 
 from slam_lcd.backend.g2o import read_g2o
 
@@ -15,11 +14,7 @@ EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 
 
 def _example(name):
-    spec = importlib.util.spec_from_file_location(f"example_{name}", EXAMPLES / f"{name}.py")
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = mod  # dataclasses look their module up
-    spec.loader.exec_module(mod)
-    return mod
+    return load_module(EXAMPLES / f"{name}.py", f"example_{name}")
 
 
 @pytest.fixture(scope="module")
