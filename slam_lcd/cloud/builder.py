@@ -73,9 +73,9 @@ class Skips:
         self.counts[reason] = self.counts.get(reason, 0) + 1
 
     def say_pending(self) -> None:
-        pending, self._pending = self._pending, []  # taken at once: two maps merged in two threads say it once
-        for reason in pending:
+        for reason in self._pending:
             self._say(reason)
+        self._pending.clear()
 
     def _say(self, reason: str) -> None:
         log.warning("%smap cloud: %s; such keyframes are left out of the map", f"{self.source}: " if self.source
@@ -191,8 +191,7 @@ class MapCloudBuilder:
         return len(self.store)
 
     def cloud(self, poses: dict[int, np.ndarray], voxel: float | None = None) -> Cloud:
-        """The map with ``poses`` (keyframe id -> 4x4 ``T_world_body``); keyframes without a pose are left out.
-        Two threads may merge two maps at once (the store is read by offset)."""
+        """The map with ``poses`` (keyframe id -> 4x4 ``T_world_body``); keyframes without a pose are left out."""
         self.drain()
         self.skips.say_pending()
         grid = VoxelGrid(voxel or self.conf.voxel_m)

@@ -10,7 +10,6 @@ so resident memory is that of the voxel grid, whatever the log's length.
 """
 from __future__ import annotations
 
-import errno
 import os
 import tempfile
 
@@ -35,20 +34,16 @@ class KeyframeCloudStore:
         rec = np.empty(int(keep.sum()), _DT)
         rec["xyz"] = q[keep]
         rec["rgb"] = np.asarray(colours)[keep]
-        data = rec.tobytes()
-        if os.pwrite(self._fh.fileno(), data, self._end) != len(data):
-            raise OSError(errno.ENOSPC, "short write to the map cloud's store")
+        self._fh.seek(self._end)
+        self._fh.write(rec.tobytes())
         self.index.append((int(kf_id), int(stamp), self._end, len(rec)))
         self._end += rec.nbytes
 
     def read(self, i: int) -> tuple[np.ndarray, np.ndarray]:
         """Points (N, 3) float64 in the body frame and colours of entry ``i``."""
         _, _, off, n = self.index[i]
-        size = n * _DT.itemsize
-        data = os.pread(self._fh.fileno(), size, off)  # by offset: threads reading at once do not race
-        if len(data) != size:
-            raise OSError(f"short read from the map cloud's store ({len(data)} of {size} bytes)")
-        rec = np.frombuffer(data, _DT)
+        self._fh.seek(off)
+        rec = np.frombuffer(self._fh.read(n * _DT.itemsize), _DT)
         return rec["xyz"].astype(np.float64) * self.unit, rec["rgb"]
 
     @property
