@@ -127,10 +127,12 @@ def test_localise_keeps_fixes_its_odometry_confirms_and_drops_a_look_alike():
     assert max(err) < 0.1
 
 
-def test_localise_without_any_match_is_a_clear_error():
+def test_localise_without_any_match_says_why_for_every_keyframe():
     gt = _route(10, 4)
-    with pytest.raises(MapError, match="no keyframe of the log was matched"):
-        localise({}, {}, {}, list(range(10)), list(range(10)), gt, [None] * 10, [])
+    loc = localise({}, {}, {}, list(range(10)), list(range(10)), gt, [None] * 10, [])
+    assert loc.share_localised == 0.0 and len(loc.keyframes) == 10 and len(loc.trajectory) == 0
+    assert all(k.reason == "no verified match in the map" for k in loc.keyframes)
+    assert "no keyframe of the log was matched" in loc.notes[0]
 
 
 def test_recent_keyframes_are_excluded_within_the_current_session_only():

@@ -17,7 +17,9 @@ could fool appearance:
 
 A keyframe is *localised* when its own fix survives both; the others get the pose the
 odometry carries from the localised ones (and a reason: no verified match, or the fix
-rejected). No fix at all: :class:`MapError` (nothing to carry).
+rejected). No fix at all, or no fix confirmed: every keyframe is "not localised" with its
+reason and the trajectory is empty (nothing to carry the odometry from); the caller still
+reports the 0 %.
 """
 from __future__ import annotations
 
@@ -31,7 +33,6 @@ from ..geometry import inv, rotation_angle_deg
 from ..types import Trajectory
 from .config import MapConfig
 from .joint_graph import information_noise, odometry_covariance, solve_lm
-from .store import MapError
 
 NEIGHBOURS = 10  # keyframes either side whose fixes may confirm a fix
 DRIFT_PER_M = 0.05  # odometry drift allowance per metre between two fixes (added to the fixed bound)
@@ -54,7 +55,7 @@ class KeyframeFix:
 @dataclass
 class Localisation:
     keyframes: list[KeyframeFix]
-    trajectory: Trajectory  # keyframe poses in the map frame
+    trajectory: Trajectory  # keyframe poses in the map frame (empty when no keyframe is localised)
     component: int | None = None  # the map component the log was localised in
     notes: list[str] = field(default_factory=list)
 
@@ -84,8 +85,7 @@ def localise(map_poses: dict[int, np.ndarray], session_of: dict[int, str], compo
     fixes = {index[q]: (c, map_poses[int(c.match_id)] @ np.asarray(c.T_match_query, float)) for q, c in best.items()}
     reasons = {i: "no verified match in the map" for i in range(n)}
     if not fixes:
-        raise MapError("no keyframe of the log was matched to the map: nothing to localise against "
-                       "(is the log inside the mapped area, with the map's camera and features?)")
+        return _nothing_localised(kf_ids, stamps, reasons, {}, None)
     # the component most fixes point into: a log is localised in one frame
     comps = [component_of[int(c.match_id)] for c, _ in fixes.values()]
     comp = max(set(comps), key=comps.count)
@@ -114,8 +114,7 @@ def localise(map_poses: dict[int, np.ndarray], session_of: dict[int, str], compo
         else:
             reasons[i] = "fix not confirmed by any neighbouring fix through the odometry"
     if not kept:
-        raise MapError(f"{len(fixes)} keyframe(s) matched the map but no two agree through the odometry: "
-                       "not localised (too few matches to trust)")
+        return _nothing_localised(kf_ids, stamps, reasons, fixes, comp)
 
     # 2. one joint solve: odometry between keyframes, kept fixes as priors (GNC-checked)
     known = gtsam.NonlinearFactorGraph()
@@ -151,3 +150,18 @@ def localise(map_poses: dict[int, np.ndarray], session_of: dict[int, str], compo
                                session_of.get(int(c.match_id)) if c is not None else None,
                                int(c.evidence.get("inliers", 0) or 0) if c is not None else None, poses[i]))
     return Localisation(out, Trajectory(np.asarray(stamps, np.int64), poses), comp)
+
+
+def _nothing_localised(kf_ids, stamps, reasons: dict[int, str], fixes: dict, comp: int | None) -> Localisation:
+    """Every keyframe "not localised", each with its reason; no trajectory (no fix to carry it from)."""
+    out = []
+    for i, k in enumerate(kf_ids):
+        c = fixes.get(i, (None, None))[0]
+        out.append(KeyframeFix(int(k), int(stamps[i]), False, reasons[i],
+                               int(c.match_id) if c is not None else None, None,
+                               int(c.evidence.get("inliers", 0) or 0) if c is not None else None, None))
+    note = ("no keyframe of the log was matched to the map (is the log inside the mapped area, with the map's "
+            "camera and features?)" if not fixes else
+            f"{len(fixes)} keyframe(s) matched the map but no two agree through the odometry (too few matches "
+            "to trust)")
+    return Localisation(out, Trajectory(np.zeros(0, np.int64), np.zeros((0, 4, 4))), comp, [note])
