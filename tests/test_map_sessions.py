@@ -18,7 +18,6 @@ from slam_lcd.geometry import inv, make_T, so3_exp
 from slam_lcd.map.config import MapConfig
 from slam_lcd.map.joint_graph import JointLoop, SessionPoses, solve
 from slam_lcd.map.localize import localise
-from slam_lcd.map.store import MapError
 from slam_lcd.types import LoopClosure
 
 ROOT = Path(__file__).resolve().parent.parent
