@@ -10,7 +10,7 @@ return. (The installed ``slam-lcd`` script does not take this path.)
 """
 import sys
 
-from .runtime.interrupts import STOP_SIGNALS, Terminated, exit_status, install_stop_signals, interrupt_behind
+from .runtime.interrupts import Terminated, exit_status, install_stop_signals, interrupt_behind, status_of
 
 
 def _forget_caught_keyboard_interrupt() -> None:
@@ -29,10 +29,6 @@ except (KeyboardInterrupt, ImportError) as caught:  # Ctrl-C while the command l
     _forget_caught_keyboard_interrupt()
     sys.exit(exit_status(e))
 
-status = main()
-import signal  # noqa: E402
-
-for _s in STOP_SIGNALS:  # the command has ended: a SIGTERM now must not turn its status into a traceback
-    signal.signal(_s, signal.SIG_IGN)
+status = status_of(main)  # from here on stop signals are ignored: the interpreter's teardown cannot spoil the status
 _forget_caught_keyboard_interrupt()
 sys.exit(status)

@@ -289,3 +289,28 @@ def test_batch_driver_killed_outright_stops_its_workers(small_log, tmp_path):
     for d in out.iterdir():  # a log's folder is complete or marked partial, never a mix
         if d.is_dir():
             assert (d / "PARTIAL.txt").exists() or (d / "report.json").exists(), sorted(x.name for x in d.iterdir())
+
+
+@pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM"])
+def test_a_signal_while_python_exits_keeps_the_commands_status(small_log, tmp_path, sig):
+    """A Ctrl-C or SIGTERM sent when a command has printed its result (the interpreter returning or
+    tearing down) leaves the command's status (0) or the signal's (130 / 143) with its one line:
+    never a death by the signal with nothing said. Without ignoring stop signals once the command
+    has a status, every one of these runs of ``python -m slam_lcd info`` died by SIGINT (exit -2)."""
+    bad, sent = [], 0
+    for i in range(10):
+        p = subprocess.Popen([sys.executable, "-u", "-m", "slam_lcd", "info", str(small_log)], env=_env(),
+                             start_new_session=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        for line in p.stdout:  # its last line: the command is returning or Python is exiting
+            if line.strip().startswith("/tf_static"):
+                break
+        time.sleep(0.002 * (i % 5))
+        if p.poll() is None:
+            os.killpg(p.pid, getattr(signal, sig))
+            sent += 1
+        _, err = p.communicate(timeout=60)
+        expected = {0, 130 if sig == "SIGINT" else 143}
+        if p.returncode not in expected or (p.returncode and len(err.strip().splitlines()) != 1):
+            bad.append(f"run {i}: exit {p.returncode}, stderr {err.strip()[-200:]!r}")
+    assert not bad, "\n".join(bad)
+    assert sent >= 5, f"only {sent} of 10 runs were still alive to be signalled"

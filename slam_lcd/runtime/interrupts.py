@@ -200,3 +200,27 @@ def keep_lost_interrupts() -> None:
 
     hook._slam_lcd_keeps_interrupts = True
     sys.unraisablehook = hook
+
+
+def status_of(command) -> int:
+    """Run ``command()`` (a command line's ``main``) and return its exit status, with Ctrl-C, SIGTERM
+    and SIGHUP ignored from the moment it has one.
+
+    Why: once a command has its status, a stop signal can only spoil it. One that lands while the
+    interpreter tears down (atexit callbacks, finalisers, code run from a string) is dropped by
+    Python, or leaves CPython's record of an unhandled Ctrl-C so that the process then kills itself
+    by SIGINT with nothing said: exit -2 instead of the command's 0 or 130. Ignored, it changes
+    nothing. A stop signal that lands before the command has a status gives the status of that signal
+    (130, 143, 129); one that lands after keeps the command's.
+    """
+    status: int | None = None
+    while True:
+        try:
+            if status is None:
+                status = int(command() or 0)
+            for s in (signal.SIGINT, *STOP_SIGNALS):
+                signal.signal(s, signal.SIG_IGN)
+            return status
+        except KeyboardInterrupt as e:
+            if status is None:
+                status = exit_status(e)
