@@ -121,7 +121,9 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as e:  # a file system error no subcommand turned into its own message
         if args.debug:
             raise
-        where = f"{e.filename}: " if getattr(e, "filename", None) else ""
+        from ..files.atomic import user_path
+
+        where = f"{user_path(e.filename)}: " if getattr(e, "filename", None) else ""
         print(f"slam-lcd {args.command}: error: {where}{e.strerror or e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as e:
@@ -135,5 +137,13 @@ def main(argv: list[str] | None = None) -> int:
         return exit_status(e)
 
 
+def console() -> int:
+    """The installed ``slam-lcd`` script: :func:`main`, then stop signals ignored while Python exits
+    (:func:`slam_lcd.runtime.interrupts.status_of`)."""
+    from ..runtime.interrupts import status_of
+
+    return status_of(main)
+
+
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    sys.exit(console())

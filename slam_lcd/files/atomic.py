@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 import shutil
 import tempfile
 from collections.abc import Iterable, Iterator, Mapping
@@ -38,6 +39,32 @@ def atomic_path(target: str | Path, *, directory: bool = False) -> Iterator[Path
     finally:
         if made:
             finish(shutil.rmtree, made[0], True)
+
+
+_TEMP_PART = re.compile(r"\.(?P<name>.+)\.[a-z0-9_]{8}")  # atomic_path's temporary folder: .<name>.XXXXXXXX
+_STAGING_PART = ".slam-lcd-staging."  # an output set's staging folder (slam_lcd.outputs.output_set)
+
+
+def user_path(path: str | Path) -> Path:
+    """The path a user asked for, from a temporary or staging path that stands for it.
+
+    Errors name what the user gave (docs/robustness.md): ``out/.x.tum.ab12cd34/x.tum`` is
+    ``out/x.tum``, ``out/.slam-lcd-staging.host.1.ab12cd34/report.json`` is ``out/report.json``."""
+    parts = list(Path(path).parts)
+    out: list[str] = []
+    i = 0
+    while i < len(parts):
+        part = parts[i]
+        m = _TEMP_PART.fullmatch(part)
+        if part.startswith(_STAGING_PART):
+            i += 1
+            continue
+        if m and i + 1 < len(parts) and parts[i + 1] == m.group("name"):
+            i += 1
+            continue
+        out.append(part)
+        i += 1
+    return Path(*out) if out else Path(path)
 
 
 def replace_path(src: Path, target: Path) -> None:
@@ -146,6 +173,12 @@ def check_no_clash(outputs: Iterable[str | Path] | Mapping[str, str | Path | Non
                 raise InputError(
                     f"the input given as {what} ({inp}) lies inside this output folder, which would replace "
                     "it; refusing to write over an input: choose another output", o)
+        if ip.is_dir():  # a merged output folder around an input folder: never nested, whatever the names
+            for w, o in outs:
+                if o.resolve() in kept and _inside(ip, o):
+                    raise InputError(
+                        f"the input folder given as {what} ({inp}) lies inside this output folder ({w}); input and "
+                        "output folders are kept apart: choose another output", o)
     for i, (wa, a) in enumerate(outs):
         for wb, b in outs[i + 1:]:
             if same_path(a, b):
@@ -154,6 +187,26 @@ def check_no_clash(outputs: Iterable[str | Path] | Mapping[str, str | Path | Non
             if b is not a and not same_path(a, b) and _inside(a, b):
                 raise InputError(f"this output ({wa}) lies inside the output folder {wb}, which is written as a "
                                  "whole; give each its own path", a)
+
+
+def check_apart(what: str, folder: str | Path, others: Mapping[str, str | Path | None]) -> None:
+    """Refuse ``folder`` (a map folder, flag ``what``) equal to, inside or around any of ``others``.
+
+    Why a rule of its own: a map folder holds only its map, whether it is read (``localize``) or
+    appended to (``run --map``), and whether or not it exists yet; an output folder around it or
+    inside it would mix a run's files with the map's (a run's ``map/`` output replaced a map
+    ``OUT/map``). The error names both paths."""
+    from ..errors import InputError
+
+    f = Path(folder)
+    for w, o in others.items():
+        if o is None or str(o) == "":
+            continue
+        op = Path(o)
+        if same_path(op, f) or _inside(op, f) or _inside(f, op):
+            where = "is" if same_path(op, f) else "lies inside" if _inside(op, f) else "holds"
+            raise InputError(f"{w} {o} {where} the map folder given as {what} ({folder}); a map folder holds only "
+                             f"its map: give {w} a path outside it, and not around it", op)
 
 
 def guard_not_input(out: str | Path, *inputs: str | Path) -> None:
