@@ -158,12 +158,12 @@ COMMIT = textwrap.dedent('''
     from slam_lcd.map import store
     root, ref = Path(sys.argv[1]), Path(sys.argv[2])
     rman = store.read_manifest(ref)
-    with store.write_lock(root):
+    with store.write_lock(root) as lock:
         man = store.read_manifest(root) if store.is_map(root) else store.MapManifest(rman.features)
         have = {s["name"] for s in man.sessions}
         new = [({k: v for k, v in meta.items() if k != "file"}, store.read_session(ref, rman, i))
                for i, meta in enumerate(rman.sessions) if meta["name"] not in have]
-        store.commit(root, man, new, store.read_graph(ref, rman), rman.sessions)
+        store.commit(root, man, new, store.read_graph(ref, rman), rman.sessions, lock=lock)
 ''')
 
 

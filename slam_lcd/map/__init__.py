@@ -14,11 +14,11 @@ def __getattr__(name):  # the heavy parts (gtsam, the loop detector) load on fir
         from . import session_map
 
         return getattr(session_map, name)
-    if name in ("MapError", "MapLockedError"):
+    if name in ("MapError", "MapLockedError", "LogAlreadyInMapError"):
         from . import store
 
         return getattr(store, name)
     raise AttributeError(name)
 
 
-__all__ = ["Map", "MapConfig", "MapError", "MapLockedError", "extractor_meta"]
+__all__ = ["LogAlreadyInMapError", "Map", "MapConfig", "MapError", "MapLockedError", "extractor_meta"]

@@ -29,6 +29,14 @@ class MapLockedError(MapError):
     """Another process is writing the map."""
 
 
+class LogAlreadyInMapError(MapError):
+    """The log (same bytes, same camera topic) is a session of the map already; ``session`` names it."""
+
+    def __init__(self, message: str, path=None, session: str = ""):
+        self.session = session
+        super().__init__(message, path)
+
+
 @dataclass
 class SessionKeyframes:
     """One session's keyframes as the map keeps them (arrays; keypoint rows concatenated).

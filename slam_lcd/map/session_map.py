@@ -21,7 +21,6 @@ from typing import BinaryIO
 
 import numpy as np
 
-from ..geometry import inv
 from ..types import Trajectory
 from . import store
 from .config import MapConfig
@@ -35,7 +34,9 @@ from .keyframe_arrays import (
     session_arrays,
     visual_links,
 )
-from .store import MapError, MapGraph, MapManifest, SessionKeyframes
+from .locks import WriterLock
+from .session_graph import existing_loops, factor_graph, session_poses
+from .store import LogAlreadyInMapError, MapError, MapGraph, MapManifest, SessionKeyframes, check_map_target
 
 log = logging.getLogger(__name__)
 
@@ -68,6 +69,7 @@ class Map:
         self.last_join: JointResult | None = None
         self._vocab: dict | None = None  # the vocabulary snapshot to save (add_session), None: none
         self._vocab_fh: BinaryIO | None = None  # a reader's snapshot file, opened with the manifest that names it
+        self._sha_cache: dict[tuple, str | None] = {}  # log file -> sha256 (a log is hashed once)
 
     # ------------------------------------------------------------------ open / close
     @classmethod
@@ -82,18 +84,15 @@ class Map:
         conf = conf or MapConfig()
         lock = None
         if write:
-            if root.exists() and not root.is_dir():
-                raise MapError("a file is in the way of the map folder", root)
-            lock = store.write_lock(root, conf.lock_timeout_s)
-            lock.__enter__()
+            check_map_target(root, create=create)  # refused before the lock: the folder stays as it was
+            lock = WriterLock(root, conf.lock_timeout_s).acquire()
         try:
             if not store.is_map(root):
                 if not create:
                     raise MapError("no map here (no map.json)" if root.exists() else "no such map folder", root)
                 if write:  # what a first append that never committed left behind (the lock is held)
                     store.remove_unfinished(root)
-                if root.exists() and any(p.name != store.LOCK for p in root.iterdir()):
-                    raise MapError("the folder is not empty and holds no map: give an empty or new folder", root)
+                    check_map_target(root, create=create)  # the folder may have changed while we waited
                 if features is None:
                     raise MapError("a new map needs the feature kind it will hold", root)
                 manifest = MapManifest(features=dict(features, descriptor_form=features.get("descriptor_form",
@@ -106,7 +105,7 @@ class Map:
             return m
         except BaseException:
             if lock is not None:
-                lock.__exit__(None, None, None)
+                lock.release()
             raise
 
     @classmethod
@@ -140,7 +139,7 @@ class Map:
             self._vocab_fh.close()
             self._vocab_fh = None
         if self._lock is not None:
-            self._lock.__exit__(None, None, None)
+            self._lock.release()
             self._lock = None
 
     def __enter__(self):
@@ -173,15 +172,42 @@ class Map:
     def session_names(self) -> list[str]:
         return [s["name"] for s in self.manifest.sessions]
 
-    def session_of_log(self, log_path: str | Path) -> str | None:
+    def session_of_log(self, log_path: str | Path, image_topic: str | None = None) -> str | None:
         """The name of the session recorded from this very log (same sha256), or None.
 
-        ``run --map`` skips such a log: a log appended twice would only loop onto itself (an
-        interrupted ``run a b c --map`` is resumed by running it again)."""
-        known = {s.get("log_sha256"): s["name"] for s in self.manifest.sessions if s.get("log_sha256")}
-        if not known:
+        One rule for every way into a map (``run --map``, ``batch --map``, ``demo --sessions``,
+        :meth:`add_session`): a log appended twice adds nothing but loops onto its own copy, so it is
+        skipped (an interrupted ``run a b c --map`` is resumed by running it again). Another camera
+        of the same log is another session: with ``image_topic`` given, only a session recorded
+        from that topic (or from an unrecorded one) counts."""
+        same = [s for s in self.manifest.sessions if s.get("log_sha256")]
+        if not same:
             return None
-        return known.get(log_sha256(log_path))
+        sha = self._log_sha256(log_path)
+        for s in same:
+            if s["log_sha256"] == sha and (image_topic is None or s.get("image_topic") in (None, image_topic)):
+                return str(s["name"])
+        return None
+
+    def already_holds(self, log_path: str | Path, image_topic: str | None = None) -> str | None:
+        """The one line that says ``log_path`` is skipped because the map holds it already, or None."""
+        name = self.session_of_log(log_path, image_topic)
+        if name is None:
+            return None
+        return (f"{log_path}: already in the map {self.root} as session {name!r} (same sha256"
+                + (f", topic {image_topic}" if image_topic else "") + "): not appended again")
+
+    def _log_sha256(self, log_path: str | Path) -> str | None:
+        """``log_sha256``, computed once per log file (by path, size and modification time) in this map."""
+        p = Path(log_path)
+        try:
+            st = p.stat()
+            key = (str(p.resolve()), st.st_size, st.st_mtime_ns)
+        except OSError:
+            return None
+        if key not in self._sha_cache:
+            self._sha_cache[key] = log_sha256(p)
+        return self._sha_cache[key]
 
     def next_kf_id(self) -> int:
         return self.manifest.next_kf_id()
@@ -221,7 +247,11 @@ class Map:
             raise MapError("the map was opened read-only: open it with write=True to add a session", self.root)
         kfs = list(pipeline.keyframes)
         if not kfs:
-            raise MapError("the session has no keyframe: nothing to add to the map", log_path or self.root)
+            raise MapError(f"the session has no keyframe: nothing to add to the map {self.root}",
+                           log_path or self.root)
+        topic = (extra or {}).get("image_topic")
+        if log_path is not None and (held := self.already_holds(log_path, topic)) is not None:
+            raise LogAlreadyInMapError(held, session=str(self.session_of_log(log_path, topic)))
         sess = session_arrays(pipeline.detector, kfs, ground_truth,
                               self.manifest.features.get("descriptor_form", self.conf.descriptor_form))
         name = name or f"session{len(self.sessions) + 1}"
@@ -232,7 +262,7 @@ class Map:
         # this session's own corrected poses, its accepted loops; every inter-session loop offered
         own = pipeline.keyframe_trajectory()
         closures = {(int(c.query_id), int(c.match_id)): c for c in pipeline.closures}
-        loops = self._existing_loops()
+        loops = existing_loops(self.sessions, self.graph)
         for rec in pipeline.loop_records:
             c = closures.get((rec.query_id, rec.match_id))
             if c is not None and rec.verdict == "accepted":
@@ -243,7 +273,7 @@ class Map:
         for c in getattr(pipeline, "map_closures", []):
             loops.append(JointLoop(int(c.query_id), int(c.match_id), np.asarray(c.T_match_query, float),
                                    np.asarray(c.information, float), True, False, ""))
-        sessions = self._session_poses()
+        sessions = session_poses(self.manifest.sessions, self.sessions, self.poses())
         sessions.append(SessionPoses(name, sess.ids, sess.T_odom, sess.cov, np.asarray(own.poses, float), None))
         result = solve(sessions, loops, self.conf)
         self.last_join = result
@@ -261,7 +291,7 @@ class Map:
         meta = {"name": name, "keyframes": len(sess), "kf_id_start": int(sess.ids.min()),
                 "kf_id_end": int(sess.ids.max()) + 1, "stamps": [int(sess.stamps[0]), int(sess.stamps[-1])],
                 "log_path": str(Path(log_path).resolve()) if log_path else None,
-                "log_sha256": log_sha256(log_path) if log_path else None,
+                "log_sha256": self._log_sha256(log_path) if log_path else None,
                 "camera": camera_json(cam), "T_body_camera": np.asarray(pipeline.T_body_camera, float).tolist(),
                 "features": self.manifest.features.get("kind"), "T_map_session": np.eye(4).tolist(),
                 "component": 0, **(extra or {})}
@@ -302,7 +332,7 @@ class Map:
         if on_disk.generation != self._generation_read:
             raise MapError("the map changed on disk since it was opened (another writer?): nothing saved", self.root)
         self.manifest = store.commit(self.root, on_disk, self._unsaved, self.graph, self.manifest.sessions,
-                                     self._vocab)
+                                     self._vocab, lock=self._lock)
         self._generation_read = self.manifest.generation
         self._unsaved = []
 
@@ -330,25 +360,7 @@ class Map:
         key`` (default: the keyframe id). No prior: the user fixes the gauge (e.g. a prior on
         one keyframe, or their own absolute factors).
         """
-        import gtsam
-
-        from .joint_graph import information_noise, odometry_covariance
-
-        key = key or (lambda k: int(k))
-        graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
-        poses = self.poses()
-        for s in self.sessions:
-            for i, k in enumerate(s.ids):
-                values.insert(key(int(k)), gtsam.Pose3(poses.get(int(k), s.T_odom[i])))
-                if i:
-                    graph.add(gtsam.BetweenFactorPose3(key(int(s.ids[i - 1])), key(int(k)),
-                                                       gtsam.Pose3(inv(s.T_odom[i - 1]) @ s.T_odom[i]),
-                                                       gtsam.noiseModel.Gaussian.Covariance(odometry_covariance(s.cov[i]))))
-        g = self.graph
-        for q, mt, T, info, acc in zip(g.loop_query, g.loop_match, g.loop_T, g.loop_info, g.loop_accepted, strict=True):
-            if acc:
-                graph.add(gtsam.BetweenFactorPose3(key(int(mt)), key(int(q)), gtsam.Pose3(T), information_noise(info)))
-        return graph, values
+        return factor_graph(self.sessions, self.graph, self.poses(), key)
 
     # ------------------------------------------------------------------ localisation
     def localise(self, pipeline):
@@ -367,25 +379,5 @@ class Map:
         return localise(poses, session_of, component_of, [k.id for k in kfs], [k.stamp for k in kfs],
                         np.array([k.T_world_body for k in kfs], float).reshape(-1, 4, 4),
                         [k.covariance_since_last for k in kfs], getattr(pipeline, "map_closures", []), self.conf)
-
-    # ------------------------------------------------------------------ helpers
-    def _existing_loops(self) -> list[JointLoop]:
-        g = self.graph
-        sess_of = {int(k): si for si, s in enumerate(self.sessions) for k in s.ids}
-        out = []
-        for q, m_, T, info, acc, why in zip(g.loop_query, g.loop_match, g.loop_T, g.loop_info, g.loop_accepted,
-                                            g.loop_reason, strict=True):
-            inter = sess_of.get(int(q)) != sess_of.get(int(m_))
-            out.append(JointLoop(int(q), int(m_), T, info, inter, bool(acc), str(why)))
-        return out
-
-    def _session_poses(self) -> list[SessionPoses]:
-        P = self.poses()
-        out = []
-        for meta, s in zip(self.manifest.sessions, self.sessions, strict=True):
-            T = np.array([P[int(k)] for k in s.ids]) if P else s.T_odom.copy()
-            out.append(SessionPoses(meta["name"], s.ids, s.T_odom, s.cov, T.reshape(-1, 4, 4), int(meta["component"])))
-        return out
-
 
 __all__ = ["Map", "MapError", "compact_for_map", "extractor_meta"]

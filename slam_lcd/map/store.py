@@ -6,7 +6,7 @@ Layout (``schema`` 1)::
     DIR/sessions/NNNN-<tag>.npz   one session's keyframes (written once, never rewritten)
     DIR/graph-<tag>.npz           loops of every session and the map-frame keyframe poses
     DIR/vocab-<tag>.npz           the online vocabulary and every keyframe's bag of words (optional)
-    DIR/.lock                     the writers' lock (flock)
+    DIR/.lock                     the writers' lock (flock; made with the first commit, slam_lcd.map.locks)
 
 Why this shape: appending a session writes only new files (the session's keyframes and a new
 graph file under a fresh name), then replaces ``map.json`` in one ``os.replace``: that rename is
@@ -20,8 +20,6 @@ used, and arrays load with ``allow_pickle=False``: a truncated, tampered or fore
 from __future__ import annotations
 
 import contextlib
-import errno
-import fcntl
 import hashlib
 import json
 import os
@@ -42,12 +40,14 @@ from .contents import (  # noqa: F401 - the folder's names, read and written her
     MANIFEST,
     MISSING,
     SCHEMA,
+    LogAlreadyInMapError,
     MapError,
     MapGraph,
     MapLockedError,
     MapManifest,
     SessionKeyframes,
 )
+from .locks import WriterLock
 
 
 # ----------------------------------------------------------------------------- reading
@@ -177,6 +177,33 @@ def read_graph(root: str | Path, manifest: MapManifest) -> MapGraph:
 
 
 # ----------------------------------------------------------------------------- writing
+def check_map_target(root: str | Path, *, create: bool = True) -> None:
+    """Refuse, without writing anything, a folder a writer cannot use as a map: a file in the way, a
+    folder that holds something else than a map (or a new map's leftovers), a place that cannot be
+    written (read-only, no permission). ``create``: a folder without a map is to become one."""
+    root = Path(root)
+    if root.exists() and not root.is_dir():
+        raise MapError("a file is in the way of the map folder", root)
+    if is_map(root) or not create:
+        where = root if root.is_dir() else None
+    else:
+        if unfinished_files(root) is None:
+            raise MapError("the folder is not empty and holds no map: give an empty or new folder", root)
+        where = root
+        while not where.exists() and where.parent != where:
+            where = where.parent
+    if where is not None and not os.access(where, os.W_OK | os.X_OK):
+        raise MapError(f"cannot write the map here ({'read-only' if _read_only(where) else 'no permission'}"
+                       f" in {where})", root)
+
+
+def _read_only(path: Path) -> bool:
+    try:
+        return bool(os.statvfs(path).f_flag & os.ST_RDONLY)
+    except OSError:
+        return False
+
+
 def _fsync_dir(path: Path) -> None:
     with contextlib.suppress(OSError):
         fd = os.open(path, os.O_RDONLY)
@@ -202,26 +229,16 @@ def _write_npz(path: Path, arrays: dict[str, np.ndarray]) -> dict:
 
 
 @contextlib.contextmanager
-def write_lock(root: Path, timeout_s: float = 60.0) -> Iterator[None]:
-    """Hold the map's writer lock (``flock`` on ``DIR/.lock``); wait up to ``timeout_s``, then refuse."""
-    root.mkdir(parents=True, exist_ok=True)
-    fd = os.open(root / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
+def write_lock(root: Path, timeout_s: float = 60.0) -> Iterator[WriterLock]:
+    """Hold the map's writer lock (:class:`slam_lcd.map.locks.WriterLock`); wait up to ``timeout_s``, then refuse.
+
+    Nothing is created in a folder that holds no map yet: :func:`commit` makes the folder and its
+    lock file when it writes the first session."""
+    lock = WriterLock(root, timeout_s).acquire()
     try:
-        deadline = time.monotonic() + max(0.0, timeout_s)
-        while True:
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                break
-            except OSError as e:
-                if e.errno not in (errno.EAGAIN, errno.EACCES):
-                    raise
-                if time.monotonic() >= deadline:
-                    raise MapLockedError(f"another slam-lcd process is writing this map (waited {timeout_s:g} s); "
-                                         "try again when it has finished", root) from None
-                time.sleep(0.2)
-        yield
+        yield lock
     finally:
-        os.close(fd)  # closing releases the lock
+        lock.release()
 
 
 def remove_unlisted(root: Path, manifest: MapManifest | None) -> None:
@@ -241,16 +258,11 @@ _ROOT_FILE = re.compile(r"(\.?(graph|vocab)-\d{6}-[0-9a-f]{8}\.npz(\.tmp)?|\.map
 _SESSION_FILE = re.compile(r"\.?\d{4}-[0-9a-f]{8}\.npz(\.tmp)?")
 
 
-def remove_unfinished(root: Path) -> None:
-    """Empty a folder that holds only what an unfinished first commit leaves (no manifest). Under the lock.
-
-    Why: a new map's first append that was killed, interrupted or ran out of disk before its
-    manifest's rename leaves its session file, graph file or just ``sessions/`` behind; the map
-    is then "no map", as it was before, and the folder must take a new one. A folder holding
-    anything else is left alone (the caller refuses it: it is not ours to empty).
-    """
+def unfinished_files(root: Path) -> list[Path] | None:
+    """What an unfinished first commit left in ``root`` (no manifest): its files; None when the folder
+    holds anything else (not ours to empty). An absent or empty folder gives ``[]``."""
     if not root.is_dir() or (root / MANIFEST).exists():
-        return
+        return []
     sessions = root / "sessions"
     ours: list[Path] = []
     for p in root.iterdir():
@@ -259,21 +271,36 @@ def remove_unfinished(root: Path) -> None:
         if p == sessions and p.is_dir() and not p.is_symlink():
             inner = list(p.iterdir())
             if not all(q.is_file() and _SESSION_FILE.fullmatch(q.name) for q in inner):
-                return
+                return None
             ours += inner
         elif p.is_file() and not p.is_symlink() and _ROOT_FILE.fullmatch(p.name):
             ours.append(p)
         else:
-            return
+            return None
+    return ours
+
+
+def remove_unfinished(root: Path) -> None:
+    """Empty a folder that holds only what an unfinished first commit leaves (no manifest). Under the lock.
+
+    Why: a new map's first append that was killed before its manifest's rename leaves its session
+    file, graph file or just ``sessions/`` behind; the map is then "no map", as it was before, and the
+    folder must take a new one. A folder holding anything else is left alone (the caller refuses it:
+    it is not ours to empty).
+    """
+    ours = unfinished_files(root)
+    if not ours:
+        return
     for p in ours:
         with contextlib.suppress(OSError):
             p.unlink()
     with contextlib.suppress(OSError):
-        sessions.rmdir()
+        (root / "sessions").rmdir()
 
 
 def commit(root: Path, manifest: MapManifest, new_sessions: list[tuple[dict, SessionKeyframes]], graph: MapGraph,
-           sessions_table: list[dict], vocab: dict[str, np.ndarray] | None = None) -> MapManifest:
+           sessions_table: list[dict], vocab: dict[str, np.ndarray] | None = None,
+           lock: WriterLock | None = None) -> MapManifest:
     """Write new sessions' files and a new graph file, then the manifest (the commit). Hold the lock.
 
     ``manifest``: the one on disk (or an empty one for a new map); ``sessions_table``: every
@@ -281,8 +308,26 @@ def commit(root: Path, manifest: MapManifest, new_sessions: list[tuple[dict, Ses
     the manifest's rename removes the files it wrote: the folder is as it was (an ``OSError``,
     such as a full disk, is raised as :class:`MapError` naming the map). ``vocab``: the online
     vocabulary's snapshot after these sessions (``vocab-<gen>-<tag>.npz``); None: the map has
-    none (it is replayed when loaded), and an older one is dropped.
+    none (it is replayed when loaded), and an older one is dropped. ``lock``: the writer's lock; a
+    first commit makes the folder and its lock file through it, and removes them again when it fails.
     """
+    if lock is None:
+        return _commit(root, manifest, new_sessions, graph, sessions_table, vocab)
+    try:
+        lock.before_first_write()
+        new = _commit(root, manifest, new_sessions, graph, sessions_table, vocab)
+    except OSError as e:  # making the folder: one error naming the map
+        lock.undo_first_write()
+        raise MapError(f"cannot write the map ({e.strerror or e}); nothing was added to it", root) from e
+    except BaseException:
+        lock.undo_first_write()
+        raise
+    lock.after_first_commit()
+    return new
+
+
+def _commit(root: Path, manifest: MapManifest, new_sessions: list[tuple[dict, SessionKeyframes]], graph: MapGraph,
+            sessions_table: list[dict], vocab: dict[str, np.ndarray] | None) -> MapManifest:
     tag = secrets.token_hex(4)
     files = dict(manifest.files)
     written: list[Path] = []
