@@ -15,21 +15,20 @@ its topic and stamp; nothing is written then, and an earlier run's folder is unt
 from __future__ import annotations
 
 import logging
-import os
 import time
 from collections import deque
 from pathlib import Path
 
 from .config import Config, validate_config
-from .errors import DamagedImageError, FileMissingError, PipelineError
+from .errors import DamagedImageError, PipelineError
 from .io import open_log
 from .io.prefetch import prefetched
 from .io.raw_spool import RawSpool
 from .io.trajectory_files import read_trajectory
 from .outputs.corrected_log import copied_topics
-from .outputs.output_set import OutputSet
 from .outputs.result import RunResult
-from .outputs.write import RUN_OUTPUTS, write_set
+from .outputs.write import write_set
+from .run_checks import check_run_paths, run_inputs
 from .run_sources import (
     calibrated_camera,
     calibration_of,
@@ -63,18 +62,6 @@ from .vision.gray import image_to_gray
 log = logging.getLogger(__name__)
 
 __all__ = ["RunResult", "run_inputs", "run_log"]
-
-
-def run_inputs(log_path, gt_file, cfg, extra=None) -> dict:
-    """What the run reads, by the flag that named it (outputs must not land on any of them)."""
-    inputs = {"the log": log_path, "--gt": gt_file}
-    inputs.update(extra or {})
-    if cfg.features.weights:
-        inputs["--weights"] = cfg.features.weights
-    env = os.environ.get("SLAM_LCD_SUPERPOINT_WEIGHTS")
-    if env:
-        inputs["$SLAM_LCD_SUPERPOINT_WEIGHTS"] = env
-    return inputs
 
 
 # --------------------------------------------------------------------------- main entry
@@ -128,16 +115,12 @@ def run_log(
     cfg = validate_config(config or Config())
     log_path = Path(log_path)
     out_dir = Path(out_dir)
-    if not log_path.exists():
-        raise FileMissingError("no such log file or directory", log_path)
-    if gt_file is not None and not Path(gt_file).is_file():
-        raise FileMissingError("ground-truth trajectory file not found (--gt)", gt_file)
     calibration = calibration_of(calib)
     extra_inputs = dict(input_paths or {})
     if calibration is not None:
         extra_inputs.update({f"--calib {i}": p for i, p in enumerate(calibration.sources)})
-    outputs = OutputSet(out_dir, RUN_OUTPUTS)
-    outputs.check(run_inputs(log_path, gt_file, cfg, extra_inputs))
+    outputs = check_run_paths(log_path, out_dir, cfg, gt_file, extra_inputs,
+                              map_dir=map.root if map is not None else None, appended=map_mode == "append")
     t_start = time.perf_counter()
     result = RunResult(out_dir=out_dir, log_path=str(log_path), command_line=command_line,
                        overrides=list(overrides or []))
@@ -151,6 +134,8 @@ def run_log(
             flags = configured_topics(reader, cfg.sensors, image_topic, odom_topic, gt_topic, depth_topic, right_topic)
             right_topic = flags.pop("right_topic")
             topics = choose_topics(reader, **flags)
+            if map is not None and map_mode == "append":
+                _refuse_a_log_the_map_holds(map, log_path, topics.image)
             calibrated = calibrated_camera(calibration, topics, log_path)
             first = check_first_messages(reader, topics)
             check_image_sizes(reader, topics, first, calibrated, calibration)
@@ -294,9 +279,19 @@ def _append_to_map(map, pipe, result: RunResult, log_path: Path, name: str | Non
         notes.append(f"The map {map.root} was left as it was: an interrupted session is not added to a map.")
         log.warning("interrupted: %s was not changed", map.root)
         return {"root": str(map.root), "appended": False, "reason": "interrupted"}
-    joined = map.add_session(pipe, name=name or log_path.stem, log_path=log_path, ground_truth=gt)
+    joined = map.add_session(pipe, name=name or log_path.stem, log_path=log_path, ground_truth=gt,
+                             extra={"image_topic": result.topics.get("image")})
     map.save()
     return map_summary(map, joined, current=map.session_names[-1], pipe=pipe)
+
+
+def _refuse_a_log_the_map_holds(map, log_path: Path, image_topic: str | None) -> None:
+    """A log (and camera topic) the map holds already is not run again (``Map.session_of_log``)."""
+    from .map.store import LogAlreadyInMapError
+
+    held = map.already_holds(log_path, image_topic)
+    if held is not None:
+        raise LogAlreadyInMapError(held, session=str(map.session_of_log(log_path, image_topic)))
 
 
 def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame, vo_odometry, log_path,

@@ -64,6 +64,8 @@ def run(args) -> int:
     from ..batch import run_batch
 
     cfg = config_from_args(args)
+    if args.map is not None:  # the map apart from --out and the inputs, before any log runs
+        _check_map(args)
     res = run_batch(args.logs, Path(args.out), cfg, workers=args.workers, ray=args.ray, force=args.force,
                     image_topic=args.image_topic, odom_topic=args.odom_topic, depth_topic=args.depth_topic,
                     gt_topic=args.gt_topic, gt_dir=args.gt_dir, vocab=args.vocab, write_mcap=not args.no_mcap,
@@ -79,6 +81,18 @@ def run(args) -> int:
 
         return exit_status()  # 130 Ctrl-C, 143 SIGTERM, 129 SIGHUP
     return 2 if res.failed else 0
+
+
+def _check_map(args) -> None:
+    from ..batch.discovery import discover_logs
+    from ..files.atomic import check_apart, check_no_clash
+    from ..map.store import check_map_target
+
+    check_apart("--map", args.map, {"--out": args.out})
+    inputs = {f"log {e.name}": e.path for e in discover_logs(args.logs)}
+    inputs.update({"--gt-dir": args.gt_dir, "--vocab": args.vocab, **config_inputs(args)})
+    check_no_clash({"--map": args.map}, inputs, merged=[args.map])
+    check_map_target(args.map, create=True)
 
 
 def _append_to_map(args, cfg, res) -> int:
@@ -100,6 +114,10 @@ def _append_to_map(args, cfg, res) -> int:
                   create=True) as m:
         last = None
         for r in rows:
+            held = m.already_holds(r["log"], args.image_topic)
+            if held is not None:  # one rule for every way into a map (Map.session_of_log)
+                print(held)
+                continue
             gt = ground_truth_in(Path(args.gt_dir), LogEntry(Path(r["log"]), r["name"])) if args.gt_dir else None
             last = run_log(r["log"], out / r["name"], cfg, extractor=extractor, progress=not args.no_progress,
                            gt_topic=args.gt_topic, gt_file=gt, image_topic=args.image_topic,
@@ -108,6 +126,9 @@ def _append_to_map(args, cfg, res) -> int:
             print(f"appended {r['name']} to {args.map}" + (" (interrupted: not added)" if last.interrupted else ""))
             if last.interrupted:
                 return exit_status()
-    for line in summary_lines(last.map):
-        print(line)
+    if last is None:
+        print(f"map {args.map}: nothing appended (it holds every log already)")
+    else:
+        for line in summary_lines(last.map):
+            print(line)
     return 0

@@ -136,9 +136,13 @@ def _run_sessions(args, cfg, extractor, notice) -> int:
                  create=True)
     try:
         if m.sessions:
-            print(f"{out / 'map'} already holds {len(m.sessions)} sessions: the demo sessions are appended to them")
+            print(f"{out / 'map'} already holds {len(m.sessions)} sessions: the demo sessions it lacks are appended")
         res = None
         for k, path in enumerate(logs, 1):
+            held = m.already_holds(path)
+            if held is not None:  # one rule for every way into a map (Map.session_of_log)
+                print(held)
+                continue
             res = run_log(path, out / f"session{k}", cfg, extractor=extractor, progress=not args.no_progress,
                           input_paths=config_inputs(args), command_line=getattr(args, "command_line", None),
                           overrides=list(args.overrides), map=m, session_name=f"session{k}")
@@ -148,7 +152,9 @@ def _run_sessions(args, cfg, extractor, notice) -> int:
         m.close()
     print("slam-lcd demo summary (multi-session)")
     print(f"  features: {cfg.features.kind}" + (f" ({notice})" if notice else ""))
-    for line in summary_lines(res.map):
+    if res is None:
+        print(f"  map {out / 'map'}: nothing appended (it holds every demo session already)")
+    for line in summary_lines(res.map) if res is not None else []:
         print(f"  {line.strip()}")
     print(f"outputs in {out}/ (map/, session1/ ... : each run's files, map/ in each: every session in the map frame)")
     return 0

@@ -1,4 +1,9 @@
-"""`slam-lcd localize LOG --map DIR --out OUT`: localise a log against a saved map without changing it."""
+"""`slam-lcd localize LOG --map DIR --out OUT`: localise a log against a saved map without changing it.
+
+Exit status: 0 when at least one keyframe is localised; 1 when none is (the outputs are still
+written: ``localization.csv`` gives each keyframe's reason, the report says 0 %); 2 bad input
+(the map, the log, the paths); 130 / 143 / 129 after Ctrl-C / SIGTERM / SIGHUP.
+"""
 from __future__ import annotations
 
 from pathlib import Path
@@ -27,20 +32,30 @@ def run(args) -> int:
     from ..features import load_extractor
     from ..map.session_map import Map, extractor_meta
     from ..map.summary import localisation_lines
+    from ..run_checks import check_run_paths
     from ..runner import run_log
+    from .run import run_input_paths
 
     cfg = config_from_args(args)
-    extractor = load_extractor(cfg.features)
-    m = Map.open(args.map, features=extractor_meta(extractor, cfg.map.descriptor_form), conf=cfg.map)
-    inputs = dict(config_inputs(args), **{"--map": args.map})
-    res = run_log(args.log, Path(args.out), cfg, image_topic=args.image_topic, odom_topic=args.odom_topic,
-                  depth_topic=args.depth_topic, gt_topic=args.gt_topic, gt_file=args.gt,
-                  progress=not args.no_progress, write_mcap=not args.no_mcap, input_paths=inputs,
-                  command_line=getattr(args, "command_line", None), overrides=list(args.overrides),
-                  calib=args.calib, right_topic=args.right_topic, map=m, map_mode="localize", extractor=extractor)
+    inputs = config_inputs(args)
+    check_run_paths(args.log, args.out, cfg, args.gt, run_input_paths(args), map_dir=args.map)  # before any work
+    m = Map.open(args.map, conf=cfg.map)  # a missing, foreign or damaged map: refused before the model loads
+    with m:
+        extractor = load_extractor(cfg.features)
+        m.check_features(extractor_meta(extractor, cfg.map.descriptor_form))
+        res = run_log(args.log, Path(args.out), cfg, image_topic=args.image_topic, odom_topic=args.odom_topic,
+                      depth_topic=args.depth_topic, gt_topic=args.gt_topic, gt_file=args.gt,
+                      progress=not args.no_progress, write_mcap=not args.no_mcap, input_paths=inputs,
+                      command_line=getattr(args, "command_line", None), overrides=list(args.overrides),
+                      calib=args.calib, right_topic=args.right_topic, map=m, map_mode="localize",
+                      extractor=extractor)
     if res.localization is not None:
         for line in localisation_lines(res.localization):
             print(line)
     print(f"outputs in {res.out_dir}/ ({', '.join(res.outputs)})"
           + (" -- a partial set, see PARTIAL.txt" if res.interrupted else ""))
-    return 130 if res.interrupted else 0
+    if res.interrupted:
+        from ..runtime.interrupts import exit_status
+
+        return exit_status()  # 130 Ctrl-C, 143 SIGTERM, 129 SIGHUP
+    return 0 if res.localization is not None and res.localization["localised"] else 1

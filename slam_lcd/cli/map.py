@@ -58,15 +58,24 @@ def info(args) -> int:
 
 
 def export(args) -> int:
-    from ..files.atomic import atomic_path, check_no_clash
+    from ..files.atomic import check_apart, check_writable_target
+    from .util import write_guard
+
+    out = Path(args.out)
+    check_apart("DIR", args.map_dir, {"OUT": out})  # before the map is read: nothing of it is written
+    m = _open(args.map_dir)
+    check_writable_target(out, folder=args.to != "mcap")
+    names = m.session_names
+    with write_guard(out):  # an OS error while writing names OUT, never a temporary name
+        return _export(args, m, out, names)
+
+
+def _export(args, m, out: Path, names: list[str]) -> int:
+    from ..files.atomic import atomic_path
     from ..io.trajectory_files import write_trajectory
     from ..map.store import MANIFEST
     from ..outputs.map_outputs import session_file_stem
 
-    m = _open(args.map_dir)
-    out = Path(args.out)
-    check_no_clash([out], {"the map": Path(args.map_dir)})
-    names = m.session_names
     if args.to == "mcap":
         from ..io.messages import pose_stamped_msg
         from ..io.writers import open_writer

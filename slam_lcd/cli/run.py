@@ -139,21 +139,23 @@ def run(args) -> int:
         return _print_result(_run_one(args, cfg, logs[0], Path(args.out), None))
     from ..features import load_extractor
     from ..map.session_map import Map, extractor_meta
+    from ..run_checks import check_run_paths
 
     names = [x.stem for x in logs]
     if len(set(names)) != len(names):
         raise InputError(f"two logs share a name ({', '.join(names)}): their output folders would clash")
     outs = [Path(args.out)] if len(logs) == 1 else [Path(args.out) / n for n in names]
+    for log_path, out in zip(logs, outs, strict=True):  # every path refused before a model loads or a lock waits
+        check_run_paths(log_path, out, cfg, args.gt, run_input_paths(args), map_dir=args.map, appended=True)
     extractor = load_extractor(cfg.features)
     m = Map.open(args.map, features=extractor_meta(extractor, cfg.map.descriptor_form), conf=cfg.map, write=True,
                  create=True)
     rc = 0
     try:
         for log_path, out in zip(logs, outs, strict=True):
-            known = m.session_of_log(log_path)
-            if known is not None:
-                print(f"{log_path}: already in the map {args.map} as session {known!r} (same sha256): "
-                      "not appended again")
+            held = m.already_holds(log_path, args.image_topic)
+            if held is not None:  # one rule for every way into a map (Map.session_of_log)
+                print(held)
                 continue
             res = _run_one(args, cfg, log_path, out, m, extractor=extractor)
             rc = _print_result(res)
@@ -162,6 +164,14 @@ def run(args) -> int:
     finally:
         m.close()
     return rc
+
+
+def run_input_paths(args) -> dict:
+    """The run's inputs named by flags besides the log and --gt (--config, --calib)."""
+    inputs = config_inputs(args)
+    for i, p in enumerate(getattr(args, "calib", None) or []):
+        inputs[f"--calib {i}"] = p
+    return inputs
 
 
 def _run_one(args, cfg, log_path: Path, out: Path, m, extractor=None):
