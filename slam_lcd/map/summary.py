@@ -115,10 +115,24 @@ def map_summary(m, joined=None, *, current: str | None = None, pipe=None) -> dic
             key = " - ".join(sorted((r["query_session"], r["match_session"])))
             pairs[key] = pairs.get(key, 0) + 1
     return {"root": str(m.root), "appended": current is not None, "current_session": current,
+            "current": _current(m, current, sessions) if current is not None else None,
             "sessions": sessions, "components": m.components(), "n_keyframes": m.n_keyframes,
             "loops_within_sessions": accepted_within, "loops_within_sessions_offered": within, "visual_links": links,
             "inter_session_loops": inter, "inter_session_accepted_by_pair": pairs,
             "inter_session_accepted": sum(1 for r in inter if r["accepted"])}
+
+
+def _current(m, name: str, sessions: list[dict]) -> dict:
+    """This run's session in the map: its loops the joint graph accepted (within it and to other sessions), its ATE."""
+    ids = {int(k) for k in m.sessions[m.session_names.index(name)].ids}
+    g = m.graph
+    within = sum(1 for q, mt, acc, why in zip(g.loop_query, g.loop_match, g.loop_accepted, g.loop_reason, strict=True)
+                 if acc and str(why) != "link" and int(q) in ids and int(mt) in ids)
+    entry = next(s for s in sessions if s["name"] == name)
+    return {"name": name, "joined": entry["joined"], "component": entry["component"],
+            "loops_accepted": within + entry["inter_session_loops"], "within_session_loops": within,
+            "inter_session_loops": entry["inter_session_loops"], "ate_odometry": entry.get("ate_odometry"),
+            "ate_map": entry.get("ate_map")}
 
 
 def summary_lines(summary: dict) -> list[str]:
@@ -154,9 +168,9 @@ def localisation_report(m, loc, gt=None) -> dict:
             reasons[key] = reasons.get(key, 0) + 1
     out = {"map": str(m.root), "keyframes": len(ks), "localised": sum(k.localised for k in ks),
            "share_localised": loc.share_localised, "component": loc.component, "not_localised_reasons": reasons,
-           "errors": None, "_loc": loc}
+           "notes": list(loc.notes), "errors": None, "_loc": loc}
     al = gt_alignment(m, loc.component or 0)
-    if gt is not None and len(gt) > 1 and al is not None:
+    if gt is not None and len(gt) > 1 and al is not None and len(loc.trajectory):
         R, t = al
         stamps = np.array([k.stamp for k in ks], np.int64)
         inside = (stamps >= gt.stamps[0]) & (stamps <= gt.stamps[-1])
@@ -178,7 +192,7 @@ def localisation_report(m, loc, gt=None) -> dict:
 
 def localisation_lines(rep: dict) -> list[str]:
     lines = [f"localised {rep['localised']} of {rep['keyframes']} keyframes ({100 * rep['share_localised']:.1f} %) "
-             f"against {rep['map']}"]
+             f"against {rep['map']}" + "".join(f": {n}" for n in rep.get("notes", []))]
     for why, n in rep["not_localised_reasons"].items():
         lines.append(f"  not localised: {n} ({why})")
     e = rep.get("errors")

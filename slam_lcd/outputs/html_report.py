@@ -163,6 +163,7 @@ def write_html_report(out_dir: Path, facts: dict, summary_lines: list[str], rows
                  ("interrupted", "yes: a partial result" if facts["interrupted"] else "no")):
         body.append(f"<tr><th class=t>{_e(k)}</th><td class=t><code>{_e(v)}</code></td></tr>")
     body.append("</table>")
+    body += _map_section(facts.get("map"), facts.get("localization"))  # a map's result before the run's details
     if facts["eval"] is not None:
         body.append("<h2>Error against ground truth</h2>")
         body += _errors_table(facts["eval"])
@@ -177,7 +178,6 @@ def write_html_report(out_dir: Path, facts: dict, summary_lines: list[str], rows
                 + (f"; {n_bad} accepted loop(s) false by ground truth" if n_bad is not None else "")
                 + ". Click a header to sort; a thumbnail opens its picture in <code>loops/</code>.</p>")
     body += _loop_table(rows, out_dir, set(pictures), thumbs)
-    body += _map_section(facts.get("map"), facts.get("localization"))
     body += _cloud_section(facts.get("map_cloud"), out_dir)
     body.append("<h2>Time per stage</h2>"
                 "<table id='stages'><tr><th class=t>stage</th><th>seconds</th><th>calls</th></tr>")

@@ -53,25 +53,29 @@ def not_built(reason: str) -> dict:
     return {"built": False, "reason": reason}
 
 
-def keyframe_poses(pipe) -> tuple[dict, dict]:
-    """``(odometry, corrected)``: keyframe id -> 4x4 pose."""
+def keyframe_poses(pipe, kf_corrected=None) -> tuple[dict, dict]:
+    """``(odometry, corrected)``: keyframe id -> 4x4 pose; ``kf_corrected``: the corrected keyframe
+    trajectory to use (a map run's, in the map frame; default the run's own)."""
     odo = {k.id: k.T_world_body for k in pipe.keyframes}
-    kf_corr = pipe.keyframe_trajectory()
+    kf_corr = pipe.keyframe_trajectory() if kf_corrected is None else kf_corrected
     by_stamp = {int(s): T for s, T in zip(kf_corr.stamps, kf_corr.poses, strict=True)}
     corr = {k.id: by_stamp[int(k.stamp)] for k in pipe.keyframes if int(k.stamp) in by_stamp}
     return odo, corr
 
 
 def write_map_clouds(out_dir: Path, pipe, conf, ate_before=None, ate_after=None, surfaces=None,
-                     surfaces_name: str = "", sensor: dict | None = None) -> tuple[dict, object | None]:
-    """Write :data:`MAP_CLOUD_FILES` into ``out_dir``; ``(facts for report.json, the corrected cloud)``."""
+                     surfaces_name: str = "", sensor: dict | None = None,
+                     kf_corrected=None) -> tuple[dict, object | None]:
+    """Write :data:`MAP_CLOUD_FILES` into ``out_dir``; ``(facts for report.json, the corrected cloud)``.
+
+    ``kf_corrected``: the corrected keyframe poses (a map run's in the map frame; default the run's own)."""
     builder = pipe.map_cloud
     try:
         if builder.n_keyframes == 0:
             reasons = "; ".join(f"{n} keyframe(s): {r}" for r, n in builder.skipped.items()) or "no keyframe"
             return not_built(f"no keyframe gave points ({reasons})"), None
         t0 = time.perf_counter()
-        odo_poses, corr_poses = keyframe_poses(pipe)
+        odo_poses, corr_poses = keyframe_poses(pipe, kf_corrected)
         clouds = {"odometry": builder.cloud(odo_poses)}
         with_truth = surfaces is not None and ate_before is not None and ate_after is not None
         # the odometry map's figures on a second core while the corrected map is merged (numpy and scipy's

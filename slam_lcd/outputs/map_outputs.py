@@ -103,16 +103,19 @@ def write_localization_outputs(out_dir: Path, pipe, result) -> list[str]:
 
     rep = result.localization
     loc = rep["_loc"]
-    kf_odom = pipe.keyframe_odometry()
-    full = correct_full_rate(pipe.odometry_trajectory(), kf_odom.stamps, kf_odom.poses, loc.trajectory.poses)
-    write_tum(out_dir / "localized.tum", full)
-    write_tum(out_dir / "keyframes_localized.tum", Trajectory(loc.trajectory.stamps, loc.trajectory.poses))
+    written = []
+    if len(loc.trajectory):  # nothing localised: no trajectory in the map frame, the table says why
+        kf_odom = pipe.keyframe_odometry()
+        full = correct_full_rate(pipe.odometry_trajectory(), kf_odom.stamps, kf_odom.poses, loc.trajectory.poses)
+        write_tum(out_dir / "localized.tum", full)
+        write_tum(out_dir / "keyframes_localized.tum", Trajectory(loc.trajectory.stamps, loc.trajectory.poses))
+        written = list(LOCALIZATION_FILES[:2])
     rows = [{"keyframe": k.kf_id, "stamp_ns": k.stamp, "localised": k.localised, "reason": k.reason,
              "map_keyframe": "" if k.match_id is None else k.match_id, "map_session": k.match_session or "",
              "inliers": "" if k.inliers is None else k.inliers,
              "error_m": "" if getattr(k, "error_m", None) is None else round(k.error_m, 4)} for k in loc.keyframes]
     write_text(out_dir / "localization.csv", _csv(rows))
-    return list(LOCALIZATION_FILES)
+    return [*written, "localization.csv"]
 
 
 def _num(x):

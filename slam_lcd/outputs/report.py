@@ -67,6 +67,10 @@ def report_facts(result: RunResult, cfg, rows: list[dict], ate_before, ate_after
     return {
         "schema": REPORT_SCHEMA_VERSION,
         "slam_lcd_version": __version__,
+        # what to read first: a run into a map gives the map's result (corrected.tum in the map frame, this
+        # session's loops accepted by the joint graph); session_frame then holds the session's own figures
+        "headline": result.headline(),
+        "session_frame": result.session_frame,
         "input": {"log": result.log_path, "gt_source": result.gt_source, "topics": dict(result.topics)},
         "command_line": result.command_line,
         "config_overrides": list(result.overrides),

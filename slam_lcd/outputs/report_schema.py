@@ -99,6 +99,15 @@ REPORT_SCHEMA: dict[str, Any] = {
         "outputs": {"type": "array", "items": {"type": "string"}},
         "config": {"type": "object"},
         "map_cloud": _MAP_CLOUD,
+        # what to read first; "frame": "map" for a run into a map (corrected.tum, the loops and the ATE are the
+        # map's), "session" otherwise
+        "headline": {"type": "object", "required": ["frame", "loops_accepted", "ate_before_m", "ate_after_m"],
+                     "properties": {"frame": {"enum": ["map", "session"]},
+                                    "loops_accepted": {"type": "integer", "minimum": 0},
+                                    "ate_before_m": _NUM_OR_NULL, "ate_after_m": _NUM_OR_NULL,
+                                    "ate_ratio": _NUM_OR_NULL, "map": {"type": ["string", "null"]}}},
+        # a run into a map: the session's own correction (its back end's loops, corrected_session.tum's ATE)
+        "session_frame": {"type": ["object", "null"]},
     },
 }
 

@@ -40,6 +40,9 @@ class RunResult:
     overrides: list[str] = field(default_factory=list)
     # run --map: the map after this session was added (slam_lcd.map.summary.map_summary), else None
     map: dict | None = None
+    # run --map: the session's own correction (its back end's loops, ATE of corrected_session.tum); the
+    # counts and ATE above are then the map's (the joint graph's loops of this session, corrected.tum in the map frame)
+    session_frame: dict | None = None
     # localize: slam_lcd.map.summary.localisation_report (with the Localisation under "_loc"), else None
     localization: dict | None = None
     # the map as a point cloud (slam_lcd.outputs.map_cloud): its figures, or why it was not built; None: not asked
@@ -56,18 +59,46 @@ class RunResult:
     def ate_ratio(self) -> float | None:
         return ratio_or_none(self.ate_after, self.ate_before)
 
+    @property
+    def in_map_frame(self) -> bool:
+        """A run into a map: the result (corrected.tum, the counts, the ATE) is the map's."""
+        return self.session_frame is not None and bool(self.map and self.map.get("current"))
+
+    def headline(self) -> dict:
+        """The result a user looks at first (report.json's ``headline``): frame, loops accepted, ATE before/after."""
+        return {"frame": "map" if self.in_map_frame else "session", "loops_accepted": self.loops_accepted,
+                "ate_before_m": self.ate_before, "ate_after_m": self.ate_after, "ate_ratio": self.ate_ratio,
+                "map": self.map["root"] if self.in_map_frame and self.map else None}
+
+    def _ate_text(self, after: float | None) -> str:
+        ratio = ratio_or_none(after, self.ate_before)
+        return (f"{self.ate_before:.3f} m -> {after:.3f} m"
+                + (f" ({100 * ratio:.1f}% of odometry)" if ratio is not None else " (odometry error ~0: no ratio)"))
+
     def summary_lines(self) -> list[str]:
-        lines = [
-            f"frames: {self.n_frames}, keyframes: {self.n_keyframes}",
-            f"loops: {self.loops_proposed} candidates, {self.loops_verified} verified, "
-            f"{self.loops_accepted} accepted by the back end, {self.loops_rejected_backend} rejected by it"
-            + (f", {self.false_loops_accepted} false loops accepted" if self.false_loops_accepted is not None else ""),
-        ]
-        if self.ate_before is not None:
-            ratio = self.ate_ratio
-            lines.append(f"ATE ({self.alignment}): {self.ate_before:.3f} m -> {self.ate_after:.3f} m"
-                         + (f" ({100 * ratio:.1f}% of odometry)" if ratio is not None else
-                            " (odometry error ~0: no ratio)"))
+        lines = []
+        if self.in_map_frame:  # the map's result first: the session's own figures follow, labelled
+            cur = self.map["current"]
+            ate = f", ATE ({self.alignment}) {self._ate_text(self.ate_after)}" if self.ate_before is not None else ""
+            lines.append(f"map {self.map['root']}: session {cur['name']} "
+                         + ("joined" if cur["joined"] else "not joined (kept in its own frame)")
+                         + f", {cur['loops_accepted']} loops accepted by the joint graph ({cur['inter_session_loops']} "
+                           f"to other sessions, {cur['within_session_loops']} within it){ate} in the map frame")
+        lines.append(f"frames: {self.n_frames}, keyframes: {self.n_keyframes}")
+        if self.in_map_frame:
+            own = self.session_frame
+            lines.append(f"this session on its own (its odometry frame, corrected_session.tum): "
+                         f"{self.loops_proposed} loop candidates, {self.loops_verified} verified, "
+                         f"{own['loops_accepted']} accepted by its back end, {own['loops_rejected_by_backend']} "
+                         "rejected by it" + (f", ATE {self._ate_text(own['ate_after'])}"
+                                             if own.get("ate_after") is not None else ""))
+        else:
+            lines.append(f"loops: {self.loops_proposed} candidates, {self.loops_verified} verified, "
+                         f"{self.loops_accepted} accepted by the back end, {self.loops_rejected_backend} rejected by it"
+                         + (f", {self.false_loops_accepted} false loops accepted"
+                            if self.false_loops_accepted is not None else ""))
+            if self.ate_before is not None:
+                lines.append(f"ATE ({self.alignment}): {self._ate_text(self.ate_after)}")
         if self.map_cloud is not None:
             from .map_cloud import summary_line
 

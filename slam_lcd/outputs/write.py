@@ -29,7 +29,10 @@ from .result import RunResult
 log = logging.getLogger(__name__)
 
 # every name `run` may write into --out (the set is published as a whole: slam_lcd.outputs.output_set)
-RUN_OUTPUTS = ("config.yaml", "odometry.tum", "corrected.tum", "keyframes_corrected.tum", "graph.g2o", "loops.csv",
+# a run into a map: corrected.tum and keyframes_corrected.tum are in the map frame, these the session's own
+SESSION_FRAME_FILES = ("corrected_session.tum", "keyframes_corrected_session.tum")
+RUN_OUTPUTS = ("config.yaml", "odometry.tum", "corrected.tum", "keyframes_corrected.tum", *SESSION_FRAME_FILES,
+               "graph.g2o", "loops.csv",
                "corrected.mcap", "trajectory.png", "ate_over_time.png", "report.json", "report.md", "report.html",
                LOOPS_DIR, MAP_DIR, *LOCALIZATION_FILES, *MAP_CLOUD_FILES)
 
@@ -124,7 +127,16 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
     odom = pipe.odometry_trajectory()
     corrected = pipe.corrected_trajectory()
     kf_corr = pipe.keyframe_trajectory() if pipe.keyframes else Trajectory(np.zeros(0, np.int64), np.zeros((0, 4, 4)))
-    for name, traj in (("odometry.tum", odom), ("corrected.tum", corrected), ("keyframes_corrected.tum", kf_corr)):
+    kf_session, corrected_session = kf_corr, None  # the session's own correction (a map run's is the map's)
+    files = [("odometry.tum", odom), ("corrected.tum", corrected), ("keyframes_corrected.tum", kf_corr)]
+    if _appended_to_map(pipe, result):  # the result is the map's: this log in the map frame
+        from .map_outputs import current_in_map_frame
+
+        corrected_session = corrected
+        corrected, kf_corr = current_in_map_frame(pipe, pipe.map, result.map["current_session"])
+        files = [("odometry.tum", odom), ("corrected.tum", corrected), ("keyframes_corrected.tum", kf_corr),
+                 (SESSION_FRAME_FILES[0], corrected_session), (SESSION_FRAME_FILES[1], kf_session)]
+    for name, traj in files:
         if len(traj) == 0 and skipped is not None:
             skipped.append(f"{name}: not written (no poses yet)")
             continue
@@ -137,7 +149,7 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
         skipped.append("graph.g2o: not written (no keyframe yet)")
 
     rows = loop_rows(pipe.candidate_records, pipe.loop_records, pipe.keyframes, gt,
-                     position_only=result.gt_position_only, keyframe_poses=kf_corr)
+                     position_only=result.gt_position_only, keyframe_poses=kf_session)
     if _appended_to_map(pipe, result):
         add_map_verdicts(rows, pipe.candidate_records, pipe.map, result.map["inter_session_loops"])
     write_loops_csv(out_dir / "loops.csv", rows)
@@ -148,6 +160,10 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
     result.loops_verified = sum(1 for r in rows if r["verdict"] == VERIFIED)
     result.loops_accepted = sum(1 for r in pipe.loop_records if r.verdict == ACCEPTED)
     result.loops_rejected_backend = sum(1 for r in pipe.loop_records if r.verdict != ACCEPTED)
+    if corrected_session is not None:  # a map run: its headline is the joint graph's (this session's loops in it)
+        result.session_frame = {"loops_accepted": result.loops_accepted,
+                                "loops_rejected_by_backend": result.loops_rejected_backend, "ate_after": None}
+        result.loops_accepted = int(result.map["current"]["loops_accepted"])
     result.stages = pipe.timer.as_dict()
     result.keyframe_seconds = list(pipe.keyframe_seconds)
 
@@ -166,6 +182,11 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
         except SlamLcdError as e:  # e.g. a log shorter than one RPE step
             rpe_before = rpe_after = None
             log.warning("RPE against the ground truth not computed: %s", e.problem)
+    if ate_before is not None and corrected_session is not None:  # the same ATE of the session's own correction
+        try:
+            result.session_frame["ate_after"] = ate_with_config(gt, corrected_session, cfg.eval).rmse
+        except SlamLcdError:
+            pass
     if ate_before is not None:
         result.ate_before, result.ate_after = ate_before.rmse, ate_after.rmse
         result.alignment = result.alignment or cfg.eval.align  # the runner may add a note (position-only ground truth)
@@ -180,7 +201,7 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
         rects = by_frame.get(result.frames.get("gt") or "world")  # the surfaces in the ground truth's frame
         try:
             result.map_cloud, cloud = write_map_clouds(out_dir, pipe, cfg.map_cloud, ate_before, ate_after, rects,
-                                                       name, result.map_cloud_sensor)
+                                                       name, result.map_cloud_sensor, kf_corrected=kf_corr)
         except OSError:
             raise
         except Exception as e:  # the map must never cost the user the trajectory
@@ -295,28 +316,24 @@ def _write_mcap_and_plots(pipe, out_dir, result, gt, mcap_source, copy_topics, s
         accepted = [(r.query_id, r.match_id, kf_stamp[r.query_id]) for r in pipe.loop_records
                     if r.verdict == ACCEPTED and r.query_id in kf_stamp]
         alignment = ate_after.alignment if ate_after is not None else None
-        shown, kf_shown, layer = corrected, kf_corr, None
-        if _appended_to_map(pipe, result):  # the log among the map's sessions, in the map frame
-            from .map_outputs import current_in_map_frame, session_layer
+        layer = None
+        if _appended_to_map(pipe, result):  # the log among the map's sessions (corrected is in the map frame)
+            from .map_outputs import session_layer
 
-            current = result.map["current_session"]
-            shown, kf_shown = current_in_map_frame(pipe, pipe.map, current)
-            layer, alignment = session_layer(pipe.map, current, result.map["inter_session_loops"])
-            if cloud is not None:  # built with the session's own corrected poses, not the map frame's
-                log.info("corrected.mcap: the point cloud of a run with a map is in map.ply only "
-                         "(it is in the session's own frame, the file shows the map frame)")
-        write_corrected_log(out_dir / "corrected.mcap", odom=odom, corrected=shown,
-                            kf_ids=[k.id for k in pipe.keyframes], kf_corrected=kf_shown, loops=accepted,
+            layer, alignment = session_layer(pipe.map, result.map["current_session"],
+                                             result.map["inter_session_loops"])
+        write_corrected_log(out_dir / "corrected.mcap", odom=odom, corrected=corrected,
+                            kf_ids=[k.id for k in pipe.keyframes], kf_corrected=kf_corr, loops=accepted,
                             log_frames=frames, run_conf=cfg.run, copy_from=mcap_source,
                             copy_topics=copy_topics or [], io_conf=cfg.io, gt_poses=gt_file,
                             gt_alignment=alignment, spooled=spool, sessions=layer,
-                            cloud=cloud if layer is None else None, cloud_topic=cfg.map_cloud.mcap_topic)
+                            cloud=cloud, cloud_topic=cfg.map_cloud.mcap_topic)
         outputs.append("corrected.mcap")
 
     # ---- plots
     if cfg.run.plots:
         try:
-            write_plots(out_dir, odom, corrected, gt, pipe.keyframes, pipe.keyframe_trajectory(), pipe.loop_records,
+            write_plots(out_dir, odom, corrected, gt, pipe.keyframes, kf_corr, pipe.loop_records,
                         ate_before, ate_after, mode=cfg.run.plot_mode)
             outputs += ["trajectory.png", "ate_over_time.png"] if ate_before is not None else ["trajectory.png"]
         except Exception as e:  # a plot must never cost the user the numbers
