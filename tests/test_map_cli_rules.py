@@ -306,3 +306,55 @@ def test_a_log_without_depth_says_no_map_cloud_in_its_summary_not_as_a_warning(t
     assert "map cloud" not in err and "map.ply" not in err, err
     rep = json.loads((tmp_path / "o" / "report.json").read_text())
     assert rep["map_cloud"]["built"] is False
+
+
+@pytest.mark.parametrize("existing", [False, True], ids=["absent", "empty"])
+def test_a_first_commit_that_fails_leaves_the_folder_as_it_was(world, tmp_path, monkeypatch, existing):
+    """A full disk at a new map's first commit: MapError naming the map; the folder absent again (or
+    empty again when the user had made it), no `.lock`, no `sessions/`; the session stays pending."""
+    import errno
+
+    from slam_lcd.map import store
+    from slam_lcd.map.session_map import Map, MapError
+
+    src = Map.open(world.m1)
+    d = tmp_path / "new" / "map"
+    if existing:
+        d.mkdir(parents=True)
+    m = Map.open(d, features=src.manifest.features, write=True, create=True)
+    m._unsaved = [(dict(src.manifest.sessions[0]), src.sessions[0])]
+    m.manifest.sessions = [dict(src.manifest.sessions[0])]
+    m.graph = src.graph
+
+    def full(path, arrays):
+        raise OSError(errno.ENOSPC, "No space left on device", str(path))
+
+    monkeypatch.setattr(store, "_write_npz", full)
+    with pytest.raises(MapError, match="cannot write the map"):
+        m.save()
+    assert tree(tmp_path) == ({"new": "dir", "new/map": "dir"} if existing else {})
+    monkeypatch.undo()
+    m.save()  # room again: the pending session commits
+    m.close()
+    assert Map.open(d).session_names == ["s1"]
+
+
+def test_two_first_appends_to_one_new_map_both_land(world, tmp_path):
+    """Two `run --map NEW` started together on a folder that does not exist yet: the second waits for the
+    first's creation lock (outside the folder), then appends to the map the first made."""
+    import subprocess
+    import sys
+
+    from bad_input_files import REPO
+
+    env = dict(__import__("os").environ, PYTHONPATH=str(REPO))
+    new = tmp_path / "new"
+    procs = [subprocess.Popen([sys.executable, "-m", "slam_lcd", "run", str(world.logs[k]), "--map", str(new),
+                               "--out", str(tmp_path / f"o{k}"), *world.orb], env=env, stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True) for k in (1, 2)]
+    for p in procs:
+        _, err = p.communicate(timeout=300)
+        assert p.returncode == 0, err
+    from slam_lcd.map.session_map import Map
+
+    assert sorted(Map.open(new).session_names) == ["s1", "s2"]
