@@ -141,6 +141,9 @@ def _walk_cases(world, d: Path) -> list[tuple[str, list, Path]]:
         ("batch --map", ["batch", world.logs[2], "--map", d / "map", "--out", "{OUT}", "--workers", "1", *world.orb],
          d / "map"),
         ("eval-lcd", ["eval-lcd", d / "images", "--out", "{OUT}", "--features", "orb", "--no-progress"], d / "images"),
+        ("vocab train", ["vocab", "train", d / "images", "--out", "{OUT}", "--features", "orb", "--no-progress"],
+         d / "images"),
+        ("export-map", ["export-map", d / "run", "{OUT}"], d / "run"),
         ("export rosbag2 log", ["export", f"{d / 'bag2'}:{topic}", "--to", "rosbag2", "{OUT}"], d / "bag2"),
         ("map export", ["map", "export", d / "map", "--to", "tum", "{OUT}"], d / "map"),
     ]
