@@ -22,7 +22,6 @@ batch solve is exact at that moment, and the sessions' own iSAM2 graphs stay as 
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field
 
 import gtsam
 import numpy as np
@@ -32,44 +31,13 @@ from ..backend.gnc import gnc_loop_weights
 from ..backend.loop_factors import valid_information
 from ..geometry import inv
 from .config import MapConfig
+from .joint_types import JointLoop, JointResult, SessionPoses
 
 log = logging.getLogger(__name__)
 
+__all__ = ["JointLoop", "JointResult", "SessionPoses", "information_noise", "odometry_covariance", "solve", "solve_lm"]
+
 ODOM_SIGMAS = np.r_[[0.01] * 3, [0.05] * 3]  # step noise when a session's odometry gave none
-
-
-@dataclass
-class SessionPoses:
-    """One session for the joint graph: its keyframes, odometry and its own best poses."""
-
-    name: str
-    ids: np.ndarray  # (n,) int64
-    T_odom: np.ndarray  # (n, 4, 4) in the session's odometry frame
-    cov: np.ndarray  # (n, 6, 6) odometry covariance since the previous keyframe (NaN: none)
-    T_init: np.ndarray  # (n, 4, 4) best-known poses: map frame if already placed, else own frame
-    # the component an earlier solve put it in (T_init in that component's frame); None: own frame
-    prev_component: int | None = None
-
-
-@dataclass
-class JointLoop:
-    """A loop between two keyframes of the map (one session or two)."""
-
-    query: int
-    match: int
-    T: np.ndarray  # T_match_query
-    info: np.ndarray  # 6x6 GTSAM order
-    inter: bool
-    accepted: bool = False
-    reason: str = ""
-
-
-@dataclass
-class JointResult:
-    poses: dict[int, np.ndarray]  # kf id -> T_map_body
-    component: dict[str, int]  # session name -> component id (0: the map's first session's)
-    anchors: dict[str, np.ndarray]  # session name -> T_component_sessionodom
-    loops: list[JointLoop] = field(default_factory=list)
 
 
 def information_noise(info: np.ndarray):
