@@ -7,10 +7,12 @@ Bron–Kerbosch (Tomita's pivot: branch only on the candidates the pivot does no
 a branch when its clique plus all its candidates cannot beat the best found (the first best is
 a greedy clique, so the search only has to prove or improve it).
 
-Bound: the search stops after ``budget`` nodes (each node costs O(n) operations on n-bit
-integers; a consistency graph of a few hundred loops explores tens of nodes when one set is
-clearly largest). Past the budget the best clique found so far is returned with
-``exact=False``; the caller logs it and records it.
+Bound: the search stops after ``budget`` nodes. Each node costs O(n) operations on n-bit
+integers: 20,000 nodes take 0.1-0.15 s at 120-300 loops on one core, so the map's default of
+100,000 is about half a second. A consistency graph with one clearly largest set needs a few
+hundred nodes (300 loops, a set of 100 among sparse false agreements: 211); a dense random
+graph is what exhausts the budget. Past the budget the best clique found so far is returned
+with ``exact=False``; the caller logs it and records it.
 """
 from __future__ import annotations
 
