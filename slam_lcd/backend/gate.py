@@ -104,12 +104,48 @@ def pair_chi2(l1: GateLoop, l2: GateLoop, relatives: Relatives) -> float:
     """Cycle ``Z1^-1 * O(a1->a2) * Z2 * O(b2->b1)``: squared Mahalanobis norm with its propagated covariance."""
     A, SA = relatives.odometry(l1.a, l2.a)
     C, SC = relatives.odometry(l2.b, l1.b)
-    X = A @ l2.Z @ C
-    e = se3_log(inv(l1.Z) @ X)
-    T1 = adjoint(inv(l2.Z @ C))
+    return float(cycle_chi2(l1.Z, l1.cov, l2.Z, l2.cov, A, SA, C, SC))
+
+
+def cycle_chi2(Z1, S1, Z2, S2, A, SA, C, SC) -> np.ndarray:
+    """Chi-square of the cycles ``Z1^-1 A Z2 C`` (stacks broadcast over leading axes; covariances in frame b).
+
+    Right perturbations of each factor carried into the frame of the cycle's end: ``A`` by
+    ``Ad((Z2 C)^-1)``, ``Z2`` by ``Ad(C^-1)``; ``Z1`` and ``C`` end there already (to first order
+    around the identity the cycle should be).
+    """
+    e = _se3_log_stack(inv(Z1) @ A @ Z2 @ C)
+    T1 = adjoint(inv(Z2 @ C))
     T2 = adjoint(inv(C))
-    S = l1.cov + T1 @ SA @ T1.T + T2 @ l2.cov @ T2.T + SC
-    return float(e @ np.linalg.solve(S, e))
+    S = S1 + T1 @ SA @ np.swapaxes(T1, -1, -2) + T2 @ S2 @ np.swapaxes(T2, -1, -2) + SC
+    return np.einsum("...i,...i->...", e, np.linalg.solve(S, e[..., None])[..., 0])
+
+
+def _se3_log_stack(T: np.ndarray) -> np.ndarray:
+    """``Log`` of a stack of poses (..., 4, 4) -> (..., 6), ``[omega, v]``: :func:`se3_log`'s formulas, vectorised."""
+    R, t = T[..., :3, :3], T[..., :3, 3]
+    th = np.arccos(np.clip((np.trace(R, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0))
+    v = np.stack([R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]], -1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        w = np.where((th < 1e-8)[..., None], 0.5 * v, (th / (2 * np.sin(th)))[..., None] * v)
+        near_pi = np.pi - th < 1e-4
+        if np.any(near_pi):  # the axis from the symmetric part cos^2(th/2) I + sin^2(th/2) a a^T
+            B = (R + np.swapaxes(R, -1, -2)) / 4.0 + 0.5 * np.eye(3)
+            d = np.sqrt(np.maximum(np.diagonal(B, axis1=-2, axis2=-1), 0.0))
+            i = np.argmax(d, axis=-1)
+            axis = np.take_along_axis(B, i[..., None, None], -2)[..., 0, :]
+            axis = axis / np.maximum(np.take_along_axis(d, i[..., None], -1), 1e-12)
+            axis = axis / np.linalg.norm(axis, axis=-1, keepdims=True)
+            axis = np.where((np.sum(axis * v, -1) < 0)[..., None], -axis, axis)
+            w = np.where(near_pi[..., None], axis * th[..., None], w)
+        a = np.linalg.norm(w, axis=-1)
+        K = np.zeros(w.shape[:-1] + (3, 3))
+        K[..., 0, 1], K[..., 0, 2], K[..., 1, 2] = -w[..., 2], w[..., 1], -w[..., 0]
+        K = K - np.swapaxes(K, -1, -2)
+        closed = (1 / a ** 2) * (1 - (a * np.sin(a)) / (2 * (1 - np.cos(a))))
+        c = np.where(a < 1e-3, 1.0 / 12.0 + a ** 2 / 720.0, closed)  # series where the closed form cancels
+    Vinv = np.eye(3) - 0.5 * K + c[..., None, None] * (K @ K)
+    return np.concatenate([w, (Vinv @ t[..., None])[..., 0]], -1)
 
 
 class AcceptAllGate:
@@ -230,6 +266,15 @@ class ChainRelatives:
         self._prefix: list[np.ndarray] = []
         self.estimate_pose = estimate_pose
 
+    @classmethod
+    def from_steps(cls, poses: np.ndarray, step_covs: np.ndarray, estimate_pose=None) -> ChainRelatives:
+        """A whole chain at once: ``poses`` (n, 4, 4) and ``step_covs[i]``, the covariance of the step
+        from pose i-1 to pose i in frame i (``step_covs[0]`` is not read)."""
+        chain = cls(estimate_pose)
+        for T, S in zip(poses, step_covs, strict=True):
+            chain.append(T, chain.next_prefix(T, S))
+        return chain
+
     def __len__(self) -> int:
         return len(self._odom)
 
@@ -249,8 +294,11 @@ class ChainRelatives:
 
     def chain_cov(self, a: int, b: int) -> np.ndarray:
         lo, hi = (a, b) if a <= b else (b, a)
-        Ai = adjoint(inv(self._odom[b]))
-        return Ai @ (self._prefix[hi] - self._prefix[lo]) @ Ai.T
+        return chain_covariance(self._odom[b], self._prefix[lo], self._prefix[hi])
+
+    def stacked(self) -> tuple[np.ndarray, np.ndarray]:
+        """The chain's poses (N, 4, 4) and prefix sums (N, 6, 6) as arrays (for many chain covariances at once)."""
+        return np.asarray(self._odom, float).reshape(-1, 4, 4), np.asarray(self._prefix, float).reshape(-1, 6, 6)
 
     def odometry(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
         return inv(self._odom[a]) @ self._odom[b], self.chain_cov(a, b)
@@ -259,6 +307,15 @@ class ChainRelatives:
         if self.estimate_pose is None:
             return self.odometry(a, b)
         return inv(self.estimate_pose(a)) @ self.estimate_pose(b), self.chain_cov(a, b)
+
+
+def chain_covariance(T_world_b: np.ndarray, prefix_lo: np.ndarray, prefix_hi: np.ndarray) -> np.ndarray:
+    """Covariance (frame b) of the chain between two poses from its prefix sums: ``Ad(O_b^-1) (P_hi - P_lo) Ad^T``.
+
+    Stacks broadcast over leading axes.
+    """
+    Ai = adjoint(inv(T_world_b))
+    return Ai @ (prefix_hi - prefix_lo) @ np.swapaxes(Ai, -1, -2)
 
 
 class ArrayRelatives:

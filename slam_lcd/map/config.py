@@ -25,10 +25,22 @@ class MapConfig:
     # pairwise consistency of two loops between the same two sessions: chi-square quantile of
     # the cycle (loop, odometry in one session, loop back, odometry in the other), 6 dof
     pcm_probability: float = 0.99
-    # odometry uncertainty per metre travelled, used for the cycle's covariance when the
-    # session's odometry gives none (m/m and rad/m, 1 sigma)
+    # odometry uncertainty per square-root metre travelled (variance grows with the distance), used
+    # for the cycle's covariance and the link test only where the session's odometry gives no
+    # covariance (m/sqrt(m) and rad/sqrt(m), 1 sigma)
     pcm_sigma_trans_per_m: float = 0.05
     pcm_sigma_rot_per_m: float = 0.02
+    # the exact search for the largest consistent set stops after this many search nodes and takes
+    # the largest set found so far (logged and recorded in the pair's decision)
+    pcm_clique_budget: int = 100000
+    # the joining set's keyframes must lie at least this far apart in each of the two sessions (m):
+    # a look-alike place seen from a few consecutive keyframes gives loops that agree with each other
+    min_join_span_m: float = 2.0
+    # not joined ("ambiguous") when a second consistent set, disjoint from the largest, could join
+    # on its own and holds at least this share of the largest set's loops
+    join_ambiguity_ratio: float = 0.5
+    # a visual link must agree with the odometry step it spans: chi-square quantile, 6 dof
+    link_probability: float = 0.999
     # localise: a keyframe's pose from the map must agree with the poses of the localised
     # keyframes around it carried by odometry (translation m, rotation deg); the rest are outliers
     localize_max_disagreement_m: float = 1.0

@@ -9,73 +9,55 @@ one prior per *connected component* is the anchor-node graph with the anchors el
 anchors are read back as ``T_map_first_keyframe @ inv(T_odom_first_keyframe)``.
 
 Sessions that no accepted loop connects stay in separate components, each in the frame of its
-first session, and the map says so. Two sessions are joined only by a **pairwise-consistent
-set** of at least ``map.min_join_loops`` loops between them (PCM, Mangelson et al. 2018): a
-single loop between two unconnected graphs cannot be tested against anything, and a false one
-would fold one map onto another. Two loops (a->b, c->d) between sessions S and T are consistent
-when the cycle a -> b (loop) -> d (T's own estimate) -> c (loop back) -> a (S's own estimate)
-closes within a chi-square bound on its covariance (both loops' plus the odometry's between the
-keyframes of each session). Then a batch GNC (TLS) re-check over all inter-session loops, and a
-Levenberg-Marquardt solve of the final graph. Why batch here: an append joins sessions once; a
-batch solve is exact at that moment, and the sessions' own iSAM2 graphs stay as they were.
+first session, and the map says so. The steps of :func:`solve`:
+
+1. **Visual links** are tested against the odometry step they span and weighed once where they
+   and the odometry share the camera (:mod:`.links`).
+2. **Joins.** Per pair of sessions, the largest pairwise-consistent set of loops (PCM with
+   covariances propagated through the adjoints, :mod:`.pcm`; the exact maximum clique with a
+   node budget, :mod:`.cliques`) joins them when it is big enough, spans distinct places in both
+   sessions and has no rival of similar size (:mod:`.joins`). A single loop between two
+   unconnected graphs cannot be tested against anything, and a false one would fold one map
+   onto another.
+3. **GNC.** A batch GNC (TLS) re-check over every loop between sessions and every link, with
+   each session's odometry and own loops as known inliers.
+4. **Re-check.** The surviving loops of each joined pair must still join it (rules 1 and 2 of
+   :mod:`.joins`); a pair that fails is undone ("undone by gnc"), the components are recomputed
+   (a component that lost its join gets its own prior and frame) and steps 3-4 run again, until
+   no join is undone (each round undoes one join at least, so at most one round per pair).
+5. A Levenberg-Marquardt solve of the final graph.
+
+Why batch here: an append joins sessions once; a batch solve is exact at that moment, and the
+sessions' own iSAM2 graphs stay as they were.
 """
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field
 
 import gtsam
 import numpy as np
-from scipy.stats import chi2 as chi2_dist
 
 from ..backend.gnc import gnc_loop_weights
 from ..backend.loop_factors import valid_information
 from ..geometry import inv
 from .config import MapConfig
+from .joins import judge_pair, recheck
+from .joint_types import LINK, JointLoop, JointResult, PairDecision, SessionPoses, is_link
+from .links import gate_links, link_weight, linked_steps, shared_weight
+from .pcm import SessionChains
 
 log = logging.getLogger(__name__)
+
+__all__ = ["LINK", "JointLoop", "JointResult", "PairDecision", "SessionPoses", "information_noise",
+           "odometry_covariance", "solve", "solve_lm"]
 
 ODOM_SIGMAS = np.r_[[0.01] * 3, [0.05] * 3]  # step noise when a session's odometry gave none
 
 
-@dataclass
-class SessionPoses:
-    """One session for the joint graph: its keyframes, odometry and its own best poses."""
-
-    name: str
-    ids: np.ndarray  # (n,) int64
-    T_odom: np.ndarray  # (n, 4, 4) in the session's odometry frame
-    cov: np.ndarray  # (n, 6, 6) odometry covariance since the previous keyframe (NaN: none)
-    T_init: np.ndarray  # (n, 4, 4) best-known poses: map frame if already placed, else own frame
-    # the component an earlier solve put it in (T_init in that component's frame); None: own frame
-    prev_component: int | None = None
-
-
-@dataclass
-class JointLoop:
-    """A loop between two keyframes of the map (one session or two)."""
-
-    query: int
-    match: int
-    T: np.ndarray  # T_match_query
-    info: np.ndarray  # 6x6 GTSAM order
-    inter: bool
-    accepted: bool = False
-    reason: str = ""
-
-
-@dataclass
-class JointResult:
-    poses: dict[int, np.ndarray]  # kf id -> T_map_body
-    component: dict[str, int]  # session name -> component id (0: the map's first session's)
-    anchors: dict[str, np.ndarray]  # session name -> T_component_sessionodom
-    loops: list[JointLoop] = field(default_factory=list)
-
-
-def information_noise(info: np.ndarray):
-    """A Gaussian noise model from a (symmetrised) information matrix, GTSAM order."""
+def information_noise(info: np.ndarray, scale: float = 1.0):
+    """A Gaussian noise model from a (symmetrised) information matrix, GTSAM order, times ``scale``."""
     info = 0.5 * (np.asarray(info, float) + np.asarray(info, float).T)
-    return gtsam.noiseModel.Gaussian.Information(info)
+    return gtsam.noiseModel.Gaussian.Information(scale * info)
 
 
 def odometry_covariance(cov: np.ndarray | None) -> np.ndarray:
@@ -92,111 +74,112 @@ def solve_lm(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values) -> gtsam.V
     return gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
 
 
-class _Chain:
-    """Relative covariance between two keyframes of one session from its odometry (a conservative sum)."""
-
-    def __init__(self, s: SessionPoses, conf: MapConfig):
-        n = len(s.ids)
-        steps = np.zeros((n, 6, 6))
-        for i in range(1, n):
-            d = float(np.linalg.norm(s.T_odom[i, :3, 3] - s.T_odom[i - 1, :3, 3]))
-            own = odometry_covariance(s.cov[i]) if np.all(np.isfinite(s.cov[i])) else np.zeros((6, 6))
-            floor = np.diag(np.r_[[(conf.pcm_sigma_rot_per_m ** 2) * d] * 3,
-                                  [(conf.pcm_sigma_trans_per_m ** 2) * d] * 3])
-            steps[i] = own + floor
-        self.prefix = np.cumsum(steps, axis=0)
-        self.index = {int(k): i for i, k in enumerate(s.ids)}
-
-    def cov(self, a: int, b: int) -> np.ndarray:
-        i, j = sorted((self.index[a], self.index[b]))
-        return self.prefix[j] - self.prefix[i] + np.diag([1e-6] * 3 + [1e-4] * 3)
+def _between(lp: JointLoop, scale: float = 1.0) -> gtsam.BetweenFactorPose3:
+    return gtsam.BetweenFactorPose3(lp.match, lp.query, gtsam.Pose3(lp.T), information_noise(lp.info, scale))
 
 
-def _session_of(sessions: list[SessionPoses]) -> dict[int, int]:
-    return {int(k): si for si, s in enumerate(sessions) for k in s.ids}
-
-
-def _pose_of(sessions, where, kf: int) -> np.ndarray:
-    si, i = where[kf]
-    return sessions[si].T_init[i]
-
-
-def pairwise_consistent(l1: JointLoop, l2: JointLoop, sessions, where, chains, threshold: float) -> bool:
-    """Do two loops between the same two sessions close a consistent cycle (chi-square test)?"""
-    a, b = l1.match, l1.query  # a in S, b in T (x_b = x_a Z1)
-    c, d = (l2.match, l2.query) if where[l2.match][0] == where[a][0] else (l2.query, l2.match)
-    Z2 = l2.T if where[l2.match][0] == where[a][0] else inv(l2.T)  # x_d = x_c Z2
-    cov2 = np.linalg.inv(l2.info) if where[l2.match][0] == where[a][0] else None
-    T_ac = inv(_pose_of(sessions, where, a)) @ _pose_of(sessions, where, c)  # S's own estimate
-    T_bd = inv(_pose_of(sessions, where, b)) @ _pose_of(sessions, where, d)  # T's own estimate
-    # b -> a -> c -> d through the loops and S, against T's b -> d
-    T_bd_loops = inv(l1.T) @ T_ac @ Z2
-    err = gtsam.Pose3.Logmap(gtsam.Pose3(inv(T_bd) @ T_bd_loops))
-    cov1 = np.linalg.inv(l1.info)
-    if cov2 is None:  # the loop seen from its other end: its covariance moved to that frame
-        Ad = gtsam.Pose3(l2.T).AdjointMap()
-        cov2 = Ad @ np.linalg.inv(l2.info) @ Ad.T
-    sa, sb = where[a][0], where[b][0]
-    cov = cov1 + cov2 + chains[sa].cov(a, c) + chains[sb].cov(b, d)
-    try:
-        m = float(err @ np.linalg.solve(cov, err))
-    except np.linalg.LinAlgError:
-        return False
-    return m <= threshold
-
-
-def _max_consistent_set(loops: list[JointLoop], ok) -> list[int]:
-    """Largest set of loops that are pairwise consistent (greedy clique growth from every seed)."""
-    n = len(loops)
-    adj = np.zeros((n, n), bool)
-    for i in range(n):
-        for j in range(i + 1, n):
-            adj[i, j] = adj[j, i] = ok(loops[i], loops[j])
-    best: list[int] = []
-    for seed in np.argsort(-adj.sum(1)):
-        clique = [int(seed)]
-        cand = [int(k) for k in np.argsort(-adj.sum(1)) if k != seed and adj[seed, k]]
-        for k in cand:
-            if all(adj[k, m] for m in clique):
-                clique.append(k)
-        if len(clique) > len(best):
-            best = clique
-        if len(best) == n:
-            break
-    return sorted(best)
+def _judge_pairs(sessions, loops, chains, conf):
+    """Every pair of sessions with loops between them: its decision and the loops that join it."""
+    by_pair: dict[tuple[int, int], list[JointLoop]] = {}
+    for lp in loops:
+        if not lp.inter:
+            continue
+        s, t = chains.session_of(lp.query), chains.session_of(lp.match)
+        lp.accepted = False
+        if s == t:
+            lp.reason = "pcm: both ends in one session"
+            continue
+        by_pair.setdefault((min(s, t), max(s, t)), []).append(lp)
+    decisions: dict[tuple[int, int], PairDecision] = {}
+    joins: dict[tuple[int, int], list[JointLoop]] = {}
+    for pair, group in sorted(by_pair.items()):
+        decisions[pair], chosen = judge_pair(pair, group, chains, conf)
+        if chosen:
+            joins[pair] = chosen
+    return decisions, joins
 
 
 def solve(sessions: list[SessionPoses], loops: list[JointLoop], conf: MapConfig | None = None,
           gnc_inlier_probability: float = 0.99) -> JointResult:
-    """Judge the inter-session loops, connect sessions, and solve the joint graph (see module docstring)."""
+    """Judge the inter-session loops and links, connect sessions, and solve the joint graph (module docstring)."""
     conf = conf or MapConfig()
-    sess_of = _session_of(sessions)
-    where = {int(k): (si, i) for si, s in enumerate(sessions) for i, k in enumerate(s.ids)}
-    chains = [_Chain(s, conf) for s in sessions]
-    threshold = float(chi2_dist.ppf(conf.pcm_probability, 6))
-
-    # 1. per pair of sessions: the largest pairwise-consistent set of loops joins them, if big enough
-    by_pair: dict[tuple[int, int], list[JointLoop]] = {}
+    chains = SessionChains(sessions, conf)
+    links = [lp for lp in loops if is_link(lp)]
+    failed = gate_links(links, chains, conf.link_probability)
+    if failed:
+        log.info("%d of %d visual links disagree with the odometry and are left out", failed, len(links))
+    decisions, joins = _judge_pairs(sessions, loops, chains, conf)
+    while True:
+        comp, init = _components(sessions, joins, chains)
+        values = _gnc_round(sessions, loops, links, comp, init, chains, gnc_inlier_probability)
+        undone = [p for p in sorted(joins) if recheck(decisions[p], p, joins[p], chains, conf)]
+        if not undone:
+            break
+        for p in undone:
+            log.info("%s", decisions[p].reason)
+            del joins[p]
+    graph = _known_graph(sessions, loops, links, comp, init, chains)
     for lp in loops:
-        if lp.inter:
-            by_pair.setdefault(tuple(sorted((sess_of[lp.query], sess_of[lp.match]))), []).append(lp)
-            lp.accepted = False
-    joins: dict[tuple[int, int], list[JointLoop]] = {}
-    for pair, group in sorted(by_pair.items()):
-        chosen = _max_consistent_set(group, lambda x, y: pairwise_consistent(x, y, sessions, where, chains, threshold))
-        names = f"{sessions[pair[0]].name} and {sessions[pair[1]].name}"
-        if len(chosen) >= conf.min_join_loops:
-            keep = set(chosen)
-            for k, lp in enumerate(group):
-                lp.accepted = k in keep
-                lp.reason = "ok" if k in keep else f"pcm: inconsistent with the {len(chosen)} loops joining {names}"
-            joins[pair] = [group[k] for k in chosen]
-        else:
-            for lp in group:
-                lp.reason = (f"pcm: {len(chosen)} consistent loop(s) between {names}, "
-                             f"{conf.min_join_loops} needed to join them")
+        if lp.accepted and (lp.inter or is_link(lp)):
+            graph.add(_between(lp, link_weight(lp, chains) if is_link(lp) else 1.0))
+    values = solve_lm(graph, values)
+    poses = {int(k): values.atPose3(int(k)).matrix() for s in sessions for k in s.ids}
+    # a component that the solve left isolated keeps its first session's frame
+    anchors = {s.name: poses[int(s.ids[0])] @ inv(s.T_odom[0]) for s in sessions}
+    return JointResult(poses, {s.name: comp[si] for si, s in enumerate(sessions)}, anchors, list(loops),
+                       [decisions[p] for p in sorted(decisions)])
 
-    # 2. components and initial values (breadth-first from each component's first session)
+
+def _known_graph(sessions, loops, links, comp, init, chains) -> gtsam.NonlinearFactorGraph:
+    """Known inliers: every session's odometry (weighed with its accepted links), own loops, a prior per component."""
+    shared = linked_steps(links, chains)
+    graph = gtsam.NonlinearFactorGraph()
+    for s in sessions:
+        w = shared_weight(s)
+        for i in range(1, len(s.ids)):
+            cov = odometry_covariance(s.cov[i]) / (w if int(s.ids[i]) in shared else 1.0)
+            graph.add(gtsam.BetweenFactorPose3(int(s.ids[i - 1]), int(s.ids[i]),
+                                               gtsam.Pose3(inv(s.T_odom[i - 1]) @ s.T_odom[i]),
+                                               gtsam.noiseModel.Gaussian.Covariance(cov)))
+    roots: dict[int, int] = {}
+    for si in range(len(sessions)):
+        roots.setdefault(comp[si], si)
+    for si in roots.values():
+        k0 = int(sessions[si].ids[0])
+        graph.add(gtsam.PriorFactorPose3(k0, gtsam.Pose3(init[k0]), gtsam.noiseModel.Diagonal.Sigmas(np.full(6, 1e-6))))
+    for lp in loops:
+        if not lp.inter and lp.accepted and not is_link(lp):
+            graph.add(_between(lp))
+    return graph
+
+
+def _gnc_round(sessions, loops, links, comp, init, chains, inlier_probability: float) -> gtsam.Values:
+    """GNC over the accepted loops between sessions and the accepted links; marks its outliers. Its solution."""
+    values = gtsam.Values()
+    for k, T in init.items():
+        values.insert(int(k), gtsam.Pose3(T))
+    known = _known_graph(sessions, loops, links, comp, init, chains)
+    cands = [lp for lp in loops if lp.accepted and (lp.inter or is_link(lp))]
+    if not cands:
+        return solve_lm(known, values)
+    factors = [_between(lp, link_weight(lp, chains) if is_link(lp) else 1.0) for lp in cands]
+    # GNC starts from the optimum with every candidate: the initial values (each session's own
+    # estimate, placed by one loop) can be far from what the links say, and TLS started there
+    # turned every loop of a consistent set into an outlier
+    start = gtsam.NonlinearFactorGraph(known)
+    for f in factors:
+        start.add(f)
+    res = gnc_loop_weights(known, factors, solve_lm(start, values), inlier_probability=inlier_probability)
+    for lp, w, c2 in zip(cands, res.weights, res.residual_chi2, strict=True):
+        if w < 0.5:
+            lp.accepted = False
+            what = f"outlier of the joint graph (weight {w:.2f}, residual chi2 {c2:.1f})"
+            lp.reason = f"{LINK}: gnc: {what}" if is_link(lp) else f"gnc: {what}"
+    return res.values
+
+
+def _components(sessions, joins, chains) -> tuple[dict[int, int], dict[int, np.ndarray]]:
+    """Components of the joined sessions and initial values, breadth-first from each component's first session."""
     comp = {si: -1 for si in range(len(sessions))}
     init: dict[int, np.ndarray] = {}
     n_comp = 0
@@ -208,7 +191,7 @@ def solve(sessions: list[SessionPoses], loops: list[JointLoop], conf: MapConfig 
         queue = [root]
         while queue:
             s = queue.pop(0)
-            for (p, q), group in joins.items():
+            for (p, q), group in sorted(joins.items()):
                 if s not in (p, q):
                     continue
                 t = q if s == p else p
@@ -219,56 +202,10 @@ def solve(sessions: list[SessionPoses], loops: list[JointLoop], conf: MapConfig 
                 if prev is not None and prev == sessions[root].prev_component:  # together before too
                     _place(sessions[t], np.eye(4), init)
                 else:
-                    _place(sessions[t], _alignment(group, sessions, where, init, t), init)
+                    _place(sessions[t], _alignment(group, chains, init, t), init)
                 queue.append(t)
         n_comp += 1
-
-    # 3. the graph: odometry and own loops of each session, inter-session loops; a prior per component
-    known = gtsam.NonlinearFactorGraph()
-    values = gtsam.Values()
-    for s in sessions:
-        for i, k in enumerate(s.ids):
-            values.insert(int(k), gtsam.Pose3(init[int(k)]))
-            if i:
-                step = inv(s.T_odom[i - 1]) @ s.T_odom[i]
-                known.add(gtsam.BetweenFactorPose3(int(s.ids[i - 1]), int(k), gtsam.Pose3(step),
-                                                   gtsam.noiseModel.Gaussian.Covariance(odometry_covariance(s.cov[i]))))
-    roots = {}
-    for si in range(len(sessions)):
-        roots.setdefault(comp[si], si)
-    for si in roots.values():
-        k0 = int(sessions[si].ids[0])
-        known.add(gtsam.PriorFactorPose3(k0, gtsam.Pose3(init[k0]),
-                                         gtsam.noiseModel.Diagonal.Sigmas(np.r_[[1e-6] * 3, [1e-6] * 3])))
-    for lp in loops:
-        if not lp.inter and lp.accepted:
-            known.add(gtsam.BetweenFactorPose3(lp.match, lp.query, gtsam.Pose3(lp.T), information_noise(lp.info)))
-    inter = [lp for lp in loops if lp.inter and lp.accepted]
-    if inter:
-        factors = [gtsam.BetweenFactorPose3(lp.match, lp.query, gtsam.Pose3(lp.T), information_noise(lp.info))
-                   for lp in inter]
-        # GNC starts from the optimum with every PCM-consistent loop: the initial values (each session's
-        # own estimate, placed by one loop) can be far from what the visual links say, and TLS started
-        # there turned every loop of a consistent set into an outlier
-        start = gtsam.NonlinearFactorGraph(known)
-        for f in factors:
-            start.add(f)
-        values = solve_lm(start, values)
-        res = gnc_loop_weights(known, factors, values, inlier_probability=gnc_inlier_probability)
-        for lp, w, c2 in zip(inter, res.weights, res.residual_chi2, strict=True):
-            if w < 0.5:
-                lp.accepted = False
-                lp.reason = f"gnc: outlier of the joint graph (weight {w:.2f}, residual chi2 {c2:.1f})"
-        values = res.values
-    graph = gtsam.NonlinearFactorGraph(known)
-    for lp in inter:
-        if lp.accepted:
-            graph.add(gtsam.BetweenFactorPose3(lp.match, lp.query, gtsam.Pose3(lp.T), information_noise(lp.info)))
-    values = solve_lm(graph, values)
-    poses = {int(k): values.atPose3(int(k)).matrix() for s in sessions for k in s.ids}
-    # a component that the solve left isolated keeps its first session's frame
-    anchors = {s.name: poses[int(s.ids[0])] @ inv(s.T_odom[0]) for s in sessions}
-    return JointResult(poses, {s.name: comp[si] for si, s in enumerate(sessions)}, anchors, list(loops))
+    return comp, init
 
 
 def _place(s: SessionPoses, A: np.ndarray, init: dict[int, np.ndarray]) -> None:
@@ -276,7 +213,7 @@ def _place(s: SessionPoses, A: np.ndarray, init: dict[int, np.ndarray]) -> None:
         init[int(k)] = A @ T
 
 
-def _alignment(group: list[JointLoop], sessions, where, init, t: int) -> np.ndarray:
+def _alignment(group: list[JointLoop], chains: SessionChains, init, t: int) -> np.ndarray:
     """Transform that places session ``t`` (own frame) next to its already-placed partner through the loops.
 
     Each loop gives one candidate ``A = T_map_a Z T_t_b^-1``; the one closest to the others (medoid
@@ -284,11 +221,12 @@ def _alignment(group: list[JointLoop], sessions, where, init, t: int) -> np.ndar
     """
     cands = []
     for lp in group:
-        if where[lp.query][0] == t:  # match placed, query in t
+        if chains.session_of(lp.query) == t:  # match placed, query in t
             other, mine, Z = lp.match, lp.query, lp.T
         else:
             other, mine, Z = lp.query, lp.match, inv(lp.T)
-        cands.append(init[other] @ Z @ inv(_pose_of(sessions, where, mine)))
+        si, i = chains.where[int(mine)]
+        cands.append(init[other] @ Z @ inv(chains.sessions[si].T_init[i]))
     ts = np.array([A[:3, 3] for A in cands])
     med = int(np.argmin(np.linalg.norm(ts[:, None] - ts[None], axis=2).sum(1)))
     return cands[med]

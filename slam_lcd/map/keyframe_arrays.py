@@ -13,7 +13,7 @@ import numpy as np
 
 from ..types import CameraModel, Keyframe, Trajectory
 from .contents import SessionKeyframes
-from .joint_graph import JointLoop
+from .joint_types import LINK, JointLoop
 
 
 def extractor_meta(extractor, descriptor_form: str = "int8") -> dict:
@@ -109,9 +109,6 @@ def session_arrays(detector, kfs: list[Keyframe], gt: Trajectory | None, form: s
         scales=np.concatenate(scales).astype(np.float32) if scales else np.zeros(0, np.float32),
         points3d=np.concatenate(p3s) if p3s else np.zeros((0, 3), np.float32),
         points_source=np.array(srcs, dtype="<U10"))
-
-
-LINK = "link"  # the reason of a visual link between consecutive keyframes (not a loop)
 
 
 def visual_links(detector, kf_ids: list[int]) -> list[JointLoop]:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..eval.align import umeyama
+from .joint_types import LINK
 
 
 def _rmse(P: np.ndarray, G: np.ndarray) -> float:
@@ -84,7 +85,7 @@ def map_summary(m, joined=None, *, current: str | None = None, pipe=None) -> dic
     within = accepted_within = links = 0
     for q, mt, acc, why in zip(g.loop_query, g.loop_match, g.loop_accepted, g.loop_reason, strict=True):
         a, b = sess_of.get(int(mt)), sess_of.get(int(q))
-        if str(why) == "link":  # a visual link between consecutive keyframes, not a loop
+        if str(why).startswith(LINK):  # a visual link between consecutive keyframes (or a dropped one), not a loop
             links += bool(acc)
             continue
         if a == b:

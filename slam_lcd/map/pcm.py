@@ -1,0 +1,164 @@
+"""Pairwise consistency (PCM, Mangelson et al. 2018) of loops between two sessions, with propagated covariances.
+
+Two loops ``l1: a1 -> b1`` and ``l2: a2 -> b2`` between sessions S (the ``a`` ends) and T (the
+``b`` ends) are consistent when the cycle ``Z1^-1 * T_S(a1->a2) * Z2 * T_T(b2->b1)`` is the
+identity within a chi-square bound (6 dof, ``map.pcm_probability``). The cycle's covariance is
+propagated to first order through the adjoints (GTSAM's ``Pose3`` convention: right
+perturbation, tangent ``[rot, trans]``) by :func:`slam_lcd.backend.gate.cycle_chi2`, the
+function behind the single-session loop gate's ``pair_chi2``, and each session's chain
+covariances come from :class:`slam_lcd.backend.gate.ChainRelatives` (``chain_covariance``), as
+the gate's do; here many pairs at once. Without the adjoints a heading error's lever arm is lost,
+and true loops tens of metres apart fail the test.
+
+Each session's relative pose between two of its keyframes is its own best estimate
+(``SessionPoses.T_init``: its odometry corrected by its own loops); the covariance is its
+odometry chain's, an upper bound for that estimate. A step's covariance is the one the odometry
+gave; where it gave none (or no valid one), the per-metre allowance ``map.pcm_sigma_trans_per_m``
+and ``map.pcm_sigma_rot_per_m`` (variance growing with the distance of the step).
+
+The test is symmetric: each loop is turned so that its ``a`` end lies in the session listed first
+in the map (a loop seen from its other end has ``Z^-1`` and its covariance carried by ``Ad(Z)``),
+and the two loops are taken in a fixed order, so the verdict does not depend on the argument
+order nor on which end of a loop was the query.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..backend.gate import ChainRelatives, GateLoop, chain_covariance, chi2_quantile, cycle_chi2
+from ..backend.loop_factors import valid_information
+from ..geometry import adjoint, inv
+from .config import MapConfig
+from .joint_types import JointLoop, SessionPoses
+
+
+def step_covariances(s: SessionPoses, conf: MapConfig) -> np.ndarray:
+    """(n, 6, 6): each odometry step's covariance as given, else the per-metre allowance for its length."""
+    n = len(s.ids)
+    out = np.zeros((n, 6, 6))
+    for i in range(1, n):
+        c = s.cov[i]
+        if valid_information(c):
+            out[i] = 0.5 * (np.asarray(c, float) + np.asarray(c, float).T)
+            continue
+        d = float(np.linalg.norm(s.T_odom[i, :3, 3] - s.T_odom[i - 1, :3, 3]))
+        out[i] = np.diag([conf.pcm_sigma_rot_per_m ** 2 * d] * 3 + [conf.pcm_sigma_trans_per_m ** 2 * d] * 3)
+    return out
+
+
+class SessionChains:
+    """Every session's odometry chain: relative poses of two keyframes of one session and their covariance."""
+
+    def __init__(self, sessions: list[SessionPoses], conf: MapConfig):
+        self.sessions = sessions
+        self.where = {int(k): (si, i) for si, s in enumerate(sessions) for i, k in enumerate(s.ids)}
+        self.chains = [ChainRelatives.from_steps(np.asarray(s.T_odom, float), step_covariances(s, conf))
+                       for s in sessions]
+        self._stacked: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+    def session_of(self, kf: int) -> int:
+        return self.where[int(kf)][0]
+
+    def _same_session(self, a: int, b: int) -> tuple[int, int, int]:
+        (sa, i), (sb, j) = self.where[int(a)], self.where[int(b)]
+        if sa != sb:
+            raise ValueError(f"keyframes {a} and {b} are in different sessions")
+        return sa, i, j
+
+    def odometry(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
+        """``T_a_b`` by the odometry alone and its chain covariance (frame b); a and b in one session."""
+        si, i, j = self._same_session(a, b)
+        return self.chains[si].odometry(i, j)
+
+    def estimates(self, si: int, i: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``T_i_j`` by session ``si``'s own estimate, with its odometry chain's covariance (frame j), for
+        many pairs of positions at once."""
+        if si not in self._stacked:
+            self._stacked[si] = self.chains[si].stacked()
+        odom, P = self._stacked[si]
+        X = np.asarray(self.sessions[si].T_init, float)
+        return inv(X[i]) @ X[j], chain_covariance(odom[j], P[np.minimum(i, j)], P[np.maximum(i, j)])
+
+    def position(self, kf: int) -> np.ndarray:
+        """A keyframe's position in its session's own estimate."""
+        si, i = self.where[int(kf)]
+        return np.asarray(self.sessions[si].T_init[i, :3, 3], float)
+
+
+def oriented(lp: JointLoop, first_session: int, chains: SessionChains) -> GateLoop:
+    """The loop as a :class:`GateLoop` whose ``a`` end lies in ``first_session`` (flipped when needed)."""
+    info = np.asarray(lp.info, float)
+    cov = np.linalg.inv(0.5 * (info + info.T))
+    if chains.session_of(lp.match) == first_session:
+        return GateLoop(int(lp.match), int(lp.query), np.asarray(lp.T, float), cov)
+    # T_b_a = (Z Exp(e))^-1 = Z^-1 Exp(-Ad(Z) e): the covariance carried by Ad(Z)
+    A = adjoint(np.asarray(lp.T, float))
+    flipped = A @ cov @ A.T
+    return GateLoop(int(lp.query), int(lp.match), inv(np.asarray(lp.T, float)), 0.5 * (flipped + flipped.T))
+
+
+def _order_key(g: GateLoop) -> tuple:
+    return (g.a, g.b, tuple(np.round(g.Z.ravel(), 12)))
+
+
+CHUNK = 20000  # loop pairs tested at once (memory: ~3 kB a pair)
+
+
+def pair_statistics(loops: list[JointLoop], chains: SessionChains) -> np.ndarray:
+    """(n, n) chi-square statistics (6 dof) of the cycles of every two loops between the same two sessions.
+
+    Symmetric, ``inf`` on the diagonal. Each loop is turned to start in the session listed first
+    and every pair is taken in one fixed order, so a pair's figure does not depend on the order
+    of ``loops`` nor on which end of a loop is the query; the cycles are computed as
+    :func:`slam_lcd.backend.gate.pair_chi2` does, many at once.
+    """
+    n = len(loops)
+    out = np.full((n, n), np.inf)
+    if n < 2:
+        return out
+    sess = {chains.session_of(k) for lp in loops for k in (lp.query, lp.match)}
+    if len(sess) != 2 or any(chains.session_of(lp.query) == chains.session_of(lp.match) for lp in loops):
+        raise ValueError("pairwise consistency needs loops between the same two sessions")
+    s_first, s_second = sorted(sess)
+    g = [oriented(lp, s_first, chains) for lp in loops]
+    rank = sorted(range(n), key=lambda k: _order_key(g[k]))
+    ia = np.array([chains.where[gl.a][1] for gl in g])
+    ib = np.array([chains.where[gl.b][1] for gl in g])
+    Z = np.array([gl.Z for gl in g])
+    S = np.array([gl.cov for gl in g])
+    iu, ju = np.triu_indices(n, 1)
+    first, second = np.array(rank)[iu], np.array(rank)[ju]  # each pair in rank order
+    for c in range(0, len(first), CHUNK):
+        p, q = first[c:c + CHUNK], second[c:c + CHUNK]
+        A, SA = chains.estimates(s_first, ia[p], ia[q])
+        C, SC = chains.estimates(s_second, ib[q], ib[p])
+        with np.errstate(all="ignore"):
+            try:
+                x = cycle_chi2(Z[p], S[p], Z[q], S[q], A, SA, C, SC)
+            except np.linalg.LinAlgError:
+                x = np.array([_one(Z[k], S[k], Z[m], S[m], A[t], SA[t], C[t], SC[t])
+                              for t, (k, m) in enumerate(zip(p, q, strict=True))])
+        x = np.where(np.isfinite(x), x, np.inf)
+        out[p, q] = out[q, p] = x
+    return out
+
+
+def _one(*args) -> float:
+    try:
+        return float(cycle_chi2(*args))
+    except np.linalg.LinAlgError:
+        return float("inf")
+
+
+def pcm_threshold(conf: MapConfig) -> float:
+    return chi2_quantile(conf.pcm_probability, 6)
+
+
+def pairwise_consistent(l1: JointLoop, l2: JointLoop, chains: SessionChains, threshold: float) -> bool:
+    """Do two loops between the same two sessions close a consistent cycle (chi-square test)?"""
+    return bool(pair_statistics([l1, l2], chains)[0, 1] <= threshold)
+
+
+def consistency_matrix(loops: list[JointLoop], chains: SessionChains, threshold: float) -> np.ndarray:
+    """(n, n) bool: which loops of one pair of sessions are pairwise consistent (diagonal False)."""
+    return pair_statistics(loops, chains) <= threshold
