@@ -273,6 +273,7 @@ class _ReadAheadJudge:
 
 def _append_to_map(map, pipe, result: RunResult, log_path: Path, name: str | None, gt, notes: list[str]) -> dict:
     """Add the finished session to ``map`` and commit it; an interrupted run adds nothing (said in the notes)."""
+    from .map.session_graph import BUILTIN_VO
     from .map.summary import map_summary
 
     if result.interrupted:
@@ -280,7 +281,8 @@ def _append_to_map(map, pipe, result: RunResult, log_path: Path, name: str | Non
         log.warning("interrupted: %s was not changed", map.root)
         return {"root": str(map.root), "appended": False, "reason": "interrupted"}
     joined = map.add_session(pipe, name=name or log_path.stem, log_path=log_path, ground_truth=gt,
-                             extra={"image_topic": result.topics.get("image")})
+                             extra={"image_topic": result.topics.get("image"),
+                                    "odometry_source": result.topics.get("odom") or BUILTIN_VO})
     map.save()
     return map_summary(map, joined, current=map.session_names[-1], pipe=pipe)
 

@@ -18,11 +18,10 @@ inlier of the joint graph it would make the GNC re-check drop true loops instead
   enter with half their information: covariance intersection with weight 1/2, consistent
   whatever their correlation; the session's shape between the two is the same as with full
   weights, only its stiffness against the loops halves. With an odometry topic (True) both
-  count in full. When the source is not known (None) both count in full too: an assumption,
-  stated here because it is what every session gets today. The map does not record a
-  session's odometry source, so ``Map.add_session`` passes None, and ``Map.factor_graph``
-  gives a user the same full-weight factors; a log run on the built-in visual odometry is
-  then counted twice on the steps its links span.
+  count in full. The session table records the source (``odometry_source``, written by the
+  runner: the odometry topic, or the built-in VO); a topic's independence is not known (None,
+  it may be a visual-inertial odometry of the same images) and counts in full: an assumption.
+  ``Map.factor_graph`` gives a user the same weights.
 """
 from __future__ import annotations
 

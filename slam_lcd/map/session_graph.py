@@ -11,6 +11,14 @@ import numpy as np
 from ..geometry import inv
 from .contents import MapGraph, SessionKeyframes
 from .joint_graph import JointLoop, SessionPoses
+from .joint_types import is_link
+
+BUILTIN_VO = "visual odometry (built in)"  # a session's odometry source when slam-lcd's own VO made it
+
+
+def odometry_independent(meta: dict) -> bool | None:
+    """Whether a session's odometry is independent of its camera (the built-in VO is not; a topic: unknown)."""
+    return False if meta.get("odometry_source") == BUILTIN_VO else None
 
 
 def existing_loops(sessions: list[SessionKeyframes], graph: MapGraph) -> list[JointLoop]:
@@ -30,27 +38,37 @@ def session_poses(table: list[dict], sessions: list[SessionKeyframes],
     out = []
     for meta, s in zip(table, sessions, strict=True):
         T = np.array([poses[int(k)] for k in s.ids]) if poses else s.T_odom.copy()
-        out.append(SessionPoses(meta["name"], s.ids, s.T_odom, s.cov, T.reshape(-1, 4, 4), int(meta["component"])))
+        out.append(SessionPoses(meta["name"], s.ids, s.T_odom, s.cov, T.reshape(-1, 4, 4), int(meta["component"]),
+                                odometry_independent=odometry_independent(meta)))
     return out
 
 
-def factor_graph(sessions: list[SessionKeyframes], graph: MapGraph, poses: dict[int, np.ndarray], key=None):
-    """(``gtsam.NonlinearFactorGraph``, ``gtsam.Values``) of a map: see :meth:`Map.factor_graph`."""
+def factor_graph(table: list[dict], sessions: list[SessionKeyframes], graph: MapGraph, poses: dict[int, np.ndarray],
+                 key=None):
+    """(``gtsam.NonlinearFactorGraph``, ``gtsam.Values``) of a map: see :meth:`Map.factor_graph`.
+
+    The factors are the joint solve's: a session on the built-in visual odometry has its linked
+    odometry steps and their links at half their information (:func:`slam_lcd.map.links.shared_weight`)."""
     import gtsam
 
     from .joint_graph import information_noise, odometry_covariance
 
     key = key or (lambda k: int(k))
+    half = {int(k) for meta, s in zip(table, sessions, strict=True) if odometry_independent(meta) is False
+            for k in s.ids}
+    loops = [lp for lp in existing_loops(sessions, graph) if lp.accepted]
+    linked = {max(int(lp.query), int(lp.match)) for lp in loops if is_link(lp)}  # consecutive ids: the later one
     g, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
     for s in sessions:
         for i, k in enumerate(s.ids):
             values.insert(key(int(k)), gtsam.Pose3(poses.get(int(k), s.T_odom[i])))
             if i:
+                cov = odometry_covariance(s.cov[i]) * (2.0 if int(k) in half and int(k) in linked else 1.0)
                 g.add(gtsam.BetweenFactorPose3(key(int(s.ids[i - 1])), key(int(k)),
                                                gtsam.Pose3(inv(s.T_odom[i - 1]) @ s.T_odom[i]),
-                                               gtsam.noiseModel.Gaussian.Covariance(odometry_covariance(s.cov[i]))))
-    for q, mt, T, info, acc in zip(graph.loop_query, graph.loop_match, graph.loop_T, graph.loop_info,
-                                   graph.loop_accepted, strict=True):
-        if acc:
-            g.add(gtsam.BetweenFactorPose3(key(int(mt)), key(int(q)), gtsam.Pose3(T), information_noise(info)))
+                                               gtsam.noiseModel.Gaussian.Covariance(cov)))
+    for lp in loops:
+        w = 0.5 if is_link(lp) and int(lp.query) in half else 1.0
+        g.add(gtsam.BetweenFactorPose3(key(int(lp.match)), key(int(lp.query)), gtsam.Pose3(lp.T),
+                                       information_noise(lp.info, w)))
     return g, values

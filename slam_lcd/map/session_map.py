@@ -35,7 +35,7 @@ from .keyframe_arrays import (
     visual_links,
 )
 from .locks import WriterLock
-from .session_graph import existing_loops, factor_graph, session_poses
+from .session_graph import existing_loops, factor_graph, odometry_independent, session_poses
 from .store import LogAlreadyInMapError, MapError, MapGraph, MapManifest, SessionKeyframes, check_map_target
 
 log = logging.getLogger(__name__)
@@ -274,7 +274,8 @@ class Map:
             loops.append(JointLoop(int(c.query_id), int(c.match_id), np.asarray(c.T_match_query, float),
                                    np.asarray(c.information, float), True, False, ""))
         sessions = session_poses(self.manifest.sessions, self.sessions, self.poses())
-        sessions.append(SessionPoses(name, sess.ids, sess.T_odom, sess.cov, np.asarray(own.poses, float), None))
+        sessions.append(SessionPoses(name, sess.ids, sess.T_odom, sess.cov, np.asarray(own.poses, float), None,
+                                     odometry_independent=odometry_independent(extra or {})))
         result = solve(sessions, loops, self.conf)
         self.last_join = result
         graph = MapGraph(
@@ -360,7 +361,7 @@ class Map:
         key`` (default: the keyframe id). No prior: the user fixes the gauge (e.g. a prior on
         one keyframe, or their own absolute factors).
         """
-        return factor_graph(self.sessions, self.graph, self.poses(), key)
+        return factor_graph(self.manifest.sessions, self.sessions, self.graph, self.poses(), key)
 
     # ------------------------------------------------------------------ localisation
     def localise(self, pipeline):

@@ -128,7 +128,7 @@ def _current(m, name: str, sessions: list[dict]) -> dict:
     ids = {int(k) for k in m.sessions[m.session_names.index(name)].ids}
     g = m.graph
     within = sum(1 for q, mt, acc, why in zip(g.loop_query, g.loop_match, g.loop_accepted, g.loop_reason, strict=True)
-                 if acc and str(why) != "link" and int(q) in ids and int(mt) in ids)
+                 if acc and not str(why).startswith(LINK) and int(q) in ids and int(mt) in ids)
     entry = next(s for s in sessions if s["name"] == name)
     return {"name": name, "joined": entry["joined"], "component": entry["component"],
             "loops_accepted": within + entry["inter_session_loops"], "within_session_loops": within,
