@@ -154,7 +154,7 @@ def localisation_report(m, loc, gt=None) -> dict:
             reasons[key] = reasons.get(key, 0) + 1
     out = {"map": str(m.root), "keyframes": len(ks), "localised": sum(k.localised for k in ks),
            "share_localised": loc.share_localised, "component": loc.component, "not_localised_reasons": reasons,
-           "errors": None, "_loc": loc}
+           "ambiguous": loc.ambiguous, "notes": list(loc.notes), "errors": None, "_loc": loc}
     al = gt_alignment(m, loc.component or 0)
     if gt is not None and len(gt) > 1 and al is not None:
         R, t = al
@@ -181,6 +181,7 @@ def localisation_lines(rep: dict) -> list[str]:
              f"against {rep['map']}"]
     for why, n in rep["not_localised_reasons"].items():
         lines.append(f"  not localised: {n} ({why})")
+    lines += [f"  {note}" for note in rep.get("notes", [])]
     e = rep.get("errors")
     if e and e["median_m"] is not None:
         lines.append(f"position error of localised keyframes: median {e['median_m']:.3f} m, max {e['max_m']:.3f} m, "
