@@ -14,10 +14,12 @@ could fool appearance:
    Neighbouring keyframes that see one look-alike place agree with each other as well as true
    fixes do; they are one match seen several times, not independent evidence.
 2. **Groups that disagree.** Confirmed fixes that agree with each other through the odometry,
-   link by link along the log, form a group. Where two groups near each other on the log
-   disagree (a look-alike place and the true one), the one with at least
-   ``map.localize_min_group_ratio`` times the other's fixes wins and the other's fixes are
-   dropped; when neither is that much larger, both are *ambiguous* and not localised.
+   link by link along the log, form a group. Where two groups disagree (their fixes closest
+   along the log do not agree through the odometry: a look-alike place and the true one), the
+   one with at least ``map.localize_min_group_ratio`` times the other's fixes wins and the
+   other's fixes are dropped; when neither is that much larger, both are *ambiguous* and not
+   localised. The joint solve cannot be left to choose: the odometry between two groups bends
+   to fit both before the solve calls either an outlier.
 3. **One joint solve.** The log's keyframes are variables, its odometry the factors between
    them, each kept fix a prior with the loop's information; GNC (TLS) drops fixes the rest
    disagree with, Levenberg-Marquardt gives the poses. The map's poses are constants: the map
@@ -44,8 +46,8 @@ from .config import MapConfig
 from .joint_graph import information_noise, odometry_covariance, solve_lm
 
 NEIGHBOURS = 10  # keyframes either side whose fixes may confirm a fix
-# fixes this close along the log (or within NEIGHBOURS keyframes) are compared when grouping: near
-# enough for the odometry's drift allowance to hold, far enough to bridge a look-alike stretch
+# fixes this close along the log (or within NEIGHBOURS keyframes) that agree are one group: near
+# enough for the odometry's drift allowance to hold link by link
 GROUP_WINDOW_M = 15.0
 DRIFT_PER_M = 0.05  # odometry drift allowance per metre between two fixes (added to the fixed bound)
 DRIFT_DEG_PER_M = 1.0
@@ -142,7 +144,8 @@ class _Pairs:
 
     agree: np.ndarray  # (k, k) bool: the two fixes agree through the odometry between them
     neighbours: np.ndarray  # (k, k) bool: within NEIGHBOURS keyframes (may confirm each other)
-    near: np.ndarray  # (k, k) bool: close enough along the log to be grouped or to be rivals
+    near: np.ndarray  # (k, k) bool: close enough along the log to be linked into one group
+    travelled: np.ndarray  # (k, k) metres the log travelled between the two
     separation: np.ndarray  # (k, k) metres between the places: map keyframes apart or log travelled
 
 
@@ -170,7 +173,7 @@ def _pairs(order: list[int], fixes: dict, map_poses: dict, T_odom: np.ndarray, p
     neighbours = (gap <= NEIGHBOURS) & (gap > 0)
     near = neighbours | ((travelled <= GROUP_WINDOW_M) & (gap > 0))
     separation = np.maximum(np.linalg.norm(place[:, None] - place[None, :], axis=2), travelled)
-    return _Pairs(agree, neighbours, near, separation)
+    return _Pairs(agree, neighbours, near, travelled, separation)
 
 
 def _confirmed(order: list[int], pair: _Pairs, conf: MapConfig, reasons: dict) -> list[int]:
@@ -194,15 +197,14 @@ def _groups(rows: list[int], pair: _Pairs) -> list[list[int]]:
 def _settle_groups(order: list[int], rows: list[int], pair: _Pairs, conf: MapConfig, reasons: dict) -> list[int]:
     """The confirmed fixes kept: a group wins over a rival it clearly outnumbers; similar rivals are ambiguous.
 
-    Two groups are rivals when fixes of the two, near each other on the log, disagree: they
-    cannot both be right. Far apart on the log, the odometry cannot tell, and the joint solve
-    decides.
+    Two groups are rivals when they disagree where the odometry between them is shortest: they
+    cannot both be right. (Two groups that agree there are two stretches of one hypothesis.)
     """
     groups = _groups(rows, pair)
     kept: list[int] = []
     ratio = conf.localize_min_group_ratio
     for g in groups:
-        rivals = [len(h) for h in groups if h is not g and (pair.near[np.ix_(g, h)] & ~pair.agree[np.ix_(g, h)]).any()]
+        rivals = [len(h) for h in groups if h is not g and _rivals(g, h, pair)]
         rival = max(rivals, default=0)
         if rival == 0 or (len(g) > rival and len(g) >= ratio * rival):
             kept += g
@@ -212,6 +214,13 @@ def _settle_groups(order: list[int], rows: list[int], pair: _Pairs, conf: MapCon
                           if rival > len(g) and rival >= ratio * len(g) else
                           f"{AMBIGUOUS}: {len(g)} fixes agree on one place, {rival} on another")
     return sorted(kept)
+
+
+def _rivals(g: list[int], h: list[int], pair: _Pairs) -> bool:
+    """Whether groups ``g`` and ``h`` disagree at their fixes closest along the log."""
+    between = pair.travelled[np.ix_(g, h)]
+    a, b = np.unravel_index(int(np.argmin(between)), between.shape)
+    return not pair.agree[g[a], h[b]]
 
 
 def _joint_solve(kept: dict, T_odom: np.ndarray, cov: list, reasons: dict) -> tuple[dict, np.ndarray]:
