@@ -202,18 +202,24 @@ def _settle_groups(order: list[int], rows: list[int], pair: _Pairs, conf: MapCon
     """
     groups = _groups(rows, pair)
     kept: list[int] = []
-    ratio = conf.localize_min_group_ratio
     for g in groups:
-        rivals = [len(h) for h in groups if h is not g and _rivals(g, h, pair)]
-        rival = max(rivals, default=0)
-        if rival == 0 or (len(g) > rival and len(g) >= ratio * rival):
+        rival = max((len(h) for h in groups if h is not g and _rivals(g, h, pair)), default=0)
+        why = _verdict(len(g), rival, conf.localize_min_group_ratio)
+        if why is None:
             kept += g
             continue
         for a in g:
-            reasons[order[a]] = (f"fix disagrees with a larger group of fixes ({rival} against {len(g)})"
-                          if rival > len(g) and rival >= ratio * len(g) else
-                          f"{AMBIGUOUS}: {len(g)} fixes agree on one place, {rival} on another")
+            reasons[order[a]] = why
     return sorted(kept)
+
+
+def _verdict(size: int, rival: int, ratio: float) -> str | None:
+    """None when a group of ``size`` fixes stands against its largest rival's ``rival`` fixes, else why not."""
+    if rival == 0 or (size > rival and size >= ratio * rival):
+        return None
+    if rival > size and rival >= ratio * size:
+        return f"fix disagrees with a larger group of fixes ({rival} against {size})"
+    return f"{AMBIGUOUS}: {size} fixes agree on one place, {rival} on another"
 
 
 def _rivals(g: list[int], h: list[int], pair: _Pairs) -> bool:
