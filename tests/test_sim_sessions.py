@@ -171,7 +171,7 @@ def test_cli_session(tmp_path, capsys):
     with open_log(out) as r:
         frames = {m.msg.header.frame_id for m in r.messages() if m.topic == "/ground_truth/pose"}
     assert frames == {"world_1000"}
-    assert main(["make-demo-log", str(tmp_path / "x.mcap"), "--session", "6"]) == 2
+    assert main(["make-demo-log", str(tmp_path / "x.mcap"), "--session", "9"]) == 2
     assert main(["make-demo-log", str(tmp_path / "y.mcap"), "--exposure", "0"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 2

@@ -38,7 +38,9 @@ def register(sub) -> None:
                         + "; ".join(f"{k}: {_preset_text(v)}" for k, v in SESSIONS.items())
                         + " (default: none, a plain demo log)")
     p.add_argument("--world-seed", type=int, default=None,
-                   help="seed of the world's textures and lighting (default: --seed; with --session the preset's)")
+                   help="seed of the world's textures and lighting (default: --seed; with --session the preset's); "
+                        "1000-1999: another building on the same corridors, 2000 and above: the demo building with "
+                        "a look-alike corridor (docs/sim_sessions.md)")
     p.add_argument("--start-at", type=float, default=None, metavar="METRES",
                    help="arc length of the start point along the route's centre line (default: the route's usual "
                         "start, 3 m for laps, 2 m for figure8; with --session the preset's)")
@@ -54,9 +56,10 @@ def register(sub) -> None:
     p.add_argument("--compressed", action="store_true",
                    help="write JPEG sensor_msgs/CompressedImage instead of raw images (default: raw)")
     p.add_argument("--color", action="store_true", help="RGB images (rgb8) instead of mono8 (default: mono8)")
-    p.add_argument("--trajectory", choices=["laps", "figure8", "laps-wide"], default=None,
-                   help="laps of block A, a figure eight, or laps-wide: laps of block A with every second lap "
-                        "0.45 m to the side and the camera turned 30 deg (wide-baseline revisits) "
+    p.add_argument("--trajectory", choices=["laps", "figure8", "laps-wide", "laps-b"], default=None,
+                   help="laps of block A, a figure eight, laps-wide: laps of block A with every second lap "
+                        "0.45 m to the side and the camera turned 30 deg (wide-baseline revisits), or laps-b: "
+                        "clockwise laps of block B "
                         "(default: laps; with --session the preset's)")
     p.add_argument("--laps", type=float, default=None,
                    help="laps to drive when --frames is not given (default 2; with --session the preset's)")

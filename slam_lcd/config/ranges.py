@@ -185,6 +185,8 @@ RANGES: dict[str, str] = {
     "map.link_probability": "(0, 1)",
     "map.localize_max_disagreement_m": "(0, inf)",
     "map.localize_max_disagreement_deg": "(0, 180]",
+    "map.localize_min_place_separation_m": "[0, inf)",
+    "map.localize_min_group_ratio": "[1, inf)",
     "map.lock_timeout_s": "[0, inf)",
     "run.loop_pictures_rejected": "[0, inf)",
     # map_cloud (the map as a point cloud)

@@ -45,5 +45,17 @@ class MapConfig:
     # keyframes around it carried by odometry (translation m, rotation deg); the rest are outliers
     localize_max_disagreement_m: float = 1.0
     localize_max_disagreement_deg: float = 15.0
+    # localise: a fix is confirmed only by a fix to another place, their map keyframes this far apart
+    # or the log this far along between them (m): neighbouring keyframes that see one look-alike
+    # place agree with each other too, so a look-alike must span more than this to confirm itself.
+    # 3 m: wider than the demo world's repeated door-and-posters groups (2.2 m); the share localised
+    # was the same from 0 to 4 m on the measured demo runs and fell at 5-6 m (the confirming window
+    # of 10 keyframes is about 5 m)
+    localize_min_place_separation_m: float = 3.0
+    # localise: fixes falling into groups that disagree (a look-alike place and the true one): a group
+    # wins only with at least this many times its rival's fixes; otherwise both are ambiguous. 2: a
+    # look-alike corridor seen by 7 fixes against its true place's 16 was decided right at 1.5 and 2,
+    # refused at 3
+    localize_min_group_ratio: float = 2.0
     # wait for a writer's lock this long before refusing (seconds; 0: refuse at once)
     lock_timeout_s: float = 60.0

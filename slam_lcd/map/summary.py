@@ -169,7 +169,7 @@ def localisation_report(m, loc, gt=None) -> dict:
             reasons[key] = reasons.get(key, 0) + 1
     out = {"map": str(m.root), "keyframes": len(ks), "localised": sum(k.localised for k in ks),
            "share_localised": loc.share_localised, "component": loc.component, "not_localised_reasons": reasons,
-           "notes": list(loc.notes), "errors": None, "_loc": loc}
+           "ambiguous": loc.ambiguous, "notes": list(loc.notes), "errors": None, "_loc": loc}
     al = gt_alignment(m, loc.component or 0)
     if gt is not None and len(gt) > 1 and al is not None and len(loc.trajectory):
         R, t = al
@@ -193,9 +193,10 @@ def localisation_report(m, loc, gt=None) -> dict:
 
 def localisation_lines(rep: dict) -> list[str]:
     lines = [f"localised {rep['localised']} of {rep['keyframes']} keyframes ({100 * rep['share_localised']:.1f} %) "
-             f"against {rep['map']}" + "".join(f": {n}" for n in rep.get("notes", []))]
+             f"against {rep['map']}"]
     for why, n in rep["not_localised_reasons"].items():
         lines.append(f"  not localised: {n} ({why})")
+    lines += [f"  {note}" for note in rep.get("notes", [])]
     e = rep.get("errors")
     if e and e["median_m"] is not None:
         lines.append(f"position error of localised keyframes: median {e['median_m']:.3f} m, max {e['max_m']:.3f} m, "

@@ -1,14 +1,16 @@
 """Where things stand in a demo world: lamps, floor and ceiling grids, wall materials, decal-group
 sites, pillars and corner panels (:class:`Building`), on the floor plan of :mod:`slam_lcd.sim.world`.
 
-Two kinds of world share these corridors (:func:`building`). Seeds below
+Three kinds of world share these corridors (:func:`building`). Seeds below
 :data:`OTHER_PLACE_SEED` (1000) are the demo building: its lamps, tile and ceiling grids,
 materials per wall, decal-group sites, pillars and corner panels stand where this module's
 constants put them, and the seed only re-draws textures and lamp states. Seeds from 1000
-on are another building on the same footprint: all of those are drawn from the seed too,
+to 1999 are another building on the same footprint: all of those are drawn from the seed too,
 away from where the demo building has them, so nothing but the corridors themselves sits
 at the same 3-D place (session 4 records world 1000: a place a map of world 0 must not
-recognise).
+recognise). Seeds from :data:`LOOKALIKE_SEED` (2000) on are the demo building again, with its
+west corridor repeated as the east one (:mod:`slam_lcd.sim.lookalike`): two places that look
+the same.
 
 Why apart from :mod:`slam_lcd.sim.world`: the placement is cheap and needs no texture, so
 sessions and tests can ask where things stand without building (painting, baking) a world.
@@ -22,7 +24,13 @@ import numpy as np
 HEIGHT = 3.0  # wall height (m)
 OUTER = (0.0, 0.0, 25.0, 14.0)  # x0, y0, x1, y1 of the outer walls
 BLOCKS = ((3.0, 3.0, 11.0, 11.0), (14.0, 3.0, 22.0, 11.0))  # solid blocks A and B
-OTHER_PLACE_SEED = 1000  # world seeds from here on are another building on the same corridors
+OTHER_PLACE_SEED = 1000  # world seeds from here to LOOKALIKE_SEED are another building on the same corridors
+LOOKALIKE_SEED = 2000  # world seeds from here on are the demo building with a look-alike corridor
+# the look-alike corridor: the west corridor beside block A (x0, y0, x1, y1) stands again, shifted
+# this far east (x, y; metres), as the east corridor beside block B
+LOOKALIKE_P1 = (0.0, 3.0, 3.0, 11.0)
+LOOKALIKE_SHIFT = (22.0, 0.0)
+LOOKALIKE_PILLAR = "pillarB2"  # the west corridor's pillar, repeated on block B's east face
 MATERIALS = ("plaster", "bricks", "wood", "tiles")
 
 
@@ -51,6 +59,7 @@ class Building:
     slots: dict
     pillars: tuple
     panels: tuple
+    lookalike: bool = False  # the east corridor repeats the west one (LOOKALIKE_P1, LOOKALIKE_SHIFT)
 
 
 def _lamp_positions() -> np.ndarray:
@@ -173,7 +182,26 @@ def _other_building(seed: int) -> Building:
                     slots=slots, pillars=tuple(pillars), panels=panels)
 
 
+def _lookalike_building() -> Building:
+    """The demo building with the east pillar moved from the outer east wall to block B's east face,
+    where the west pillar stands in the west corridor once shifted by :data:`LOOKALIKE_SHIFT`: the
+    east corridor then has the west one's pillar too (its textures are copied when the world is painted)."""
+    demo = _demo_building()
+    dx, dy = LOOKALIKE_SHIFT
+    west = [(LOOKALIKE_PILLAR, x + dx, y + dy, inward, along) for name, x, y, inward, along in demo.pillars
+            if name == "pillarW"]
+    pillars = tuple(p for p in demo.pillars if p[0] != "pillarE") + tuple(west)
+    return Building(other_place=False, lamps=demo.lamps, lamp_half_px=demo.lamp_half_px,
+                    floor_tile_m=demo.floor_tile_m, floor_phase_m=demo.floor_phase_m, ceil_tile_m=demo.ceil_tile_m,
+                    ceil_phase_m=demo.ceil_phase_m, materials=demo.materials, slots=demo.slots, pillars=pillars,
+                    panels=demo.panels, lookalike=True)
+
+
 def building(seed: int = 0) -> Building:
     """Where things stand in world ``seed``: the demo building below :data:`OTHER_PLACE_SEED`,
-    another building on the same corridors from it on."""
-    return _other_building(int(seed)) if int(seed) >= OTHER_PLACE_SEED else _demo_building()
+    another building on the same corridors from it to :data:`LOOKALIKE_SEED`, and from that on the demo
+    building with a look-alike corridor."""
+    seed = int(seed)
+    if seed >= LOOKALIKE_SEED:
+        return _lookalike_building()
+    return _other_building(seed) if seed >= OTHER_PLACE_SEED else _demo_building()

@@ -308,7 +308,7 @@ def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int |
     Kinect v1 model of :mod:`slam_lcd.sim.kinect`); False writes the exact rendered depth
     (millimetre steps only). The demo layout's depth is exact (1/1024 m steps) either way.
 
-    ``session`` (1-5): one recording of a multi-session set (:mod:`slam_lcd.sim.sessions`):
+    ``session`` (1-8): one recording of a multi-session set (:mod:`slam_lcd.sim.sessions`):
     the preset gives ``kind``, ``laps``, ``seed``, ``world_seed``, ``start_at``, ``lighting``
     and ``exposure`` where they are None; the odometry starts at the identity (its own
     frame; no world -> odom on /tf_static), stamps start ``session`` days after the plain

@@ -18,6 +18,9 @@ K  route                   start_at laps     seed      world_seed lighting expo 
 3  figure eight (A and B)  26.0 m   0.9      3         0          3        0.75  mapping, changed lighting
 4  laps of block A         3.0 m    1.3      4         1000       0        1.0   another building
 5  laps of block A         24.0 m   1.0      5         0          0        1.0   localisation in 1-3
+6  laps of block A         9.0 m    1.0      6         2000       0        1.0   look-alike world: P1
+7  laps of block B (cw)    38.0 m   1.3      7         2000       0        1.0   look-alike world: P2
+8  laps of block B (cw)    12.0 m   1.0      8         2000       0        1.0   localisation through P2
 == ======================= ======== ======== ========= ========== ======== ===== ========================
 
 ``start_at``: arc length of the start point along the route's centre line
@@ -25,16 +28,22 @@ K  route                   start_at laps     seed      world_seed lighting expo 
 lighting epoch; ``expo``: a global exposure factor of the renderer. Every field is only a
 default: explicit arguments override it.
 
-World seeds from 1000 on (:data:`slam_lcd.sim.building.OTHER_PLACE_SEED`) are another
+World seeds 1000-1999 (:data:`slam_lcd.sim.building.OTHER_PLACE_SEED` on) are another
 building on the demo corridors: lamps, floor and ceiling grids, wall materials, decal
 sites, pillars and corner panels stand elsewhere, so session 4 shares neither textures nor
 the 3-D places of its keypoints with sessions 1-3 (below 1000 only textures change).
+World seeds from 2000 on (:data:`slam_lcd.sim.building.LOOKALIKE_SEED`) are the demo building
+with its west corridor beside block A (P1) repeated as the east corridor beside block B (P2),
+:mod:`slam_lcd.sim.lookalike`: sessions 6-8 record it. Session 6 drives through P1 and never
+P2, session 7 through P2 and never P1, both north through the middle corridor; session 8, to
+be localised in their map, drives through P2.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 from . import rig
+from .building import LOOKALIKE_SEED
 from .trajectory import START_NS
 
 DAY_NS = 86_400 * 1_000_000_000
@@ -45,7 +54,7 @@ class SessionPreset:
     """Defaults one session sets (each overridable by an explicit argument)."""
 
     session: int
-    kind: str  # route: 'laps' (block A) or 'figure8' (A and B)
+    kind: str  # route: 'laps' (block A), 'figure8' (A and B) or 'laps-b' (block B, clockwise)
     start_at: float  # arc length (m) of the start point along the route's centre line
     laps: float
     seed: int  # path weave, odometry noise and image noise
@@ -55,7 +64,8 @@ class SessionPreset:
     role: str
 
     def describe(self) -> str:
-        route = {"laps": "laps of block A", "figure8": "figure eight around A and B"}.get(self.kind, self.kind)
+        route = {"laps": "laps of block A", "figure8": "figure eight around A and B",
+                 "laps-b": "laps of block B (clockwise)"}.get(self.kind, self.kind)
         return (f"session {self.session}: {self.role}; {self.laps:g} {route} from {self.start_at:g} m, seed "
                 f"{self.seed}, world {self.world_seed}, lighting +{self.lighting:g}, exposure {self.exposure:g}")
 
@@ -67,11 +77,17 @@ SESSIONS: dict[int, SessionPreset] = {
     4: SessionPreset(4, "laps", 3.0, 1.3, 4, 1000, 0.0, 1.0,
                      "another world, another building on the same corridors: shares no place with 1-3"),
     5: SessionPreset(5, "laps", 24.0, 1.0, 5, 0, 0.0, 1.0, "localisation inside the area of 1-3"),
+    6: SessionPreset(6, "laps", 9.0, 1.0, 6, LOOKALIKE_SEED, 0.0, 1.0,
+                     "look-alike world, mapping: the west corridor (P1), never the east one (P2)"),
+    7: SessionPreset(7, "laps-b", 38.0, 1.3, 7, LOOKALIKE_SEED, 0.0, 1.0,
+                     "look-alike world, mapping: P2 (P1's look-alike) once, the middle corridor shared with 6 twice"),
+    8: SessionPreset(8, "laps-b", 12.0, 1.0, 8, LOOKALIKE_SEED, 0.0, 1.0,
+                     "look-alike world, localisation in the map of 6 and 7 through P2"),
 }
 
 
 def session_preset(session: int) -> SessionPreset:
-    """The preset of ``session`` (1-5); an InputError names the valid ones otherwise."""
+    """The preset of ``session`` (1-8); an InputError names the valid ones otherwise."""
     from ..errors import InputError
 
     if session not in SESSIONS:

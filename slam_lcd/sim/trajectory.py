@@ -1,4 +1,4 @@
-"""Ground-truth robot trajectories through the demo world: laps around block A or a figure eight.
+"""Ground-truth robot trajectories through the demo world: laps around block A or B, or a figure eight.
 
 A path is a closed centre line through the corridors (straight runs joined by circular
 arcs of radius 1.2 m), driven repeatedly. On top of it the robot weaves gently left and
@@ -26,15 +26,17 @@ WAYPOINTS = {
     # around A counter-clockwise, then around B clockwise, north through the middle corridor both times
     "figure8": [(12.5, 1.5), (12.5, 12.5), (1.5, 12.5), (1.5, 1.5),
                 (12.5, 1.5), (12.5, 12.5), (23.5, 12.5), (23.5, 1.5)],
+    # clockwise around block B, as the figure eight drives it: north through the middle corridor
+    "laps-b": [(12.5, 1.5), (12.5, 12.5), (23.5, 12.5), (23.5, 1.5)],
 }
-START_AT = {"laps": 3.0, "figure8": 2.0}  # arc length of the start point along the centre line (m)
+START_AT = {"laps": 3.0, "figure8": 2.0, "laps-b": 2.0}  # arc length of the start point along the centre line (m)
 # 'laps-wide': the laps of block A, every second lap driven 0.45 m to the side with the body
 # (and camera) turned 30 deg off the direction of travel, so revisits are wide-baseline:
 # lateral offset and a heading difference in the 20-45 deg of loop closure's hard cases
 WIDE_OFFSET_M = 0.45
 WIDE_YAW_DEG = 30.0
 WIDE_RAMP_M = 0.8  # the change of lane and heading is smoothed over about this length (sigma)
-KINDS = ("laps", "figure8", "laps-wide")
+KINDS = ("laps", "figure8", "laps-wide", "laps-b")
 
 
 def _centre_line(waypoints, radius: float):
@@ -120,7 +122,7 @@ class DemoPath:
 
 def make_path(kind: str = "laps", laps: float = 2.0, seed: int = 0, speed: float = 1.1,
               turn_speed: float = 0.7, weave: float = 0.18, start_at: float | None = None) -> DemoPath:
-    """Build the continuous path for ``laps`` laps of ``kind`` ('laps', 'figure8' or 'laps-wide').
+    """Build the continuous path for ``laps`` laps of ``kind`` ('laps', 'figure8', 'laps-wide' or 'laps-b').
 
     ``start_at``: arc length (m) of the start point along the route's centre line, measured
     from the centre line's origin (:data:`START_AT` holds each route's default; values wrap

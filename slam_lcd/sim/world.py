@@ -25,7 +25,9 @@ same world, bit for bit.
 
 Where things stand (lamps, grids, materials, decal sites, pillars, panels) is
 :mod:`slam_lcd.sim.building`'s: the demo building below :data:`OTHER_PLACE_SEED`, another
-building on the same corridors from it on. This module paints and lights what stands there.
+building on the same corridors from it on, the demo building with its west corridor repeated
+as the east one from ``LOOKALIKE_SEED`` on (:mod:`slam_lcd.sim.lookalike`). This module paints
+and lights what stands there.
 """
 from __future__ import annotations
 
@@ -36,6 +38,7 @@ import cv2
 import numpy as np
 
 from ..vision.gray import to_gray_uint8
+from . import lookalike
 from . import textures as tx
 from .building import BLOCKS, HEIGHT, OUTER, Building, building, wall_ends
 from .building import OTHER_PLACE_SEED as OTHER_PLACE_SEED  # public here too: where the world's seeds split
@@ -244,8 +247,9 @@ def _wall_planes(name, p0, p1, tex, lamps, z_top=HEIGHT, double_sided=False) -> 
     return out
 
 
-def _horizontal_planes(name, tex_full, res, z, lamps, facing_up: bool) -> list[Plane]:
-    """Floor (facing up) or ceiling tiles over the free area, cut on the layout grid."""
+def _horizontal_planes(name, tex_full, res, z, lamps_at, facing_up: bool) -> list[Plane]:
+    """Floor (facing up) or ceiling tiles over the free area, cut on the layout grid; ``lamps_at(x, y)``: the
+    lamps that light the tile centred at (x, y)."""
     xs = [0.0, 3.0, 5.67, 8.33, 11.0, 14.0, 16.67, 19.33, 22.0, 25.0]
     ys = [0.0, 3.0, 5.67, 8.33, 11.0, 14.0]
     out = []
@@ -265,7 +269,7 @@ def _horizontal_planes(name, tex_full, res, z, lamps, facing_up: bool) -> list[P
                 origin, u, v = np.array([x0, y0, z]), np.array([1.0, 0, 0]), np.array([0, 1.0, 0])
                 seg = np.ascontiguousarray(seg[::-1])
             pl = Plane(f"{name}[{i},{j}]", origin, u, v, x1 - x0, y1 - y0, [], [])
-            lit, pl.lamp_weights = _bake(pl, seg, lamps)
+            lit, pl.lamp_weights = _bake(pl, seg, lamps_at(cx, cy))
             pl.rgb = _mips(lit)
             pl.gray = [to_gray_uint8(m) for m in pl.rgb]
             out.append(pl)
@@ -303,11 +307,15 @@ def _corner_panel(name, corner, dx, dy, tex, lamps, reach_x=1.3, reach_y=1.3, he
 def build_world(seed: int = 0) -> DemoWorld:
     """Build (and cache) the demo world for ``seed``; ~1 s, ~100 MB of textures.
 
-    Seeds from :data:`OTHER_PLACE_SEED` on build another building on the same corridors
-    (see :func:`building`)."""
+    Seeds from :data:`OTHER_PLACE_SEED` on build another building on the same corridors,
+    seeds from :data:`~slam_lcd.sim.building.LOOKALIKE_SEED` on the demo building with a
+    look-alike corridor (see :func:`building` and :mod:`slam_lcd.sim.lookalike`)."""
     rng = np.random.default_rng(np.random.SeedSequence([seed, 0x5EED]))
     bld = building(seed)
     lamps = bld.lamps
+
+    def lit_by(where):  # the lamps lighting a wall (by name) or a floor or ceiling tile (by centre)
+        return lookalike.lamps_lighting(bld, lamps, where)
     groups = _decal_groups(rng)
     planes: list[Plane] = []
     X0, Y0, X1, Y1 = OUTER
@@ -323,10 +331,12 @@ def build_world(seed: int = 0) -> DemoWorld:
             sites.append({"group": gi, "wall": name, "centre": centre, "normal": np.array([d[1], -d[0], 0.0])})
 
     # outer walls, then the faces of blocks A and B (names and ends: wall_ends)
+    walls = {name: _paint_wall(rng, float(np.hypot(p1[0] - p0[0], p1[1] - p0[1])), bld.materials[name], groups,
+                               slots.get(name, [])) for name, (p0, p1) in wall_ends().items()}
+    if bld.lookalike:
+        lookalike.copy_walls(walls, WALL_RES)
     for name, (p0, p1) in wall_ends().items():
-        L = float(np.hypot(p1[0] - p0[0], p1[1] - p0[1]))
-        tex = _paint_wall(rng, L, bld.materials[name], groups, slots.get(name, []))
-        planes += _wall_planes(name, p0, p1, tex, lamps)
+        planes += _wall_planes(name, p0, p1, walls[name], lit_by(name))
         record_sites(name, p0, p1)
     # pillars out of the outer walls (identical textures: more aliasing)
     front = tx.plaster(rng, int(HEIGHT * WALL_RES), int(0.4 * WALL_RES), WALL_RES)
@@ -334,7 +344,7 @@ def build_world(seed: int = 0) -> DemoWorld:
              int(0.05 * WALL_RES), int(0.9 * WALL_RES))
     side = tx.plaster(rng, int(HEIGHT * WALL_RES), int(0.3 * WALL_RES), WALL_RES)
     for name, x, y, inward, along in bld.pillars:
-        planes += _pillar_planes(name, x, y, inward, along, front, side, lamps)
+        planes += _pillar_planes(name, x, y, inward, along, front, side, lit_by(name))
     # free-standing panels across the outer corners
     corners = [((X0, Y0), 1, 1), ((X1, Y0), -1, 1), ((X1, Y1), -1, -1), ((X0, Y1), 1, -1)]
     for k, reach_x, reach_y, height in bld.panels:
@@ -359,14 +369,18 @@ def build_world(seed: int = 0) -> DemoWorld:
         c = (int(rng.integers(0, fw)), int(rng.integers(0, fh)))
         cv2.ellipse(floor, c, (int(rng.uniform(3, 25)), int(rng.uniform(2, 8))), float(rng.uniform(0, 180)),
                     0, 360, tx.random_color(rng, 20, 120), -1, cv2.LINE_AA)
-    planes += _horizontal_planes("floor", floor, FLOOR_RES, 0.0, lamps, facing_up=True)
+    if bld.lookalike:
+        lookalike.copy_floor_or_ceiling(floor, FLOOR_RES)
+    planes += _horizontal_planes("floor", floor, FLOOR_RES, 0.0, lambda x, y: lit_by((x, y)), facing_up=True)
     ch, cw = int(round((Y1 - Y0) * CEIL_RES)), int(round((X1 - X0) * CEIL_RES))
     ceil = tx.ceiling_panels(rng, ch, cw, CEIL_RES, tile_m=bld.ceil_tile_m, phase_m=bld.ceil_phase_m)
     hx, hy = bld.lamp_half_px
     for lx, ly, _ in lamps:  # lamp panels: bright rectangles
         c, r_ = int(lx * CEIL_RES), int((Y1 - ly) * CEIL_RES)
         cv2.rectangle(ceil, (c - hx, r_ - hy), (c + hx, r_ + hy), (250, 250, 245), -1)
-    planes += _horizontal_planes("ceiling", ceil, CEIL_RES, HEIGHT, lamps, facing_up=False)
+    if bld.lookalike:
+        lookalike.copy_floor_or_ceiling(ceil, CEIL_RES)
+    planes += _horizontal_planes("ceiling", ceil, CEIL_RES, HEIGHT, lambda x, y: lit_by((x, y)), facing_up=False)
     # lighting epochs: epoch 0 nominal; later epochs dim/brighten lamps and change exposure
     n_l = len(lamps)
     gains = np.ones((N_LIGHT_EPOCHS, n_l))
