@@ -188,6 +188,11 @@ RANGES: dict[str, str] = {
     "map.localize_min_place_separation_m": "[0, inf)",
     "map.localize_min_group_ratio": "[1, inf)",
     "map.lock_timeout_s": "[0, inf)",
+    "map.place_radius_m": "(0, inf)",
+    "map.place_angle_deg": "(0, 180]",
+    "map.place_compare": "[1, inf)",
+    "map.redundant_match_ratio": "(0, 1]",
+    "map.max_variants": "[1, inf)",
     "run.loop_pictures_rejected": "[0, inf)",
     # map_cloud (the map as a point cloud)
     "map_cloud.voxel_m": "[0.001, inf)",

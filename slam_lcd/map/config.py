@@ -59,3 +59,18 @@ class MapConfig:
     localize_min_group_ratio: float = 2.0
     # wait for a writer's lock this long before refusing (seconds; 0: refuse at once)
     lock_timeout_s: float = 60.0
+    # keep places and appearance variants, not every keyframe (slam_lcd.map.places): a keyframe that
+    # a kept one of its place matches well keeps only its pose; false: every keyframe keeps everything
+    lifelong: bool = True
+    # a kept keyframe is of the same place when its camera lies within this distance (m) and its
+    # optical axis within this angle (deg)
+    place_radius_m: float = 1.0
+    place_angle_deg: float = 30.0
+    # the nearest kept keyframes of the place a new one is compared with
+    place_compare: int = 3
+    # redundant when at least this share of the smaller keyframe's descriptors are mutual nearest
+    # neighbours of a kept keyframe of its place; below it, a new appearance of the place
+    redundant_match_ratio: float = 0.3
+    # kept keyframes (appearance variants) of one place at most; a new one beyond that evicts the
+    # variant matched longest ago
+    max_variants: int = 3

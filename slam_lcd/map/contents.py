@@ -23,6 +23,7 @@ class MapError(InputError):
 
 
 MISSING = "map file missing"
+REMOVED = "removed"  # points_source of a keyframe whose descriptors, keypoints and points the map dropped
 
 
 class MapLockedError(MapError):
@@ -70,6 +71,10 @@ class SessionKeyframes:
     def rows(self, i: int) -> slice:
         return slice(int(self.offsets[i]), int(self.offsets[i + 1]))
 
+    def kept(self) -> np.ndarray:
+        """Which keyframes the map keeps as candidates (the others keep only their pose: ``REMOVED``)."""
+        return self.points_source != REMOVED
+
     def descriptors_of(self, i: int) -> np.ndarray:
         """Keyframe i's descriptors as the loop detector uses them (float32 unit rows, or ORB bytes)."""
         d = self.descriptors[self.rows(i)]
@@ -110,8 +115,19 @@ class MapGraph:
     loop_info: np.ndarray  # (m, 6, 6) information, GTSAM order
     loop_accepted: np.ndarray  # (m,) bool: in the graph (false: kept for the record, not used)
     loop_reason: np.ndarray  # (m,) str
+    # a map that keeps places (map.lifelong): each keyframe's place (-1: not kept) and the generation
+    # (sessions in the map) at which it was last matched or added; None: a map that keeps every keyframe
+    kf_place: np.ndarray | None = None  # (N,) int64
+    kf_last_used: np.ndarray | None = None  # (N,) int64
 
     ARRAYS = ("kf_ids", "T_map", "loop_query", "loop_match", "loop_T", "loop_info", "loop_accepted", "loop_reason")
+    OPTIONAL = ("kf_place", "kf_last_used")
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Every array to write (the optional ones where present)."""
+        out = {k: getattr(self, k) for k in self.ARRAYS}
+        out.update({k: getattr(self, k) for k in self.OPTIONAL if getattr(self, k) is not None})
+        return out
 
     @classmethod
     def empty(cls) -> MapGraph:
@@ -122,7 +138,8 @@ class MapGraph:
         N, m = len(self.kf_ids), len(self.loop_query)
         ok = (self.T_map.shape == (N, 4, 4) and self.loop_match.shape == (m,) and self.loop_T.shape == (m, 4, 4)
               and self.loop_info.shape == (m, 6, 6) and self.loop_accepted.shape == (m,)
-              and self.loop_reason.shape == (m,))
+              and self.loop_reason.shape == (m,)
+              and all(getattr(self, k) is None or getattr(self, k).shape == (N,) for k in self.OPTIONAL))
         if not ok:
             raise MapError("graph file's arrays do not fit together (damaged or not written by slam-lcd)", where)
 

@@ -44,8 +44,8 @@ def map_keyframes(manifest: MapManifest, sessions: list[SessionKeyframes]):
         kind = manifest.features.get("kind", "superpoint")
         size = (camera.width, camera.height) if camera else tuple(meta.get("image_size", (0, 0)))
         items = []
-        for i, k in enumerate(s.ids):
-            r = s.rows(i)
+        for i in map(int, np.flatnonzero(s.kept())):  # a keyframe the map keeps only the pose of is no candidate
+            k, r = s.ids[i], s.rows(i)
             feats = Features(s.keypoints[r], np.zeros(0, np.float32), np.zeros((0, 1), np.float32), size, kind)
             kf = Keyframe(id=int(k), stamp=int(s.stamps[i]), T_world_body=s.T_odom[i], camera=camera,
                           T_body_camera=T_bc, features=feats)
@@ -65,7 +65,7 @@ def restore_vocab(detector, root: Path, manifest: MapManifest, sessions: list[Se
     if manifest.vocab_file is None or not db.online or len(db) or db.words is not None:
         return None
     state = store.read_vocab(root, manifest, vocab_fh)
-    ids = np.concatenate([s.ids for s in sessions]) if sessions else np.zeros(0, np.int64)
+    ids = np.concatenate([s.ids[s.kept()] for s in sessions]) if sessions else np.zeros(0, np.int64)
     if state is None or not np.array_equal(state["kf_ids"], ids):
         return None
     try:

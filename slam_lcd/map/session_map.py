@@ -34,6 +34,7 @@ from .keyframe_arrays import (
     session_arrays,
     visual_links,
 )
+from .lifelong import reduce_append
 from .locks import WriterLock
 from .session_graph import existing_loops, factor_graph, odometry_independent, session_poses
 from .store import LogAlreadyInMapError, MapError, MapGraph, MapManifest, SessionKeyframes, check_map_target
@@ -70,6 +71,7 @@ class Map:
         self._vocab: dict | None = None  # the vocabulary snapshot to save (add_session), None: none
         self._vocab_fh: BinaryIO | None = None  # a reader's snapshot file, opened with the manifest that names it
         self._sha_cache: dict[tuple, str | None] = {}  # log file -> sha256 (a log is hashed once)
+        self._rewritten: dict[str, SessionKeyframes] = {}  # sessions whose kept keyframes changed, not committed
 
     # ------------------------------------------------------------------ open / close
     @classmethod
@@ -296,9 +298,20 @@ class Map:
                 "camera": camera_json(cam), "T_body_camera": np.asarray(pipeline.T_body_camera, float).tolist(),
                 "features": self.manifest.features.get("kind"), "T_map_session": np.eye(4).tolist(),
                 "component": 0, **(extra or {})}
+        expected = np.concatenate([s.ids[s.kept()] for s in self.sessions] + [sess.ids])  # the detector's keyframes
+        if self.conf.lifelong:  # keep places and variants, not every keyframe (slam_lcd.map.lifelong)
+            table = [dict(m) for m in self.manifest.sessions]
+            after, changed, graph = reduce_append(table, self.sessions, self.graph, graph, result, meta, sess, loops,
+                                                  self.conf)
+            sess = after[-1]
+            for i in changed - {len(self.sessions)}:
+                self._rewritten[table[i]["name"]] = after[i]
+            self.sessions = after[:-1]
+            meta["map_keyframes_after"] = sum(len(s) for s in after)
+            meta["map_kept_after"] = int(sum(int(s.kept().sum()) for s in after))
         # the in-memory map follows at once (a second session may be added before saving)
         self._apply(meta, sess, graph, result)
-        self._vocab = self._vocab_snapshot(pipeline.detector)
+        self._vocab = self._vocab_snapshot(pipeline.detector, expected)
         return result
 
     def _apply(self, meta, sess, graph, result) -> None:
@@ -313,15 +326,19 @@ class Map:
                                     self.manifest.files, self.manifest.created, self.manifest.updated,
                                     self.manifest.generation)
 
-    def _vocab_snapshot(self, detector) -> dict | None:
-        """The detector's online vocabulary and bags of words when its keyframes are exactly the map's, in order."""
+    def _vocab_snapshot(self, detector, expected: np.ndarray | None = None) -> dict | None:
+        """The detector's online vocabulary and bags of words when its keyframes are ``expected`` (default: the
+        map's kept ones; after an append, those before it and the new session's), in order; pruned to the
+        keyframes the map keeps now."""
         from ..vocab.database import snapshot
+        from ..vocab.snapshot import keep_only
 
+        kept = np.concatenate([s.ids[s.kept()] for s in self.sessions])
+        expected = kept if expected is None else expected
         state = snapshot(detector.db, self.conf.vocab_centres)
-        ids = np.concatenate([s.ids for s in self.sessions])
-        if state is None or not np.array_equal(state["kf_ids"], ids):
+        if state is None or not np.array_equal(state["kf_ids"], expected):
             return None
-        return state
+        return state if len(kept) == len(expected) else keep_only(state, kept)
 
     def save(self) -> None:
         """Commit the sessions added since the last save: one atomic step (the manifest's rename)."""
@@ -333,7 +350,8 @@ class Map:
         if on_disk.generation != self._generation_read:
             raise MapError("the map changed on disk since it was opened (another writer?): nothing saved", self.root)
         self.manifest = store.commit(self.root, on_disk, self._unsaved, self.graph, self.manifest.sessions,
-                                     self._vocab, lock=self._lock)
+                                     self._vocab, lock=self._lock, rewritten=self._rewritten)
+        self._rewritten = {}
         self._generation_read = self.manifest.generation
         self._unsaved = []
 

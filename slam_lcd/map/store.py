@@ -127,13 +127,14 @@ def open_listed(root: str | Path, manifest: MapManifest, name: str) -> BinaryIO:
         raise MapError(f"cannot be opened ({e.strerror})", path) from None
 
 
-def _load_arrays(path: Path, names: tuple[str, ...], fh: BinaryIO | None = None) -> dict[str, np.ndarray]:
+def _load_arrays(path: Path, names: tuple[str, ...], fh: BinaryIO | None = None,
+                 optional: tuple[str, ...] = ()) -> dict[str, np.ndarray]:
     try:
         with np.load(fh if fh is not None else path, allow_pickle=False) as z:
             missing = [n for n in names if n not in z.files]
             if missing:
                 raise MapError(f"map file lacks arrays {missing}", path)
-            return {n: z[n] for n in names}
+            return {n: z[n] for n in (*names, *(o for o in optional if o in z.files))}
     except MapError:
         raise
     except Exception as e:  # zip damage, pickled objects, bad CRC
@@ -171,7 +172,7 @@ def read_graph(root: str | Path, manifest: MapManifest) -> MapGraph:
         return MapGraph.empty()
     root = Path(root)
     path = _checked(root, manifest, manifest.graph_file)
-    g = MapGraph(**_load_arrays(path, MapGraph.ARRAYS))
+    g = MapGraph(**_load_arrays(path, MapGraph.ARRAYS, optional=MapGraph.OPTIONAL))
     g.check(path)
     return g
 
@@ -300,7 +301,7 @@ def remove_unfinished(root: Path) -> None:
 
 def commit(root: Path, manifest: MapManifest, new_sessions: list[tuple[dict, SessionKeyframes]], graph: MapGraph,
            sessions_table: list[dict], vocab: dict[str, np.ndarray] | None = None,
-           lock: WriterLock | None = None) -> MapManifest:
+           lock: WriterLock | None = None, rewritten: dict[str, SessionKeyframes] | None = None) -> MapManifest:
     """Write new sessions' files and a new graph file, then the manifest (the commit). Hold the lock.
 
     ``manifest``: the one on disk (or an empty one for a new map); ``sessions_table``: every
@@ -310,12 +311,14 @@ def commit(root: Path, manifest: MapManifest, new_sessions: list[tuple[dict, Ses
     vocabulary's snapshot after these sessions (``vocab-<gen>-<tag>.npz``); None: the map has
     none (it is replayed when loaded), and an older one is dropped. ``lock``: the writer's lock; a
     first commit makes the folder and its lock file through it, and removes them again when it fails.
+    ``rewritten``: sessions already in the map whose keyframes changed (a map that keeps places drops
+    a variant's descriptors): each gets a new file under a new name, the old one goes with the commit.
     """
     if lock is None:
-        return _commit(root, manifest, new_sessions, graph, sessions_table, vocab)
+        return _commit(root, manifest, new_sessions, graph, sessions_table, vocab, rewritten)
     try:
         lock.before_first_write()
-        new = _commit(root, manifest, new_sessions, graph, sessions_table, vocab)
+        new = _commit(root, manifest, new_sessions, graph, sessions_table, vocab, rewritten)
     except OSError as e:  # making the folder: one error naming the map
         lock.undo_first_write()
         raise MapError(f"cannot write the map ({e.strerror or e}); nothing was added to it", root) from e
@@ -327,7 +330,8 @@ def commit(root: Path, manifest: MapManifest, new_sessions: list[tuple[dict, Ses
 
 
 def _commit(root: Path, manifest: MapManifest, new_sessions: list[tuple[dict, SessionKeyframes]], graph: MapGraph,
-            sessions_table: list[dict], vocab: dict[str, np.ndarray] | None) -> MapManifest:
+            sessions_table: list[dict], vocab: dict[str, np.ndarray] | None,
+            rewritten: dict[str, SessionKeyframes] | None = None) -> MapManifest:
     tag = secrets.token_hex(4)
     files = dict(manifest.files)
     written: list[Path] = []
@@ -341,13 +345,21 @@ def _commit(root: Path, manifest: MapManifest, new_sessions: list[tuple[dict, Se
             written.append(root / name)
             files[name] = _write_npz(root / name, {k: getattr(sess, k) for k in SessionKeyframes.ARRAYS})
             known[meta["name"]] = name
+        for index, s in enumerate(table):
+            if s["name"] in (rewritten or {}) and s["name"] not in {m["name"] for m, _ in new_sessions}:
+                name = f"sessions/{index + 1:04d}-{tag}.npz"
+                files.pop(known.get(s["name"]) or "", None)
+                written.append(root / name)
+                files[name] = _write_npz(root / name, {k: getattr(rewritten[s["name"]], k)  # type: ignore[index]
+                                                        for k in SessionKeyframes.ARRAYS})
+                known[s["name"]] = name
         for s in table:
             s["file"] = known[s["name"]]
         gname = f"graph-{manifest.generation + 1:06d}-{tag}.npz"
         if manifest.graph_file:
             files.pop(manifest.graph_file, None)
         written.append(root / gname)
-        files[gname] = _write_npz(root / gname, {k: getattr(graph, k) for k in MapGraph.ARRAYS})
+        files[gname] = _write_npz(root / gname, graph.arrays())
         if manifest.vocab_file:
             files.pop(manifest.vocab_file, None)
         vname = None

@@ -122,3 +122,35 @@ def restore_into(db: BowDatabase, state: dict[str, np.ndarray]) -> list[BowVecto
     bows = restore_bows(state)
     db.words = words  # the descriptor kind and size are taken from the next descriptors (_check)
     return bows
+
+
+def keep_only(state: dict[str, np.ndarray], kf_ids: np.ndarray) -> dict[str, np.ndarray]:
+    """The snapshot for the keyframes ``kf_ids`` only (a map that dropped the others' descriptors).
+
+    Their bags of words are kept as they are; the words no kept bag of words uses are dropped and
+    the others renumbered, each word's image count recomputed; the word index (a faiss graph over
+    every word) is left out, to be rebuilt by the database when its words call for one. Why prune
+    rather than keep: the online vocabulary grows with every keyframe a run inserts (about 78 words
+    a keyframe on the demo), and a map that keeps places must not keep the words of the views it
+    dropped.
+    """
+    ids = state["kf_ids"]
+    keep = np.isin(ids, np.asarray(kf_ids, np.int64))
+    off = state["bow_offsets"]
+    spans = [(int(a), int(b)) for a, b, k in zip(off[:-1], off[1:], keep, strict=True) if k]
+    rows = np.concatenate([np.arange(a, b) for a, b in spans]) if spans else np.zeros(0, np.int64)
+    words = state["bow_words"][rows]
+    used = np.unique(words)
+    renumber = np.full(len(state["lengths"]), -1, np.int64)
+    renumber[used] = np.arange(len(used))
+    new_words = renumber[words].astype(np.int32)
+    q, scale, f16 = state["centres_q"], state["centres_scale"], state["centres_f16"]
+    return dict(state, kf_ids=ids[keep], n_images=np.array(int(keep.sum()), np.int64),
+                centres_q=q[used] if len(q) else q, centres_scale=scale[used] if len(scale) else scale,
+                centres_f16=f16[used] if len(f16) else f16, lengths=state["lengths"][used],
+                counts=state["counts"][used],
+                images=np.bincount(new_words, minlength=len(used)).astype(np.int32),
+                bow_offsets=np.concatenate([[0], np.cumsum([b - a for a, b in spans])]).astype(np.int64),
+                bow_words=new_words, bow_counts=state["bow_counts"][rows],
+                proj=np.zeros((0, 0), np.float32), graph=np.zeros(0, np.uint8),
+                index_state=np.zeros(3, np.int64), image_ends=np.zeros(0, np.int64))

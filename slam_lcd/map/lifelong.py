@@ -1,0 +1,128 @@
+"""A map that grows with the place, not with the days: keeping places and variants at every append.
+
+:mod:`slam_lcd.map.places` judges keyframes; this module applies its verdicts to a map's arrays:
+the keyframes it does not keep lose their descriptors, keypoints and 3-D points
+(``points_source`` becomes :data:`~slam_lcd.map.contents.REMOVED`) and keep their id, stamp,
+odometry and ground truth, so every session is still given in the map frame at full rate; the
+graph file records each keyframe's place and when it was last matched; the vocabulary snapshot
+keeps the kept keyframes' bags of words and the words they use. ``map.lifelong`` turns this on
+for appends; ``Map.compact`` applies it to a map built without it, session by session in the
+order they were appended, as if each had been appended with it.
+
+What this does not reduce: the joint graph keeps a variable per keyframe (kept or not) and
+every loop and visual link, so its size still follows the keyframes of every visit.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from .contents import REMOVED, MapGraph, SessionKeyframes
+from .places import REDUNDANT, Kept, Verdicts, judge
+
+
+def strip(sess: SessionKeyframes, keep: np.ndarray) -> SessionKeyframes:
+    """``sess`` with the features of the keyframes not in ``keep`` dropped (their poses stay)."""
+    keep = np.asarray(keep, bool) & sess.kept()
+    if keep.all() or not len(sess):
+        return sess
+    n = np.diff(sess.offsets)
+    rows = np.repeat(keep, n)
+    offsets = np.concatenate([[0], np.cumsum(np.where(keep, n, 0))]).astype(np.int64)
+    src = np.where(keep, sess.points_source, REMOVED).astype("<U10")
+    return replace(sess, offsets=offsets, keypoints=sess.keypoints[rows], descriptors=sess.descriptors[rows],
+                   scales=sess.scales[rows] if len(sess.scales) else sess.scales, points3d=sess.points3d[rows],
+                   points_source=src)
+
+
+def camera_pose(T_map_body: np.ndarray, meta: dict) -> np.ndarray:
+    return np.asarray(T_map_body, float) @ np.asarray(meta.get("T_body_camera", np.eye(4).tolist()), float)
+
+
+def kept_keyframes(table: list[dict], sessions: list[SessionKeyframes], graph: MapGraph,
+                   poses: dict[int, np.ndarray], components: dict[str, int]) -> tuple[list[Kept], int]:
+    """The map's kept keyframes for :func:`slam_lcd.map.places.judge`, and the first free place id.
+
+    A map without place records (built without ``map.lifelong``) gives each kept keyframe a place of
+    its own; ``map compact`` judges such a map's sessions properly."""
+    place = dict(zip(graph.kf_ids.tolist(), graph.kf_place.tolist(), strict=True)) if graph.kf_place is not None \
+        else {}
+    used = dict(zip(graph.kf_ids.tolist(), graph.kf_last_used.tolist(), strict=True)) \
+        if graph.kf_last_used is not None else {}
+    out: list[Kept] = []
+    next_place = max([p for p in place.values() if p >= 0], default=-1) + 1
+    for si, (meta, s) in enumerate(zip(table, sessions, strict=True)):
+        for i in np.flatnonzero(s.kept()):
+            k = int(s.ids[i])
+            p = place.get(k, -1)
+            if p < 0:
+                p, next_place = next_place, next_place + 1
+            out.append(Kept(k, camera_pose(poses[k], meta), components[meta["name"]], p, int(used.get(k, si + 1)),
+                            _descriptors(s, int(i))))
+    return out, next_place
+
+
+def _descriptors(s: SessionKeyframes, i: int):
+    return lambda: s.descriptors_of(i)
+
+
+def judge_session(meta: dict, sess: SessionKeyframes, component: int, poses: dict[int, np.ndarray],
+                  kept: list[Kept], conf, now: int, next_place: int, used: set[int] = frozenset()) -> Verdicts:
+    """Judge a session's keyframes (module docstring of :mod:`slam_lcd.map.places`); ``used``: map keyframes
+    its accepted loops matched (marked used now, before the judging, so a place's variant in use stays)."""
+    for k in kept:
+        if k.kf_id in used:
+            k.last_used = now
+    new = [(int(k), camera_pose(poses[int(k)], meta), _descriptors(sess, i)) for i, k in enumerate(sess.ids)]
+    out = judge(new, component, kept, conf, now, next_place)
+    out.used |= set(used)
+    return out
+
+
+def apply(verdicts: Verdicts, kept: list[Kept], table: list[dict], sessions: list[SessionKeyframes],
+          graph: MapGraph) -> tuple[list[SessionKeyframes], set[int], MapGraph]:
+    """The sessions with what the verdicts removed stripped, the indices of the sessions that changed, and the
+    graph with every keyframe's place (-1: not kept) and last use."""
+    keep_ids = {k.kf_id for k in kept}
+    changed, out = set(), []
+    for si, s in enumerate(sessions):
+        mask = np.array([int(k) in keep_ids for k in s.ids])
+        new = strip(s, mask)
+        if new is not s:
+            changed.add(si)
+        out.append(new)
+    place = {k.kf_id: k.place for k in kept}
+    last = {k.kf_id: k.last_used for k in kept}
+    ids = graph.kf_ids.tolist()
+    g = replace(graph, kf_place=np.array([place.get(int(k), -1) for k in ids], np.int64),
+                kf_last_used=np.array([last.get(int(k), -1) for k in ids], np.int64))
+    return out, changed, g
+
+
+def reduce_append(table: list[dict], sessions: list[SessionKeyframes], old_graph: MapGraph, new_graph: MapGraph,
+                  result, meta: dict, sess: SessionKeyframes, loops, conf) -> tuple[list[SessionKeyframes], set[int],
+                                                                                   MapGraph]:
+    """An append's verdicts applied: (every session after it, the indices that changed, the graph with places).
+
+    ``table``/``sessions``/``old_graph``: the map before the append; ``new_graph``, ``result``: after its
+    joint solve; ``loops``: every loop of that solve (the session's accepted ones to the map mark their
+    map keyframe used)."""
+    kept, next_place = kept_keyframes(table, sessions, old_graph, result.poses, result.component)
+    ids = {int(k) for k in sess.ids}
+    used = {int(lp.match) if int(lp.query) in ids else int(lp.query) for lp in loops
+            if lp.inter and lp.accepted and (int(lp.query) in ids) != (int(lp.match) in ids)}
+    verdicts = judge_session(meta, sess, int(result.component[meta["name"]]), result.poses, kept, conf,
+                             len(sessions) + 1, next_place, used)
+    return apply(verdicts, kept, [*table, meta], [*sessions, sess], new_graph)
+
+
+def counts(graph: MapGraph, sessions: list[SessionKeyframes]) -> dict:
+    """Places, variants (kept keyframes beyond the first of their place) and kept / total keyframes."""
+    kept = int(sum(int(s.kept().sum()) for s in sessions))
+    total = int(sum(len(s) for s in sessions))
+    places = len({int(p) for p in graph.kf_place if p >= 0}) if graph.kf_place is not None else kept
+    return {"places": places, "variants": kept - places, "kept_keyframes": kept, "keyframes": total}
+
+
+__all__ = ["REDUNDANT", "apply", "counts", "judge_session", "kept_keyframes", "strip"]

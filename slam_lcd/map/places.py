@@ -1,0 +1,127 @@
+"""Places and appearance variants: which keyframes a map keeps as the same place is recorded day after day.
+
+A map that stores every keyframe of every log grows with the days, not with the place. After
+the joint solve of an append (when every new keyframe has its pose in the map frame), each new
+keyframe is judged against the keyframes the map keeps, in order:
+
+- **new place**: no kept keyframe of its component lies within ``map.place_radius_m`` and
+  ``map.place_angle_deg`` (camera poses): it is kept and founds a place;
+- **redundant**: one of the (up to ``map.place_compare``) nearest kept keyframes matches it well:
+  at least ``map.redundant_match_ratio`` of the smaller keyframe's descriptors are mutual nearest
+  neighbours within the matching distance. It keeps its pose (every session stays in the map
+  frame at full rate) but not its descriptors, keypoints, points or bag of words; the keyframe it
+  matched is marked used now;
+- **new appearance** (a variant): kept keyframes are near but none matches it well (other
+  lighting, moved objects): it is kept as another variant of the nearest kept keyframe's place.
+  A place holds at most ``map.max_variants`` variants; a new one beyond that evicts the variant
+  that has gone longest without being matched (by a later append's keyframe or loop), so what
+  the map's users still meet stays.
+
+Why mutual nearest neighbours of the stored descriptors rather than the loop chain: the question
+is whether the map would recognise this view from what it keeps, and the share of mutual matches
+between two views of one place falls with the change of appearance (the table in
+docs/multisession.md gives the measured figures); the chain's geometric checks answer another
+question (is this the same place), which the poses already answer here.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+NEW_PLACE, VARIANT, REDUNDANT = "place", "variant", "redundant"
+MATCH_COS = 0.75  # float descriptors (unit rows): mutual nearest neighbours at least this cosine apart
+MATCH_HAMMING = 64  # binary descriptors (ORB, 256 bits): at most this many bits apart
+
+
+def match_ratio(a: np.ndarray, b: np.ndarray) -> float:
+    """Share of the smaller set's descriptors that are mutual nearest neighbours within the matching distance."""
+    if len(a) == 0 or len(b) == 0:
+        return 0.0
+    if a.dtype == np.uint8:  # binary: Hamming distances from the bits
+        A, B = np.unpackbits(a, axis=1).astype(np.float32), np.unpackbits(b, axis=1).astype(np.float32)
+        dist = A @ (1 - B).T + (1 - A) @ B.T
+        fwd, back = dist.argmin(1), dist.argmin(0)
+        good = dist[np.arange(len(a)), fwd] <= MATCH_HAMMING
+    else:
+        sim = np.asarray(a, np.float32) @ np.asarray(b, np.float32).T
+        fwd, back = sim.argmax(1), sim.argmax(0)
+        good = sim[np.arange(len(a)), fwd] >= MATCH_COS
+    mutual = back[fwd] == np.arange(len(a))
+    return float(np.count_nonzero(mutual & good)) / min(len(a), len(b))
+
+
+@dataclass
+class Kept:
+    """A keyframe the map keeps: its camera pose in its component's frame, place, and when it was last matched."""
+
+    kf_id: int
+    T_map_camera: np.ndarray
+    component: int
+    place: int
+    last_used: int
+    descriptors: Callable[[], np.ndarray]
+
+
+@dataclass
+class Verdicts:
+    """What :func:`judge` decided for the new keyframes, and what it changed among the kept ones."""
+
+    status: dict[int, str] = field(default_factory=dict)  # new kf id -> place / variant / redundant
+    place: dict[int, int] = field(default_factory=dict)  # kept kf id (new or old) -> place id
+    matched: dict[int, int] = field(default_factory=dict)  # redundant new kf id -> the kept kf it matched
+    used: set[int] = field(default_factory=set)  # kept kf ids matched now (their last_used becomes now)
+    evicted: list[int] = field(default_factory=list)  # kept kf ids no longer kept (a full place's oldest variant)
+
+
+def judge(new: list[tuple[int, np.ndarray, Callable[[], np.ndarray]]], component: int, kept: list[Kept],
+          conf, now: int, next_place: int) -> Verdicts:
+    """Judge the new keyframes ``(kf id, camera pose in the map frame, descriptors)`` in order (module docstring).
+
+    ``kept``: the map's kept keyframes (changed in place: new kept keyframes are added, evicted
+    ones removed); ``now``: the append's generation (what ``last_used`` records); ``next_place``:
+    the first free place id.
+    """
+    out = Verdicts()
+    cos_max = np.cos(np.radians(conf.place_angle_deg))
+    for kf_id, T, desc in new:
+        near = _near(T, component, kept, conf.place_radius_m, cos_max)[: max(1, int(conf.place_compare))]
+        if not near:
+            kept.append(Kept(kf_id, T, component, next_place, now, desc))
+            out.status[kf_id], out.place[kf_id] = NEW_PLACE, next_place
+            next_place += 1
+            continue
+        mine = desc()
+        ratios = [match_ratio(mine, k.descriptors()) for k in near]
+        best = int(np.argmax(ratios))
+        if ratios[best] >= conf.redundant_match_ratio:
+            near[best].last_used = now
+            out.status[kf_id], out.matched[kf_id] = REDUNDANT, near[best].kf_id
+            out.used.add(near[best].kf_id)
+            continue
+        place = near[0].place
+        kept.append(Kept(kf_id, T, component, place, now, desc))
+        out.status[kf_id], out.place[kf_id] = VARIANT, place
+        variants = [k for k in kept if k.place == place]
+        if len(variants) > conf.max_variants:
+            old = min((k for k in variants if k.kf_id != kf_id), key=lambda k: (k.last_used, k.kf_id))
+            kept.remove(old)
+            out.evicted.append(old.kf_id)
+            out.place.pop(old.kf_id, None)
+            if old.kf_id in out.status:  # a keyframe of this append: it is not kept after all
+                out.status[old.kf_id] = REDUNDANT
+    return out
+
+
+def _near(T: np.ndarray, component: int, kept: list[Kept], radius: float, cos_max: float) -> list[Kept]:
+    """Kept keyframes of ``component`` within ``radius`` whose optical axis is within the angle, nearest first."""
+    if not kept:
+        return []
+    P = np.array([k.T_map_camera[:3, 3] for k in kept])
+    Z = np.array([k.T_map_camera[:3, 2] for k in kept])
+    d = np.linalg.norm(P - T[:3, 3], axis=1)
+    ok = (d <= radius) & (Z @ T[:3, 2] >= cos_max) & np.array([k.component == component for k in kept])
+    order = np.argsort(d)
+    return [kept[i] for i in order if ok[i]]
+
