@@ -1,4 +1,4 @@
-"""`slam-lcd map info DIR` and `slam-lcd map export DIR --to FMT OUT`: look into a saved map."""
+"""`slam-lcd map info DIR`, `map export DIR --to FMT OUT`, `map compact DIR`: look into, export and reduce a map."""
 from __future__ import annotations
 
 import json
@@ -8,7 +8,7 @@ FORMATS = ("tum", "kitti", "euroc", "mcap")
 
 
 def register(sub) -> None:
-    p = sub.add_parser("map", help="inspect or export a multi-session map (info, export)",
+    p = sub.add_parser("map", help="inspect, export or compact a multi-session map (info, export, compact)",
                        description="Inspect a map folder written by `slam-lcd run --map`, or export every "
                                    "session's trajectory in the map frame.")
     msub = p.add_subparsers(dest="map_command", metavar="SUBCOMMAND")
@@ -16,7 +16,20 @@ def register(sub) -> None:
     i = msub.add_parser("info", help="sessions, keyframes, loops within and between sessions, components, size")
     i.add_argument("map_dir", metavar="DIR", help="map folder")
     i.add_argument("--json", action="store_true", help="print the summary as JSON (default: text)")
+    i.add_argument("--plot", default=None, metavar="PNG",
+                   help="also draw the map's growth over its sessions (keyframes, kept keyframes, MB) into PNG "
+                        "(default: none)")
     i.set_defaults(func=info)
+    c = msub.add_parser("compact", help="keep places and appearance variants, not every keyframe (map.lifelong)",
+                        description="Reduce a map built without map.lifelong as if each session had been appended "
+                                    "with it: keyframes that a kept keyframe of their place matches well keep only "
+                                    "their pose. One atomic commit, like an append.")
+    c.add_argument("map_dir", metavar="DIR", help="map folder (changed in place, atomically)")
+    c.add_argument("--config", default=None, metavar="NAME|FILE", help="preset or YAML file for the map section "
+                                                                         "(default: default)")
+    c.add_argument("--set", dest="overrides", action="append", default=[], metavar="map.KEY=VALUE",
+                   help="override a map key, e.g. --set map.max_variants=2 (default: none)")
+    c.set_defaults(func=compact)
     e = msub.add_parser("export", help="every session's keyframe trajectory in the map frame")
     e.add_argument("map_dir", metavar="DIR", help="map folder")
     e.add_argument("--to", choices=FORMATS, default="tum",
@@ -44,6 +57,8 @@ def info(args) -> int:
     s["bytes"] = _size(Path(args.map_dir))
     s["bytes_per_keyframe"] = s["bytes"] / max(1, s["n_keyframes"])
     s["schema"], s["features"] = 1, m.manifest.features.get("kind")
+    if args.plot:
+        _write_plot(Path(args.plot), s, Path(args.map_dir))
     if args.json:
         print(json.dumps(s, indent=2))
         return 0
@@ -54,6 +69,37 @@ def info(args) -> int:
     print("components: " + "; ".join("[" + ", ".join(c) + "]" for c in s["components"]))
     print(f"features: {s['features']}; size on disk: {s['bytes'] / 1e6:.1f} MB "
           f"({s['bytes_per_keyframe'] / 1e3:.0f} kB per keyframe)")
+    for r in s["sessions"]:
+        print(f"  {r['name']}: {r['kept_keyframes']} of {r['keyframes']} keyframes kept, {r['bytes'] / 1e6:.2f} MB")
+    return 0
+
+
+def _write_plot(out: Path, summary: dict, map_dir: Path) -> None:
+    from ..errors import InputError
+    from ..files.atomic import atomic_write, check_apart, check_writable_target
+    from ..outputs.map_outputs import growth_png
+
+    check_apart("DIR", map_dir, {"--plot": out})
+    check_writable_target(out)
+    png = growth_png(summary)
+    if png is None:
+        raise InputError("the map does not record its growth (made by an older slam-lcd): no plot", map_dir)
+    with atomic_write(out, "wb") as fh:
+        fh.write(png)
+
+
+def compact(args) -> int:
+    """``map compact DIR``: the map reduced in memory, then one commit (the writer lock held throughout)."""
+    from ..config import load_config
+    from ..map.session_map import Map
+
+    cfg = load_config(args.config or "default", list(args.overrides))
+    with Map.open(args.map_dir, conf=cfg.map, write=True) as m:
+        figures = m.compact()
+        m.save()
+    b, a = figures["before"], figures["after"]
+    print(f"map {args.map_dir}: {a['keyframes']} keyframes, kept {b['kept_keyframes']} -> {a['kept_keyframes']} "
+          f"({a['places']} places, {a['variants']} more variants)")
     return 0
 
 

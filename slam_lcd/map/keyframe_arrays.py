@@ -122,6 +122,40 @@ def visual_links(detector, kf_ids: list[int]) -> list[JointLoop]:
     return out
 
 
+class LogHashes:
+    """``log_sha256`` of each log file computed once (by resolved path, size and modification time)."""
+
+    def __init__(self):
+        self._cache: dict[tuple, str | None] = {}
+
+    def __call__(self, log_path) -> str | None:
+        p = Path(log_path)
+        try:
+            st = p.stat()
+            key = (str(p.resolve()), st.st_size, st.st_mtime_ns)
+        except OSError:
+            return None
+        if key not in self._cache:
+            self._cache[key] = log_sha256(p)
+        return self._cache[key]
+
+
+def session_holding(table: list[dict], sha: str | None, image_topic: str | None = None) -> str | None:
+    """The session of ``table`` recorded from the log of sha256 ``sha`` (and ``image_topic``, when given), or None.
+
+    One rule for every way into a map (``run --map``, ``batch --map``, ``demo --sessions``,
+    ``Map.add_session``): a log appended twice adds nothing but loops onto its own copy, so it is
+    skipped (an interrupted ``run a b c --map`` is resumed by running it again). Another camera of
+    the same log is another session: with ``image_topic`` given, only a session recorded from that
+    topic (or from an unrecorded one) counts."""
+    if sha is None:
+        return None
+    for s in table:
+        if s.get("log_sha256") == sha and (image_topic is None or s.get("image_topic") in (None, image_topic)):
+            return str(s["name"])
+    return None
+
+
 def log_sha256(path) -> str | None:
     """sha256 of a log file; of a rosbag2 folder, the sha256 of its files' relative names and sha256s."""
     from ..features.weights import sha256_of

@@ -68,22 +68,26 @@ def _descriptors(s: SessionKeyframes, i: int):
 
 
 def judge_session(meta: dict, sess: SessionKeyframes, component: int, poses: dict[int, np.ndarray],
-                  kept: list[Kept], conf, now: int, next_place: int, used: set[int] = frozenset()) -> Verdicts:
+                  kept: list[Kept], conf, now: int, next_place: int, used: set[int] = frozenset(),
+                  only: np.ndarray | None = None) -> Verdicts:
     """Judge a session's keyframes (module docstring of :mod:`slam_lcd.map.places`); ``used``: map keyframes
-    its accepted loops matched (marked used now, before the judging, so a place's variant in use stays)."""
+    its accepted loops matched (marked used now, before the judging, so a place's variant in use stays);
+    ``only``: the keyframes to judge (default all; the others are not kept)."""
     for k in kept:
         if k.kf_id in used:
             k.last_used = now
-    new = [(int(k), camera_pose(poses[int(k)], meta), _descriptors(sess, i)) for i, k in enumerate(sess.ids)]
+    which = np.ones(len(sess), bool) if only is None else np.asarray(only, bool)
+    new = [(int(sess.ids[i]), camera_pose(poses[int(sess.ids[i])], meta), _descriptors(sess, int(i)))
+           for i in np.flatnonzero(which)]
     out = judge(new, component, kept, conf, now, next_place)
     out.used |= set(used)
     return out
 
 
-def apply(verdicts: Verdicts, kept: list[Kept], table: list[dict], sessions: list[SessionKeyframes],
+def apply(kept: list[Kept], sessions: list[SessionKeyframes],
           graph: MapGraph) -> tuple[list[SessionKeyframes], set[int], MapGraph]:
-    """The sessions with what the verdicts removed stripped, the indices of the sessions that changed, and the
-    graph with every keyframe's place (-1: not kept) and last use."""
+    """The sessions with every keyframe not in ``kept`` stripped, the indices of the sessions that changed, and
+    the graph with every keyframe's place (-1: not kept) and last use."""
     keep_ids = {k.kf_id for k in kept}
     changed, out = set(), []
     for si, s in enumerate(sessions):
@@ -109,12 +113,37 @@ def reduce_append(table: list[dict], sessions: list[SessionKeyframes], old_graph
     joint solve; ``loops``: every loop of that solve (the session's accepted ones to the map mark their
     map keyframe used)."""
     kept, next_place = kept_keyframes(table, sessions, old_graph, result.poses, result.component)
-    ids = {int(k) for k in sess.ids}
-    used = {int(lp.match) if int(lp.query) in ids else int(lp.query) for lp in loops
+    judge_session(meta, sess, int(result.component[meta["name"]]), result.poses, kept, conf, len(sessions) + 1,
+                  next_place, _used_by(loops, {int(k) for k in sess.ids}))
+    return apply(kept, [*sessions, sess], new_graph)
+
+
+def compact(table: list[dict], sessions: list[SessionKeyframes], graph: MapGraph, poses: dict[int, np.ndarray],
+            loops, conf) -> tuple[list[SessionKeyframes], set[int], MapGraph]:
+    """A map built without ``map.lifelong`` reduced as if each session had been appended with it, in order
+    (with the map's present poses): (every session after it, the indices that changed, the graph with places).
+
+    A map that keeps places already is judged again from its kept keyframes: what it dropped stays dropped."""
+    kept: list[Kept] = []
+    for si, (meta, s) in enumerate(zip(table, sessions, strict=True)):
+        earlier = {int(k) for t in sessions[:si] for k in t.ids}
+        used = {k for k in _used_by(loops, {int(k) for k in s.ids}) if k in earlier}
+        next_place = max((k.place for k in kept), default=-1) + 1
+        judge_session(meta, s, int(meta["component"]), poses, kept, conf, si + 1, next_place, used, only=s.kept())
+    return apply(kept, sessions, graph)
+
+
+def _used_by(loops, ids: set[int]) -> set[int]:
+    """The keyframes outside ``ids`` that accepted loops between sessions match from a keyframe in ``ids``."""
+    return {int(lp.match) if int(lp.query) in ids else int(lp.query) for lp in loops
             if lp.inter and lp.accepted and (int(lp.query) in ids) != (int(lp.match) in ids)}
-    verdicts = judge_session(meta, sess, int(result.component[meta["name"]]), result.poses, kept, conf,
-                             len(sessions) + 1, next_place, used)
-    return apply(verdicts, kept, [*table, meta], [*sessions, sess], new_graph)
+
+
+def array_bytes(sessions: list[SessionKeyframes], graph: MapGraph, vocab: dict | None) -> int:
+    """Bytes of the map's arrays (its files hold them uncompressed): the size a map reaches, as it grows."""
+    n = sum(getattr(s, k).nbytes for s in sessions for k in SessionKeyframes.ARRAYS)
+    n += sum(a.nbytes for a in graph.arrays().values())
+    return int(n + sum(np.asarray(a).nbytes for a in (vocab or {}).values()))
 
 
 def counts(graph: MapGraph, sessions: list[SessionKeyframes]) -> dict:
@@ -125,4 +154,4 @@ def counts(graph: MapGraph, sessions: list[SessionKeyframes]) -> dict:
     return {"places": places, "variants": kept - places, "kept_keyframes": kept, "keyframes": total}
 
 
-__all__ = ["REDUNDANT", "apply", "counts", "judge_session", "kept_keyframes", "strip"]
+__all__ = ["REDUNDANT", "apply", "compact", "counts", "judge_session", "kept_keyframes", "reduce_append", "strip"]

@@ -286,3 +286,20 @@ def _nothing_localised(kf_ids, stamps, reasons: dict[int, str], fixes: dict, com
         note = (f"{len(fixes)} keyframe(s) matched the map but no two fixes to distinct places agree through the "
                 "odometry (too few matches to trust)")
     return Localisation(out, Trajectory(np.zeros(0, np.int64), np.zeros((0, 4, 4))), comp, [note], n_amb)
+
+
+def localise_pipeline(m, pipeline) -> Localisation:
+    """:func:`localise` of a finished pipeline's keyframes against the map ``m`` (``Map.localise``)."""
+    from .contents import MapError
+
+    session_of, component_of = {}, {}
+    for meta, s in zip(m.manifest.sessions, m.sessions, strict=True):
+        for k in s.ids:
+            session_of[int(k)] = meta["name"]
+            component_of[int(k)] = int(meta["component"])
+    kfs = list(pipeline.keyframes)
+    if not kfs:
+        raise MapError("the log gave no keyframe: nothing to localise", m.root)
+    return localise(m.poses(), session_of, component_of, [k.id for k in kfs], [k.stamp for k in kfs],
+                    np.array([k.T_world_body for k in kfs], float).reshape(-1, 4, 4),
+                    [k.covariance_since_last for k in kfs], getattr(pipeline, "map_closures", []), m.conf)

@@ -27,14 +27,15 @@ from .config import MapConfig
 from .detector_load import load_into
 from .joint_graph import JointLoop, JointResult, SessionPoses, solve
 from .keyframe_arrays import (
+    LogHashes,
     camera_json,
     compact_for_map,
     extractor_meta,
-    log_sha256,
     session_arrays,
+    session_holding,
     visual_links,
 )
-from .lifelong import reduce_append
+from .lifelong import array_bytes, reduce_append
 from .locks import WriterLock
 from .session_graph import existing_loops, factor_graph, odometry_independent, session_poses
 from .store import LogAlreadyInMapError, MapError, MapGraph, MapManifest, SessionKeyframes, check_map_target
@@ -70,8 +71,9 @@ class Map:
         self.last_join: JointResult | None = None
         self._vocab: dict | None = None  # the vocabulary snapshot to save (add_session), None: none
         self._vocab_fh: BinaryIO | None = None  # a reader's snapshot file, opened with the manifest that names it
-        self._sha_cache: dict[tuple, str | None] = {}  # log file -> sha256 (a log is hashed once)
+        self._log_sha256 = LogHashes()  # a log is hashed once
         self._rewritten: dict[str, SessionKeyframes] = {}  # sessions whose kept keyframes changed, not committed
+        self._dirty = False  # changed without a new session (compacted), not committed
 
     # ------------------------------------------------------------------ open / close
     @classmethod
@@ -175,21 +177,10 @@ class Map:
         return [s["name"] for s in self.manifest.sessions]
 
     def session_of_log(self, log_path: str | Path, image_topic: str | None = None) -> str | None:
-        """The name of the session recorded from this very log (same sha256), or None.
-
-        One rule for every way into a map (``run --map``, ``batch --map``, ``demo --sessions``,
-        :meth:`add_session`): a log appended twice adds nothing but loops onto its own copy, so it is
-        skipped (an interrupted ``run a b c --map`` is resumed by running it again). Another camera
-        of the same log is another session: with ``image_topic`` given, only a session recorded
-        from that topic (or from an unrecorded one) counts."""
-        same = [s for s in self.manifest.sessions if s.get("log_sha256")]
-        if not same:
-            return None
-        sha = self._log_sha256(log_path)
-        for s in same:
-            if s["log_sha256"] == sha and (image_topic is None or s.get("image_topic") in (None, image_topic)):
-                return str(s["name"])
-        return None
+        """The name of the session recorded from this very log (same sha256), or None
+        (:func:`~slam_lcd.map.keyframe_arrays.session_holding`: one rule for every way into a map)."""
+        table = [s for s in self.manifest.sessions if s.get("log_sha256")]
+        return session_holding(table, self._log_sha256(log_path), image_topic) if table else None
 
     def already_holds(self, log_path: str | Path, image_topic: str | None = None) -> str | None:
         """The one line that says ``log_path`` is skipped because the map holds it already, or None."""
@@ -198,18 +189,6 @@ class Map:
             return None
         return (f"{log_path}: already in the map {self.root} as session {name!r} (same sha256"
                 + (f", topic {image_topic}" if image_topic else "") + "): not appended again")
-
-    def _log_sha256(self, log_path: str | Path) -> str | None:
-        """``log_sha256``, computed once per log file (by path, size and modification time) in this map."""
-        p = Path(log_path)
-        try:
-            st = p.stat()
-            key = (str(p.resolve()), st.st_size, st.st_mtime_ns)
-        except OSError:
-            return None
-        if key not in self._sha_cache:
-            self._sha_cache[key] = log_sha256(p)
-        return self._sha_cache[key]
 
     def next_kf_id(self) -> int:
         return self.manifest.next_kf_id()
@@ -307,11 +286,12 @@ class Map:
             for i in changed - {len(self.sessions)}:
                 self._rewritten[table[i]["name"]] = after[i]
             self.sessions = after[:-1]
-            meta["map_keyframes_after"] = sum(len(s) for s in after)
-            meta["map_kept_after"] = int(sum(int(s.kept().sum()) for s in after))
         # the in-memory map follows at once (a second session may be added before saving)
         self._apply(meta, sess, graph, result)
         self._vocab = self._vocab_snapshot(pipeline.detector, expected)
+        meta.update(map_keyframes_after=self.n_keyframes,  # the map's growth over sessions (map info)
+                    map_kept_after=int(sum(s.kept().sum() for s in self.sessions)),
+                    map_bytes_after=array_bytes(self.sessions, self.graph, self._vocab))
         return result
 
     def _apply(self, meta, sess, graph, result) -> None:
@@ -331,27 +311,52 @@ class Map:
         map's kept ones; after an append, those before it and the new session's), in order; pruned to the
         keyframes the map keeps now."""
         from ..vocab.database import snapshot
-        from ..vocab.snapshot import keep_only
 
         kept = np.concatenate([s.ids[s.kept()] for s in self.sessions])
         expected = kept if expected is None else expected
         state = snapshot(detector.db, self.conf.vocab_centres)
         if state is None or not np.array_equal(state["kf_ids"], expected):
             return None
-        return state if len(kept) == len(expected) else keep_only(state, kept)
+        return state if len(kept) == len(expected) else self._vocab_pruned(state)
+
+    def compact(self) -> dict:
+        """Keep places and variants, not every keyframe, in a map built without ``map.lifelong`` (in memory:
+        :meth:`save` commits it). Returns the map's counts (:func:`slam_lcd.map.lifelong.counts`) before and after."""
+        if self._lock is None:
+            raise MapError("the map was opened read-only: open it with write=True to compact it", self.root)
+        from .lifelong import compact, counts
+        from .store import read_vocab
+
+        before = counts(self.graph, self.sessions)
+        after, changed, graph = compact(self.manifest.sessions, self.sessions, self.graph, self.poses(),
+                                        existing_loops(self.sessions, self.graph), self.conf)
+        state = read_vocab(self.root, self.manifest) if self.manifest.vocab_file else None
+        self.sessions, self.graph = after, graph
+        self._rewritten.update({self.manifest.sessions[i]["name"]: after[i] for i in changed})
+        self._vocab = self._vocab_pruned(state)
+        self._dirty = True
+        return {"before": before, "after": counts(self.graph, self.sessions)}
+
+    def _vocab_pruned(self, state: dict | None) -> dict | None:
+        from ..vocab.snapshot import keep_only
+
+        if state is None:
+            return None
+        return keep_only(state, np.concatenate([s.ids[s.kept()] for s in self.sessions]))
 
     def save(self) -> None:
-        """Commit the sessions added since the last save: one atomic step (the manifest's rename)."""
+        """Commit the sessions added (or the map compacted) since the last save: one atomic step (the manifest's
+        rename)."""
         if self._lock is None:
             raise MapError("the map was opened read-only", self.root)
-        if not self._unsaved:
+        if not self._unsaved and not self._dirty:
             return
         on_disk = store.read_manifest(self.root) if store.is_map(self.root) else MapManifest(self.manifest.features)
         if on_disk.generation != self._generation_read:
             raise MapError("the map changed on disk since it was opened (another writer?): nothing saved", self.root)
         self.manifest = store.commit(self.root, on_disk, self._unsaved, self.graph, self.manifest.sessions,
                                      self._vocab, lock=self._lock, rewritten=self._rewritten)
-        self._rewritten = {}
+        self._rewritten, self._dirty = {}, False
         self._generation_read = self.manifest.generation
         self._unsaved = []
 
@@ -384,19 +389,9 @@ class Map:
     # ------------------------------------------------------------------ localisation
     def localise(self, pipeline):
         """Map-frame poses of a finished pipeline's keyframes from its matches to the map (the map is not changed)."""
-        from .localize import localise
+        from .localize import localise_pipeline
 
-        poses = self.poses()
-        session_of, component_of = {}, {}
-        for meta, s in zip(self.manifest.sessions, self.sessions, strict=True):
-            for k in s.ids:
-                session_of[int(k)] = meta["name"]
-                component_of[int(k)] = int(meta["component"])
-        kfs = list(pipeline.keyframes)
-        if not kfs:
-            raise MapError("the log gave no keyframe: nothing to localise", self.root)
-        return localise(poses, session_of, component_of, [k.id for k in kfs], [k.stamp for k in kfs],
-                        np.array([k.T_world_body for k in kfs], float).reshape(-1, 4, 4),
-                        [k.covariance_since_last for k in kfs], getattr(pipeline, "map_closures", []), self.conf)
+        return localise_pipeline(self, pipeline)
+
 
 __all__ = ["Map", "MapError", "compact_for_map", "extractor_meta"]

@@ -12,6 +12,7 @@ import numpy as np
 
 from ..eval.align import umeyama
 from .joint_types import LINK
+from .lifelong import counts
 
 
 def _rmse(P: np.ndarray, G: np.ndarray) -> float:
@@ -103,7 +104,9 @@ def map_summary(m, joined=None, *, current: str | None = None, pipe=None) -> dic
     for meta, s in zip(m.manifest.sessions, m.sessions, strict=True):
         name = meta["name"]
         n_inter = sum(1 for r in inter if r["accepted"] and name in (r["query_session"], r["match_session"]))
-        entry = {"name": name, "keyframes": len(s), "component": int(meta["component"]),
+        entry = {"name": name, "keyframes": len(s), "kept_keyframes": int(s.kept().sum()),
+                 "bytes": int(m.manifest.files.get(meta.get("file", ""), {}).get("bytes", 0)),
+                 "component": int(meta["component"]),
                  "joined": int(meta["component"]) == first_comp, "inter_session_loops": n_inter,
                  "log_path": meta.get("log_path"), **ates.get(name, {})}
         if not entry["joined"]:
@@ -117,6 +120,10 @@ def map_summary(m, joined=None, *, current: str | None = None, pipe=None) -> dic
             pairs[key] = pairs.get(key, 0) + 1
     return {"root": str(m.root), "appended": current is not None, "current_session": current,
             "current": _current(m, current, sessions) if current is not None else None,
+            **counts(m.graph, m.sessions), "lifelong": m.graph.kf_place is not None,
+            "growth": [{"session": t["name"], "keyframes": t.get("map_keyframes_after"),
+                        "kept_keyframes": t.get("map_kept_after"), "bytes": t.get("map_bytes_after")}
+                       for t in m.manifest.sessions],
             "sessions": sessions, "components": m.components(), "n_keyframes": m.n_keyframes,
             "loops_within_sessions": accepted_within, "loops_within_sessions_offered": within, "visual_links": links,
             "inter_session_loops": inter, "inter_session_accepted_by_pair": pairs,
@@ -140,7 +147,9 @@ def summary_lines(summary: dict) -> list[str]:
     """A map summary as the CLI prints it."""
     if not summary.get("appended", True) and summary.get("reason"):
         return [f"map {summary['root']}: unchanged ({summary['reason']})"]
-    lines = [f"map {summary['root']}: {len(summary['sessions'])} sessions, {summary['n_keyframes']} keyframes, "
+    kept = (f" ({summary['kept_keyframes']} kept: {summary['places']} places, {summary['variants']} more variants)"
+            if summary.get("lifelong") else "")
+    lines = [f"map {summary['root']}: {len(summary['sessions'])} sessions, {summary['n_keyframes']} keyframes{kept}, "
              f"{summary['inter_session_accepted']} loops between sessions accepted "
              f"({len(summary['inter_session_loops'])} offered), {len(summary['components'])} component(s)"]
     for s in summary["sessions"]:

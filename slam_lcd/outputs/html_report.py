@@ -214,6 +214,22 @@ def _cloud_section(cloud: dict | None, out_dir: Path) -> list[str]:
     return out
 
 
+def _growth_figure(summary: dict) -> list[str]:
+    """The map's keyframes (all, kept) and size after each of its sessions (``map info --plot`` draws the same)."""
+    import base64
+
+    from .map_outputs import growth_png
+
+    try:
+        png = growth_png(summary)
+    except Exception as e:  # a figure must never cost the user the report
+        return [f"<p>map growth figure not drawn: {_e(e)}</p>"]
+    if png is None:
+        return []
+    return [f"<img class=fig id='map-growth' src='data:image/png;base64,{base64.b64encode(png).decode()}' "
+            "alt='map growth over sessions'>"]
+
+
 def _map_section(summary: dict | None, localization: dict | None) -> list[str]:
     """The map this run appended to (sessions, ATE per session, loops between sessions) or was localised against."""
     out: list[str] = []
@@ -222,15 +238,17 @@ def _map_section(summary: dict | None, localization: dict | None) -> list[str]:
                    f"{summary['n_keyframes']} keyframes, {summary['inter_session_accepted']} loops between sessions "
                    f"accepted of {len(summary['inter_session_loops'])} offered, {len(summary['components'])} "
                    "component(s).</p>")
-        out.append("<table id='map_sessions'><tr><th class=t>session</th><th>keyframes</th><th>component</th>"
-                   "<th>loops to other sessions</th><th>ATE odometry (m)</th><th>ATE in the map (m)</th>"
-                   "<th class=t>note</th></tr>")
+        out.append("<table id='map_sessions'><tr><th class=t>session</th><th>keyframes</th><th>kept</th>"
+                   "<th>component</th><th>loops to other sessions</th><th>ATE odometry (m)</th>"
+                   "<th>ATE in the map (m)</th><th class=t>note</th></tr>")
         for r in summary["sessions"]:
             a, b = r.get("ate_odometry"), r.get("ate_map")
-            out.append(f"<tr><td class=t>{_e(r['name'])}</td><td>{r['keyframes']}</td><td>{r['component']}</td>"
+            out.append(f"<tr><td class=t>{_e(r['name'])}</td><td>{r['keyframes']}</td>"
+                       f"<td>{r.get('kept_keyframes', r['keyframes'])}</td><td>{r['component']}</td>"
                        f"<td>{r['inter_session_loops']}</td><td>{'' if a is None else f'{a:.3f}'}</td>"
                        f"<td>{'' if b is None else f'{b:.4f}'}</td><td class=t>{_e(r.get('note', ''))}</td></tr>")
         out.append("</table>")
+        out += _growth_figure(summary)
         loops = summary["inter_session_loops"]
         if loops:
             out.append("<table id='inter_session_loops'><tr><th>query</th><th class=t>session</th><th>match</th>"

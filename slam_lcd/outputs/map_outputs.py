@@ -120,3 +120,35 @@ def write_localization_outputs(out_dir: Path, pipe, result) -> list[str]:
 
 def _num(x):
     return "" if x is None or not np.isfinite(x) else round(float(x), 4)
+
+
+def growth_png(summary: dict) -> bytes | None:
+    """The map's growth over its sessions (keyframes stored, kept, and megabytes after each), as PNG; None
+    when the map does not record it (a map of an older slam-lcd)."""
+    rows = [g for g in summary.get("growth", []) if g.get("keyframes") is not None]
+    if not rows:
+        return None
+    import io as _io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    x = np.arange(1, len(rows) + 1)
+    fig, ax = plt.subplots(figsize=(6.4, 3.6), dpi=100)
+    ax.plot(x, [g["keyframes"] for g in rows], "o-", label="keyframes (poses)")
+    ax.plot(x, [g["kept_keyframes"] for g in rows], "s-", label="kept keyframes (matched against)")
+    ax.set_xlabel("sessions in the map")
+    ax.set_ylabel("keyframes")
+    ax2 = ax.twinx()
+    ax2.plot(x, [(g["bytes"] or 0) / 1e6 for g in rows], "^--", color="tab:red", label="MB")
+    ax2.set_ylabel("MB of arrays")
+    lines = ax.get_legend_handles_labels()[0] + ax2.get_legend_handles_labels()[0]
+    ax.legend(lines, [line.get_label() for line in lines], loc="upper left", fontsize=8)
+    ax.set_title("map growth over sessions")
+    fig.tight_layout()
+    buf = _io.BytesIO()
+    fig.savefig(buf, format="png")
+    plt.close(fig)
+    return buf.getvalue()
