@@ -37,13 +37,10 @@ def tree(root) -> dict[str, str]:
 def world(tmp_path_factory):
     """Logs s1, s2 (a second visit of s1's route: another seed) and s4 (another world); map ``m1`` of s1,
     map ``m2`` of s1 + s2 with s2's run."""
-    from slam_lcd.sim import make_demo_log
+    from support.map_logs import visits
 
     root = tmp_path_factory.mktemp("map_rules")
-    logs = {k: root / f"s{k}.mcap" for k in (1, 2, 4)}
-    make_demo_log(logs[1], "mcap", frames=80, width=320, height=240, session=1)
-    make_demo_log(logs[2], "mcap", frames=80, width=320, height=240, session=1, seed=9)
-    make_demo_log(logs[4], "mcap", frames=40, width=320, height=240, session=4)
+    logs = visits(root)
     orb = [*ORB, "--set", f"features.cache_dir={root / 'cache'}"]
     from slam_lcd.cli.main import main
 

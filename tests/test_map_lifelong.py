@@ -81,14 +81,12 @@ def test_judge_new_place_redundant_variant_and_eviction():
 def world(tmp_path_factory):
     """s1, s2 (a second visit of s1's route) and s4 (another world); map ``life`` of s1+s2 (default: lifelong)
     and map ``full`` of the same with ``map.lifelong=false``."""
+    from support.map_logs import visits
+
     from slam_lcd.cli.main import main
-    from slam_lcd.sim import make_demo_log
 
     root = tmp_path_factory.mktemp("lifelong")
-    logs = {k: root / f"s{k}.mcap" for k in (1, 2, 4)}
-    make_demo_log(logs[1], "mcap", frames=80, width=320, height=240, session=1)
-    make_demo_log(logs[2], "mcap", frames=80, width=320, height=240, session=1, seed=9)
-    make_demo_log(logs[4], "mcap", frames=40, width=320, height=240, session=4)
+    logs = visits(root)
     orb = [*ORB, "--set", f"features.cache_dir={root / 'cache'}"]
     for name, extra in (("life", []), ("full", ["--set", "map.lifelong=false"])):
         for k in (1, 2):
