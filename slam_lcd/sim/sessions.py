@@ -62,6 +62,7 @@ class SessionPreset:
     lighting: float  # offset added to the lighting epoch of every frame
     exposure: float  # global exposure factor of the renderer
     role: str
+    appearance: str = "day"  # the world's appearance state (slam_lcd.sim.appearance)
 
     def describe(self) -> str:
         route = {"laps": "laps of block A", "figure8": "figure eight around A and B",
