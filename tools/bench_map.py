@@ -18,8 +18,12 @@ arrays) and ``Map.open`` + ``load_into`` (the loop detector ready to query: BoW 
 from the stored descriptors), median of ``--repeat`` runs each in a fresh process, resident
 memory, bytes per keyframe on disk.
 
+Section ``lifelong`` (:mod:`bench_map_lifelong`): twenty sessions in four appearance states appended
+to a lifelong map and to an unreduced one; growth, append and load cost, ATE, localisation.
+
     python tools/bench_map.py sessions --work W --weights W.pth
     python tools/bench_map.py load --work W [--keyframes 5000]
+    python tools/bench_map.py lifelong --work W --weights W.pth
 """
 from __future__ import annotations
 
@@ -354,6 +358,9 @@ def main() -> None:
     lo.add_argument("--snapshot", action="store_true",
                     help="give the repeated map a vocabulary snapshot (the source's words repeated; made untimed)")
     lo.set_defaults(func=section_load)
+    import bench_map_lifelong
+
+    bench_map_lifelong.add_parser(sub)
     args = ap.parse_args()
     args.func(args)
 

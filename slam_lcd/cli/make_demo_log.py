@@ -49,6 +49,11 @@ def register(sub) -> None:
                         "(default 0; with --session the preset's)")
     p.add_argument("--exposure", type=float, default=None, metavar="FACTOR",
                    help="global exposure factor of the renderer (default 1; with --session the preset's)")
+    p.add_argument("--appearance", choices=["day", "night", "moved", "renovated"], default=None,
+                   help="the world's appearance state: day (as the seed paints it), night (most ambient light gone, "
+                        "60 %% of the lamps on as spotlights), moved (posters and boards replaced or moved on about "
+                        "60 %% of the walls), renovated (new walls and a wooden floor east of x = 12.5 m); "
+                        "geometry and ground truth are the same (default: day; docs/sim_sessions.md)")
     p.add_argument("--stereo", action="store_true", help="also write the rectified right camera (default: off)")
     p.add_argument("--depth", dest="depth", action="store_true", default=True, help="write /camera/depth (default: on)")
     p.add_argument("--no-depth", dest="depth", action="store_false",
@@ -115,6 +120,7 @@ def run(args) -> int:
                              laps=args.laps, width=w, height=h, hfov_deg=args.hfov, camera_rate=args.rate,
                              loops_csv=args.loops_csv, progress=not args.no_progress, layout=args.layout,
                              depth_noise=not args.exact_depth, session=args.session, world_seed=args.world_seed,
-                             start_at=args.start_at, lighting=args.lighting, exposure=args.exposure)
+                             start_at=args.start_at, lighting=args.lighting, exposure=args.exposure,
+                             appearance=args.appearance)
     print(info.summary())
     return 0

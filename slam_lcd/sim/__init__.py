@@ -4,7 +4,8 @@ May import: io (writers), vision.gray and the base modules; only the CLI, the de
 A rendered indoor environment with loops, drifting odometry and exact ground truth,
 written as real log files. Public API:
 
-- :func:`build_world` / :class:`DemoWorld`: textured planes (corridors around two blocks);
+- :func:`build_world` / :class:`DemoWorld`: textured planes (corridors around two blocks), in an
+  appearance state (``day``, ``night``, ``moved``, ``renovated``: :mod:`slam_lcd.sim.appearance`);
 - :func:`render`: pinhole view -> (uint8 image, float32 metric depth);
 - :func:`demo_camera`, :func:`T_body_camera`: the sensor rig;
 - :func:`make_trajectory` / :func:`make_path`: laps around block A or a figure eight;

@@ -31,7 +31,7 @@ import logging
 import math
 import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -39,6 +39,8 @@ import numpy as np
 from ..errors import InputError
 from ..types import CameraModel, Trajectory
 from . import rig
+from .appearance import check_appearance
+from .demo_info import DemoLogInfo
 from .demo_writers import demo_io_conf, write_demo_folder, write_demo_log
 from .image_noise import NOISE_BANK, add_noise, noise_bank
 from .loops import gt_loop_pairs, write_loop_pairs
@@ -51,61 +53,6 @@ log = logging.getLogger(__name__)
 
 FORMATS = ("mcap", "rosbag2", "rosbag1", "folder")
 DEPTH_STEP = 1.0 / 1024.0  # depth quantisation (m): like a sensor's millimetre steps, and compresses 40x
-
-
-@dataclass
-class DemoLogInfo:
-    """What :func:`make_demo_log` wrote."""
-
-    path: Path
-    format: str
-    frames: int
-    duration_s: float
-    path_length_m: float
-    topics: dict[str, dict] = field(default_factory=dict)  # topic -> {type, count, rate_hz}
-    loop_pairs_path: Path | None = None
-    n_loop_pairs: int = 0
-    drift: dict = field(default_factory=dict)
-    camera: CameraModel | None = None
-    T_body_camera: np.ndarray | None = None
-    wall_s: float = 0.0
-    seed: int = 0
-    kind: str = "laps"
-    layout: str = "demo"
-    depth_model: object = None  # the depth sensor model the depth images carry (None: exact depth)
-    calibration_path: Path | None = None  # the Kalibr camchain written beside the log (layout euroc)
-    session: int | None = None  # the session preset (slam_lcd.sim.sessions), None: a plain demo log
-    world_seed: int = 0
-    world_frame: str = "world"  # frame of the ground truth
-    start_at: float = 0.0  # arc length (m) of the start point along the route's centre line
-    lighting: float = 0.0  # offset added to the lighting epoch of every frame
-    exposure: float = 1.0
-    odom_at_start: bool = False  # odometry in its own frame (identity at the first stamp)
-
-    def summary(self) -> str:
-        lines = [
-            f"wrote {self.path} ({self.format}): {self.frames} frames, {self.duration_s:.1f} s, "
-            f"{self.path_length_m:.1f} m ({self.kind}, seed {self.seed}) in {self.wall_s:.1f} s",
-        ]
-        if self.session is not None:
-            lines.append(f"session {self.session}: world {self.world_seed} (ground truth in "
-                         f"'{self.world_frame}'), start "
-                         f"{self.start_at:g} m along the route, lighting +{self.lighting:g}, exposure "
-                         f"{self.exposure:g}; odometry in its own frame (identity at the first stamp)")
-        lines += [
-            (f"odometry end drift {self.drift.get('end_error_m', float('nan')):.2f} m = "
-             f"{self.drift.get('drift_percent', float('nan')):.2f} % of the path "
-             f"(yaw {self.drift.get('end_yaw_error_deg', float('nan')):+.1f} deg)") if self.layout == "demo" else
-            f"layout {self.layout}: no odometry topic (the run's built-in visual odometry is the source)",
-            f"ground-truth loop pairs: {self.n_loop_pairs} -> {self.loop_pairs_path}",
-        ]
-        if self.depth_model is not None:
-            lines.append(f"depth: {self.depth_model.describe()}")
-        if self.calibration_path is not None:
-            lines.append(f"calibration (Kalibr camchain): {self.calibration_path}")
-        for t, d in self.topics.items():
-            lines.append(f"  {t:32s} {d['type']:30s} {d['count']:6d} msgs  {d['rate_hz']:5.1f} Hz")
-        return "\n".join(lines)
 
 
 @dataclass
@@ -122,10 +69,11 @@ class _Scenario:
     exposure: float = 1.0  # global exposure factor of the renderer
     world_frame: str = rig.WORLD_FRAME  # frame of the ground truth
     odom_at_start: bool = False  # the odometry starts at the identity (its own frame), not at the world pose
+    appearance: str = "day"  # the world's appearance state (slam_lcd.sim.appearance)
 
     @property
     def world(self):
-        return build_world(self.world_seed)  # cached per seed; built only when rendering
+        return build_world(self.world_seed, self.appearance)  # cached; built only when rendering
 
 
 MAX_CAMERA_RATE_HZ = 1000.0  # a camera period of 1 ms; more is no camera, and the frames would never end
@@ -135,7 +83,7 @@ MAX_ODOM_RATE_HZ = 10000.0
 def _scenario(frames, seed, kind, laps, width, height, camera_rate, odom_rate, stereo, hfov_deg=70.0, *,
               world_seed: int | None = None, start_at: float | None = None, lighting: float = 0.0,
               exposure: float = 1.0, start_ns: int = START_NS, odom_at_start: bool = False,
-              world_frame: str = rig.WORLD_FRAME) -> _Scenario:
+              world_frame: str = rig.WORLD_FRAME, appearance: str = "day") -> _Scenario:
     """Everything of a log but its images: stamps, ground truth, odometry, lighting epochs.
 
     Cheap (no world is built until ``.world`` is read), so the routes and odometry of
@@ -155,6 +103,7 @@ def _scenario(frames, seed, kind, laps, width, height, camera_rate, odom_rate, s
         raise InputError(f"the lighting epoch offset must be >= 0, got {lighting}")
     if start_at is not None and not np.isfinite(start_at):
         raise InputError(f"the start point must be a finite arc length (m), got {start_at}")
+    check_appearance(appearance)
     path = make_path(kind, laps=laps, seed=seed, start_at=start_at)
     cam_period = int(round(1e9 / camera_rate))
     if frames is None:
@@ -180,14 +129,14 @@ def _scenario(frames, seed, kind, laps, width, height, camera_rate, odom_rate, s
     laps_at = path.laps_at((cam_stamps - start_ns) * 1e-9) + float(lighting)
     return _Scenario(camera, rig.T_body_camera(), cam_stamps, odo_stamps, gt_cam, gt_odo, odom, laps_at,
                      seed if world_seed is None else int(world_seed), exposure=float(exposure),
-                     world_frame=world_frame, odom_at_start=odom_at_start)
+                     world_frame=world_frame, odom_at_start=odom_at_start, appearance=appearance)
 
 
 def _resolve(session: int | None, **given) -> dict:
     """The scenario settings of ``session`` (None: a plain demo log): ``given`` values that are
     not None win over the preset's, the preset's over the plain log's defaults."""
     plain = {"kind": "laps", "laps": 2.0, "seed": 0, "world_seed": None, "start_at": None, "lighting": 0.0,
-             "exposure": 1.0}
+             "exposure": 1.0, "appearance": "day"}
     out = {k: given.get(k) for k in plain}
     extra = {"start_ns": START_NS, "odom_at_start": False, "world_frame": rig.WORLD_FRAME}
     if session is not None:
@@ -211,13 +160,13 @@ def session_scenario(session: int | None, *, frames: int | None = None, camera_r
                      odom_rate: float = 50.0, width: int = 640, height: int = 480, **given) -> _Scenario:
     """The scenario (stamps, ground truth, odometry, lighting) a log of ``session`` would hold,
     without rendering anything: for studying routes and shared places. ``given``: ``kind``,
-    ``laps``, ``seed``, ``world_seed``, ``start_at``, ``lighting``, ``exposure`` overriding
-    the preset, as :func:`make_demo_log` takes them."""
+    ``laps``, ``seed``, ``world_seed``, ``start_at``, ``lighting``, ``exposure``, ``appearance``
+    overriding the preset, as :func:`make_demo_log` takes them."""
     r = _resolve(session, **given)
     return _scenario(frames, r["seed"], r["kind"], r["laps"], width, height, camera_rate, odom_rate, False,
                      world_seed=r["world_seed"], start_at=r["start_at"], lighting=r["lighting"],
                      exposure=r["exposure"], start_ns=r["start_ns"], odom_at_start=r["odom_at_start"],
-                     world_frame=r["world_frame"])
+                     world_frame=r["world_frame"], appearance=r["appearance"])
 
 
 def make_path_start(kind: str, start_at: float | None) -> float:
@@ -294,7 +243,7 @@ def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int |
                   io_conf=None, workers: int | None = None, hfov_deg: float = 70.0,
                   layout: str = "demo", depth_noise: bool = True, session: int | None = None,
                   world_seed: int | None = None, start_at: float | None = None, lighting: float | None = None,
-                  exposure: float | None = None) -> DemoLogInfo:
+                  exposure: float | None = None, appearance: str | None = None) -> DemoLogInfo:
     """Render the demo world along a trajectory and write it as ``fmt`` at ``out``.
 
     ``frames`` None means ``laps`` laps (default 2 laps of block A: ~850 frames at 10 Hz);
@@ -315,13 +264,15 @@ def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int |
     log's, and the ground truth is in the world's frame (:func:`~slam_lcd.sim.sessions.world_frame`).
     Without a session: ``seed`` 0, ``kind`` laps, 2 laps, ``world_seed`` = ``seed``, the
     route's usual start, ``lighting`` 0 (offset added to every frame's lighting epoch),
-    ``exposure`` 1 (global gain of the renderer).
+    ``exposure`` 1 (global gain of the renderer), ``appearance`` ``day``: the world as its seed
+    paints it; ``night``, ``moved`` or ``renovated`` change what the camera sees
+    (:mod:`slam_lcd.sim.appearance`; a session's preset is ``day``).
     Returns a :class:`DemoLogInfo`.
     """
     t_start = time.perf_counter()
     out = Path(out)
     r = _resolve(session, kind=kind, laps=laps, seed=seed, world_seed=world_seed, start_at=start_at,
-                 lighting=lighting, exposure=exposure)
+                 lighting=lighting, exposure=exposure, appearance=appearance)
     kind, laps, seed, world_seed, start_at, lighting, exposure = (
         r["kind"], r["laps"], r["seed"], r["world_seed"], r["start_at"], r["lighting"], r["exposure"])
     start_ns, odom_at_start, gt_frame = r["start_ns"], r["odom_at_start"], r["world_frame"]
@@ -344,7 +295,7 @@ def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int |
         stereo, depth, color, compressed = layout in ("euroc", "kitti"), layout == "tum", layout == "tum", False
     sc = _scenario(frames, seed, kind, laps, width, height, camera_rate, odom_rate, stereo, hfov_deg,
                    world_seed=world_seed, start_at=start_at, lighting=lighting, exposure=exposure, start_ns=start_ns,
-                   odom_at_start=odom_at_start, world_frame=gt_frame)
+                   odom_at_start=odom_at_start, world_frame=gt_frame, appearance=r["appearance"])
     if workers is None:
         workers = 1 if (os.cpu_count() or 1) >= 2 else 0
     er = L.euroc_rig(sc.camera, sc.T_bc) if layout == "euroc" else None
@@ -390,4 +341,5 @@ def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int |
                        layout=layout, calibration_path=calib_path,
                        depth_model=L.depth_model(layout, depth_noise), session=session, world_seed=sc.world_seed,
                        world_frame=sc.world_frame, lighting=float(lighting), exposure=float(exposure),
-                       start_at=float(make_path_start(kind, start_at)), odom_at_start=odom_at_start)
+                       start_at=float(make_path_start(kind, start_at)), odom_at_start=odom_at_start,
+                       appearance=sc.appearance)

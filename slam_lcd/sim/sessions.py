@@ -25,8 +25,10 @@ K  route                   start_at laps     seed      world_seed lighting expo 
 
 ``start_at``: arc length of the start point along the route's centre line
 (:func:`slam_lcd.sim.trajectory.make_path`); ``lighting``: offset added to every frame's
-lighting epoch; ``expo``: a global exposure factor of the renderer. Every field is only a
-default: explicit arguments override it.
+lighting epoch; ``expo``: a global exposure factor of the renderer. Every preset records the
+world in its ``day`` appearance; ``appearance=`` (``night``, ``moved``, ``renovated``:
+:mod:`slam_lcd.sim.appearance`) records it in another. Every field is only a default: explicit
+arguments override it.
 
 World seeds 1000-1999 (:data:`slam_lcd.sim.building.OTHER_PLACE_SEED` on) are another
 building on the demo corridors: lamps, floor and ceiling grids, wall materials, decal
@@ -62,6 +64,7 @@ class SessionPreset:
     lighting: float  # offset added to the lighting epoch of every frame
     exposure: float  # global exposure factor of the renderer
     role: str
+    appearance: str = "day"  # the world's appearance state (slam_lcd.sim.appearance)
 
     def describe(self) -> str:
         route = {"laps": "laps of block A", "figure8": "figure eight around A and B",

@@ -204,6 +204,13 @@ def ceiling_panels(rng: np.random.Generator, h: int, w: int, res: float, tile_m:
     return cv2.cvtColor(cv2.addWeighted(gray, 0.6, np.full_like(gray, 200), 0.4, 0), cv2.COLOR_GRAY2RGB)
 
 
+def material(rng: np.random.Generator, name: str, h: int, w: int, res: float) -> np.ndarray:
+    """A wall's base material by name (``plaster``, ``bricks``, ``wood``, ``tiles``: 20 cm wall tiles)."""
+    if name == "tiles":
+        return tiles(rng, h, w, res, tile_m=0.2)
+    return {"plaster": plaster, "bricks": bricks, "wood": wood}[name](rng, h, w, res)
+
+
 def paste(dst: np.ndarray, src: np.ndarray, x: int, y: int) -> None:
     """Copy ``src`` into ``dst`` at top-left (x, y), clipped to ``dst``."""
     h, w = dst.shape[:2]

@@ -40,8 +40,10 @@ import numpy as np
 from ..vision.gray import to_gray_uint8
 from . import lookalike
 from . import textures as tx
+from .appearance import Look, check_appearance
 from .building import BLOCKS, HEIGHT, OUTER, Building, building, wall_ends
 from .building import OTHER_PLACE_SEED as OTHER_PLACE_SEED  # public here too: where the world's seeds split
+from .lighting import DAY, Light, bake, mips
 
 WALL_RES = 160.0  # texels per metre on walls and panels (6 mm texels)
 FLOOR_RES = 80.0
@@ -95,6 +97,7 @@ class DemoWorld:
     exposure: np.ndarray  # (N_LIGHT_EPOCHS,) global gain per epoch
     alias_sites: list[dict] = field(default_factory=list)  # repeated decal groups: group, wall, centre, normal
     building: Building | None = None  # where lamps, grids, materials, decals, pillars and panels stand
+    appearance: str = "day"  # the appearance state it was built in (slam_lcd.sim.appearance)
     # stacked geometry for vectorised culling
     corners: np.ndarray = field(init=False)
     normals: np.ndarray = field(init=False)
@@ -127,44 +130,6 @@ class DemoWorld:
         return ok
 
 
-# --------------------------------------------------------------------------- lighting
-
-def _irradiance(points: np.ndarray, normal: np.ndarray, lamps: np.ndarray) -> np.ndarray:
-    """(N, L) lamp contributions at points with the given normal (cosine law, soft falloff)."""
-    d = lamps[None, :, :] - points[:, None, :]
-    dist2 = (d ** 2).sum(-1)
-    cos = np.clip((d @ normal) / np.sqrt(dist2 + 1e-9), 0.0, 1.0)
-    return (0.25 + cos) / (1.0 + dist2 / 4.0)
-
-
-def _bake(plane: Plane, tex: np.ndarray, lamps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Multiply baked lamp light into ``tex``; return (lit texture, lamp weights at the centre)."""
-    h, w = tex.shape[:2]
-    gh, gw = max(2, int(plane.height * 5) + 1), max(2, int(plane.width * 5) + 1)
-    a = np.linspace(0, plane.width, gw)
-    b = np.linspace(0, plane.height, gh)
-    A, B = np.meshgrid(a, b)
-    pts = plane.origin + A.reshape(-1, 1) * plane.u + B.reshape(-1, 1) * plane.v
-    contrib = _irradiance(pts, plane.normal, lamps)
-    light = contrib.sum(1).reshape(gh, gw)
-    light = 0.35 + 0.65 * light / 2.2
-    light = cv2.resize(light.astype(np.float32), (w, h), interpolation=cv2.INTER_LINEAR)
-    lit = np.clip(tex.astype(np.float32) * np.clip(light, 0.3, 1.15)[..., None], 0, 255).astype(np.uint8)
-    centre = plane.origin + 0.5 * plane.width * plane.u + 0.5 * plane.height * plane.v
-    wts = _irradiance(centre[None], plane.normal, lamps)[0]
-    return lit, wts / wts.sum()
-
-
-def _mips(img: np.ndarray) -> list[np.ndarray]:
-    """Box-filtered pyramid (INTER_AREA halving) down to ~8 texels, each level padded by one
-    replicated texel on every side (so bilinear lookups at a plane's edge never blend with black)."""
-    levels = [np.ascontiguousarray(img)]
-    while min(levels[-1].shape[:2]) >= 16:
-        h, w = levels[-1].shape[:2]
-        levels.append(cv2.resize(levels[-1], ((w + 1) // 2, (h + 1) // 2), interpolation=cv2.INTER_AREA))
-    return [cv2.copyMakeBorder(m, 1, 1, 1, 1, cv2.BORDER_REPLICATE) for m in levels]
-
-
 # --------------------------------------------------------------------------- wall painting
 
 def _decal_groups(rng: np.random.Generator) -> list[np.ndarray]:
@@ -181,12 +146,13 @@ def _decal_groups(rng: np.random.Generator) -> list[np.ndarray]:
     return groups
 
 
-def _paint_wall(rng: np.random.Generator, length: float, material: str, groups, group_slots) -> np.ndarray:
-    """Paint one full wall (base material + decals). ``group_slots``: [(a_m, group_index)]."""
+def _paint_wall(rng: np.random.Generator, length: float, material: str, groups, group_slots,
+                decals: list | None = None) -> np.ndarray:
+    """Paint one full wall (base material + decals). ``group_slots``: [(a_m, group_index)];
+    ``decals`` (if given) receives the (x, y, w, h) texel box of every poster and board pasted."""
     r = WALL_RES
     h, w = int(round(HEIGHT * r)), int(round(length * r))
-    base = {"plaster": tx.plaster, "bricks": tx.bricks, "wood": tx.wood, "tiles": tx.tiles}[material]
-    img = base(rng, h, w, r) if material != "tiles" else tx.tiles(rng, h, w, r, tile_m=0.2)
+    img = tx.material(rng, material, h, w, r)
     if material == "plaster" and rng.random() < 0.6:  # wooden dado on the lower metre
         dado = tx.wood(rng, int(0.9 * r), w, r)
         img[h - dado.shape[0]:] = dado
@@ -207,6 +173,8 @@ def _paint_wall(rng: np.random.Generator, length: float, material: str, groups, 
             ph = float(rng.uniform(0.5, 1.2))
             top = float(rng.uniform(0.4, HEIGHT - 0.9 - ph + 0.4))
             tx.paste(img, tx.poster(rng, int(ph * r), int(wid * r), r), int(a * r), int(top * r))
+            if decals is not None:
+                decals.append((int(a * r), int(top * r), int(wid * r), int(ph * r)))
         elif kind == "door":
             tx.paste(img, tx.door(rng, int(2.1 * r), int(0.9 * r), r), int(a * r), h - int(2.1 * r))
         elif kind == "board":
@@ -218,11 +186,13 @@ def _paint_wall(rng: np.random.Generator, length: float, material: str, groups, 
                 tx.paste(board, tx.poster(rng, int(ph * r), int(pw * r), r),
                          int(rng.uniform(0, wid - pw) * r), int(rng.uniform(0, bh - ph) * r))
             tx.paste(img, board, int(a * r), int(0.8 * r))
+            if decals is not None:
+                decals.append((int(a * r), int(0.8 * r), board.shape[1], board.shape[0]))
         a += wid + float(rng.uniform(0.15, 0.9))
     return img
 
 
-def _wall_planes(name, p0, p1, tex, lamps, z_top=HEIGHT, double_sided=False) -> list[Plane]:
+def _wall_planes(name, p0, p1, tex, lamps, z_top=HEIGHT, double_sided=False, light: Light = DAY) -> list[Plane]:
     """Cut a wall from floor point p0 to p1 (free space on the left of p0->p1) into segments.
 
     Seen from the free side, p1 is on the viewer's left: texture column 0 is at p1 and the
@@ -240,14 +210,14 @@ def _wall_planes(name, p0, p1, tex, lamps, z_top=HEIGHT, double_sided=False) -> 
         seg_tex = np.ascontiguousarray(tex[:, cuts[k]:cuts[k + 1]])
         origin = np.array([*(p1[:2] + u[:2] * a0), z_top])
         pl = Plane(f"{name}#{k}", origin, u, v, a1 - a0, z_top, [], [], double_sided=double_sided)
-        lit, pl.lamp_weights = _bake(pl, seg_tex, lamps)
-        pl.rgb = _mips(lit)
+        lit, pl.lamp_weights = bake(pl, seg_tex, lamps, light)
+        pl.rgb = mips(lit)
         pl.gray = [to_gray_uint8(m) for m in pl.rgb]
         out.append(pl)
     return out
 
 
-def _horizontal_planes(name, tex_full, res, z, lamps_at, facing_up: bool) -> list[Plane]:
+def _horizontal_planes(name, tex_full, res, z, lamps_at, facing_up: bool, light: Light = DAY) -> list[Plane]:
     """Floor (facing up) or ceiling tiles over the free area, cut on the layout grid; ``lamps_at(x, y)``: the
     lamps that light the tile centred at (x, y)."""
     xs = [0.0, 3.0, 5.67, 8.33, 11.0, 14.0, 16.67, 19.33, 22.0, 25.0]
@@ -269,27 +239,28 @@ def _horizontal_planes(name, tex_full, res, z, lamps_at, facing_up: bool) -> lis
                 origin, u, v = np.array([x0, y0, z]), np.array([1.0, 0, 0]), np.array([0, 1.0, 0])
                 seg = np.ascontiguousarray(seg[::-1])
             pl = Plane(f"{name}[{i},{j}]", origin, u, v, x1 - x0, y1 - y0, [], [])
-            lit, pl.lamp_weights = _bake(pl, seg, lamps_at(cx, cy))
-            pl.rgb = _mips(lit)
+            lit, pl.lamp_weights = bake(pl, seg, lamps_at(cx, cy), light)
+            pl.rgb = mips(lit)
             pl.gray = [to_gray_uint8(m) for m in pl.rgb]
             out.append(pl)
     return out
 
 
-def _pillar_planes(name, x, y, inward, along, tex_front, tex_side, lamps) -> list[Plane]:
+def _pillar_planes(name, x, y, inward, along, tex_front, tex_side, lamps, light: Light = DAY) -> list[Plane]:
     """A 0.4 m wide, 0.3 m deep pillar standing out of a wall at (x, y) (front and two sides)."""
     inward, along = np.asarray(inward, float), np.asarray(along, float)
     base = np.array([x, y])
     half, depth = 0.2, 0.3
     a, b = base - along * half, base + along * half
     fa, fb = a + inward * depth, b + inward * depth
-    planes = _wall_planes(f"{name}.front", fa, fb, tex_front, lamps)
-    planes += _wall_planes(f"{name}.left", a, fa, tex_side, lamps)
-    planes += _wall_planes(f"{name}.right", fb, b, tex_side, lamps)
+    planes = _wall_planes(f"{name}.front", fa, fb, tex_front, lamps, light=light)
+    planes += _wall_planes(f"{name}.left", a, fa, tex_side, lamps, light=light)
+    planes += _wall_planes(f"{name}.right", fb, b, tex_side, lamps, light=light)
     return planes
 
 
-def _corner_panel(name, corner, dx, dy, tex, lamps, reach_x=1.3, reach_y=1.3, height=2.2) -> list[Plane]:
+def _corner_panel(name, corner, dx, dy, tex, lamps, reach_x=1.3, reach_y=1.3, height=2.2,
+                  light: Light = DAY) -> list[Plane]:
     """Free-standing panel across an outer corner, from ``reach_x`` m along the x wall to
     ``reach_y`` m along the y wall (1.3 m both in the demo building), ``height`` m tall."""
     c = np.asarray(corner, float)
@@ -300,19 +271,27 @@ def _corner_panel(name, corner, dx, dy, tex, lamps, reach_x=1.3, reach_y=1.3, he
     left = np.array([-d[1], d[0]])
     if np.dot(left, np.array([dx, dy])) < 0:
         p0, p1 = p1, p0
-    return _wall_planes(name, p0, p1, tex, lamps, z_top=height)
+    return _wall_planes(name, p0, p1, tex, lamps, z_top=height, light=light)
 
 
-@functools.lru_cache(maxsize=4)
-def build_world(seed: int = 0) -> DemoWorld:
-    """Build (and cache) the demo world for ``seed``; ~1 s, ~100 MB of textures.
+def build_world(seed: int = 0, appearance: str = "day") -> DemoWorld:
+    """Build (and cache) the demo world for ``seed`` in an appearance state; ~1 s, ~100 MB of textures.
 
     Seeds from :data:`OTHER_PLACE_SEED` on build another building on the same corridors,
     seeds from :data:`~slam_lcd.sim.building.LOOKALIKE_SEED` on the demo building with a
-    look-alike corridor (see :func:`building` and :mod:`slam_lcd.sim.lookalike`)."""
+    look-alike corridor (see :func:`building` and :mod:`slam_lcd.sim.lookalike`).
+    ``appearance``: ``day`` (the world as the seed paints it), ``night``, ``moved`` or
+    ``renovated`` (:mod:`slam_lcd.sim.appearance`)."""
+    return _build_world(int(seed), check_appearance(str(appearance)))
+
+
+@functools.lru_cache(maxsize=4)
+def _build_world(seed: int, appearance: str) -> DemoWorld:
     rng = np.random.default_rng(np.random.SeedSequence([seed, 0x5EED]))
     bld = building(seed)
     lamps = bld.lamps
+    look = Look(appearance, seed, len(lamps))
+    light = look.light
 
     def lit_by(where):  # the lamps lighting a wall (by name) or a floor or ceiling tile (by centre)
         return lookalike.lamps_lighting(bld, lamps, where)
@@ -328,15 +307,21 @@ def build_world(seed: int = 0) -> DemoWorld:
         for a, gi in slots.get(name, []):
             w_m, h_m = groups[gi].shape[1] / WALL_RES, groups[gi].shape[0] / WALL_RES
             centre = np.array([*(p1 + d * (a + w_m / 2)), h_m / 2])
+            if look.changed_at(centre):
+                continue  # painted over in this appearance state
             sites.append({"group": gi, "wall": name, "centre": centre, "normal": np.array([d[1], -d[0], 0.0])})
 
     # outer walls, then the faces of blocks A and B (names and ends: wall_ends)
-    walls = {name: _paint_wall(rng, float(np.hypot(p1[0] - p0[0], p1[1] - p0[1])), bld.materials[name], groups,
-                               slots.get(name, [])) for name, (p0, p1) in wall_ends().items()}
+    length = {name: float(np.hypot(p1[0] - p0[0], p1[1] - p0[1])) for name, (p0, p1) in wall_ends().items()}
+    decals: dict[str, list] = {name: [] for name in length}
+    walls = {name: _paint_wall(rng, length[name], bld.materials[name], groups, slots.get(name, []), decals[name])
+             for name in length}
     if bld.lookalike:
         lookalike.copy_walls(walls, WALL_RES)
+    look.change_walls(walls, decals, bld.materials, lambda g, name, material: _paint_wall(
+        g, length[name], material, groups, []), WALL_RES)
     for name, (p0, p1) in wall_ends().items():
-        planes += _wall_planes(name, p0, p1, walls[name], lit_by(name))
+        planes += _wall_planes(name, p0, p1, walls[name], lit_by(name), light=light)
         record_sites(name, p0, p1)
     # pillars out of the outer walls (identical textures: more aliasing)
     front = tx.plaster(rng, int(HEIGHT * WALL_RES), int(0.4 * WALL_RES), WALL_RES)
@@ -344,7 +329,7 @@ def build_world(seed: int = 0) -> DemoWorld:
              int(0.05 * WALL_RES), int(0.9 * WALL_RES))
     side = tx.plaster(rng, int(HEIGHT * WALL_RES), int(0.3 * WALL_RES), WALL_RES)
     for name, x, y, inward, along in bld.pillars:
-        planes += _pillar_planes(name, x, y, inward, along, front, side, lit_by(name))
+        planes += _pillar_planes(name, x, y, inward, along, front, side, lit_by(name), light)
     # free-standing panels across the outer corners
     corners = [((X0, Y0), 1, 1), ((X1, Y0), -1, 1), ((X1, Y1), -1, -1), ((X0, Y1), 1, -1)]
     for k, reach_x, reach_y, height in bld.panels:
@@ -360,7 +345,8 @@ def build_world(seed: int = 0) -> DemoWorld:
             ptex[:] = tx.random_color(rng, 40, 120)
             tx.paste(ptex, tx.poster(rng, int(1.6 * WALL_RES), int(1.5 * WALL_RES), WALL_RES),
                      int(0.17 * WALL_RES), int(0.15 * WALL_RES))
-        planes += _corner_panel(f"panel{k}", corner, dx, dy, ptex, lamps, reach_x, reach_y, height)
+        ptex = look.change_panel(k, ptex, WALL_RES)
+        planes += _corner_panel(f"panel{k}", corner, dx, dy, ptex, lamps, reach_x, reach_y, height, light)
     # floor and ceiling (texture row 0 at y = Y1, column 0 at x = X0)
     fh, fw = int(round((Y1 - Y0) * FLOOR_RES)), int(round((X1 - X0) * FLOOR_RES))
     fpx, fpy = bld.floor_phase_m
@@ -371,7 +357,8 @@ def build_world(seed: int = 0) -> DemoWorld:
                     0, 360, tx.random_color(rng, 20, 120), -1, cv2.LINE_AA)
     if bld.lookalike:
         lookalike.copy_floor_or_ceiling(floor, FLOOR_RES)
-    planes += _horizontal_planes("floor", floor, FLOOR_RES, 0.0, lambda x, y: lit_by((x, y)), facing_up=True)
+    look.change_floor(floor, FLOOR_RES)
+    planes += _horizontal_planes("floor", floor, FLOOR_RES, 0.0, lambda x, y: lit_by((x, y)), True, light)
     ch, cw = int(round((Y1 - Y0) * CEIL_RES)), int(round((X1 - X0) * CEIL_RES))
     ceil = tx.ceiling_panels(rng, ch, cw, CEIL_RES, tile_m=bld.ceil_tile_m, phase_m=bld.ceil_phase_m)
     hx, hy = bld.lamp_half_px
@@ -380,7 +367,7 @@ def build_world(seed: int = 0) -> DemoWorld:
         cv2.rectangle(ceil, (c - hx, r_ - hy), (c + hx, r_ + hy), (250, 250, 245), -1)
     if bld.lookalike:
         lookalike.copy_floor_or_ceiling(ceil, CEIL_RES)
-    planes += _horizontal_planes("ceiling", ceil, CEIL_RES, HEIGHT, lambda x, y: lit_by((x, y)), facing_up=False)
+    planes += _horizontal_planes("ceiling", ceil, CEIL_RES, HEIGHT, lambda x, y: lit_by((x, y)), False, light)
     # lighting epochs: epoch 0 nominal; later epochs dim/brighten lamps and change exposure
     n_l = len(lamps)
     gains = np.ones((N_LIGHT_EPOCHS, n_l))
@@ -388,4 +375,4 @@ def build_world(seed: int = 0) -> DemoWorld:
     expo = np.ones(N_LIGHT_EPOCHS)
     expo[1:] = rng.uniform(0.88, 1.08, size=N_LIGHT_EPOCHS - 1)
     return DemoWorld(seed=seed, planes=planes, lamps=lamps, lamp_gains=gains, exposure=expo, alias_sites=sites,
-                     building=bld)
+                     building=bld, appearance=appearance)
