@@ -124,10 +124,27 @@ class MapGraph:
     OPTIONAL = ("kf_place", "kf_last_used")
 
     def arrays(self) -> dict[str, np.ndarray]:
-        """Every array to write (the optional ones where present)."""
+        """Every array to write (the optional ones where present), in the file's compact forms.
+
+        Why compact: a map keeps a loop or visual link per keyframe of every visit, and as numpy's
+        fixed-width text (4 bytes a character, 160 characters) a reason took 640 bytes, the information
+        matrix 288: UTF-8 bytes as long as the longest reason, and the information in float32 (seven
+        digits, more than a noise model needs), take a third of that. :meth:`from_file` reads both forms."""
         out = {k: getattr(self, k) for k in self.ARRAYS}
+        out["loop_reason"] = np.char.encode(np.asarray(self.loop_reason, str), "utf-8") if len(self.loop_reason) \
+            else np.zeros(0, "S1")
+        out["loop_info"] = np.asarray(self.loop_info, np.float32)
         out.update({k: getattr(self, k) for k in self.OPTIONAL if getattr(self, k) is not None})
         return out
+
+    @classmethod
+    def from_file(cls, arrays: dict[str, np.ndarray]) -> MapGraph:
+        """The graph of a file's arrays (:meth:`arrays`' compact forms, or the plain ones)."""
+        a = dict(arrays)
+        if a["loop_reason"].dtype.kind == "S":
+            a["loop_reason"] = np.char.decode(a["loop_reason"], "utf-8")
+        a["loop_info"] = np.asarray(a["loop_info"], float)
+        return cls(**a)
 
     @classmethod
     def empty(cls) -> MapGraph:

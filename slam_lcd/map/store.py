@@ -172,7 +172,7 @@ def read_graph(root: str | Path, manifest: MapManifest) -> MapGraph:
         return MapGraph.empty()
     root = Path(root)
     path = _checked(root, manifest, manifest.graph_file)
-    g = MapGraph(**_load_arrays(path, MapGraph.ARRAYS, optional=MapGraph.OPTIONAL))
+    g = MapGraph.from_file(_load_arrays(path, MapGraph.ARRAYS, optional=MapGraph.OPTIONAL))
     g.check(path)
     return g
 
