@@ -73,4 +73,4 @@ class MapConfig:
     redundant_match_ratio: float = 0.3
     # kept keyframes (appearance variants) of one place at most; a new one beyond that evicts the
     # variant matched longest ago
-    max_variants: int = 3
+    max_variants: int = 4
