@@ -44,14 +44,20 @@ def check_run_paths(log_path, out_dir, cfg: Config, gt_file=None, extra_inputs: 
         raise FileMissingError("ground-truth trajectory file not found (--gt)", gt_file)
     inputs = run_inputs(log_path, gt_file, cfg, extra_inputs)
     if map_dir is not None:
-        check_apart("--map", map_dir, {"--out": out_dir})
-        if appended:
-            from .map.store import check_map_target
-
-            check_no_clash({"--map": map_dir}, inputs, merged=[map_dir])
-            check_map_target(map_dir, create=True)
-        else:
+        check_map_paths(map_dir, {"--out": out_dir}, inputs, appended)
+        if not appended:
             inputs["--map"] = map_dir
     outputs = OutputSet(out_dir, RUN_OUTPUTS)
     outputs.check(inputs)
     return outputs
+
+
+def check_map_paths(map_dir, outputs: dict, inputs: dict, appended: bool) -> None:
+    """The map folder ``--map`` apart from every output folder; appended, it is an output too: not on or in
+    an input, and a folder a map can be written to (:func:`slam_lcd.map.store.check_map_target`)."""
+    check_apart("--map", map_dir, outputs)
+    if appended:
+        from .map.store import check_map_target
+
+        check_no_clash({"--map": map_dir}, inputs, merged=[map_dir])
+        check_map_target(map_dir, create=True)

@@ -135,7 +135,7 @@ def run_log(
             right_topic = flags.pop("right_topic")
             topics = choose_topics(reader, **flags)
             if map is not None and map_mode == "append":
-                _refuse_a_log_the_map_holds(map, log_path, topics.image)
+                map.refuse_held(log_path, topics.image)  # not run again (Map.session_of_log)
             calibrated = calibrated_camera(calibration, topics, log_path)
             first = check_first_messages(reader, topics)
             check_image_sizes(reader, topics, first, calibrated, calibration)
@@ -285,15 +285,6 @@ def _append_to_map(map, pipe, result: RunResult, log_path: Path, name: str | Non
                                     "odometry_source": result.topics.get("odom") or BUILTIN_VO})
     map.save()
     return map_summary(map, joined, current=map.session_names[-1], pipe=pipe)
-
-
-def _refuse_a_log_the_map_holds(map, log_path: Path, image_topic: str | None) -> None:
-    """A log (and camera topic) the map holds already is not run again (``Map.session_of_log``)."""
-    from .map.store import LogAlreadyInMapError
-
-    held = map.already_holds(log_path, image_topic)
-    if held is not None:
-        raise LogAlreadyInMapError(held, session=str(map.session_of_log(log_path, image_topic)))
 
 
 def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame, vo_odometry, log_path,

@@ -85,14 +85,11 @@ def run(args) -> int:
 
 def _check_map(args) -> None:
     from ..batch.discovery import discover_logs
-    from ..files.atomic import check_apart, check_no_clash
-    from ..map.store import check_map_target
+    from ..run_checks import check_map_paths
 
-    check_apart("--map", args.map, {"--out": args.out})
     inputs = {f"log {e.name}": e.path for e in discover_logs(args.logs)}
     inputs.update({"--gt-dir": args.gt_dir, "--vocab": args.vocab, **config_inputs(args)})
-    check_no_clash({"--map": args.map}, inputs, merged=[args.map])
-    check_map_target(args.map, create=True)
+    check_map_paths(args.map, {"--out": args.out}, inputs, appended=True)
 
 
 def _append_to_map(args, cfg, res) -> int:

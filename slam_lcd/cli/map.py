@@ -90,10 +90,10 @@ def _write_plot(out: Path, summary: dict, map_dir: Path) -> None:
 
 def compact(args) -> int:
     """``map compact DIR``: the map reduced in memory, then one commit (the writer lock held throughout)."""
-    from ..config import load_config
     from ..map.session_map import Map
+    from .run import config_from_args
 
-    cfg = load_config(args.config or "default", list(args.overrides))
+    cfg = config_from_args(args)
     with Map.open(args.map_dir, conf=cfg.map, write=True) as m:
         figures = m.compact()
         m.save()

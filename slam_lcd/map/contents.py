@@ -103,6 +103,11 @@ class SessionKeyframes:
             raise MapError("session file holds non-finite keyframe poses", where)
 
 
+def kept_ids(sessions: list[SessionKeyframes]) -> np.ndarray:
+    """The ids of the keyframes the map keeps as candidates (:meth:`SessionKeyframes.kept`), in map order."""
+    return np.concatenate([s.ids[s.kept()] for s in sessions]) if sessions else np.zeros(0, np.int64)
+
+
 @dataclass
 class MapGraph:
     """Loops of every session (within and between) and the keyframes' poses in the map frame."""

@@ -15,7 +15,7 @@ import numpy as np
 
 from ..types import Features, Keyframe
 from . import store
-from .contents import MapError, MapManifest, SessionKeyframes
+from .contents import MapError, MapManifest, SessionKeyframes, kept_ids
 from .keyframe_arrays import camera_from_json
 
 
@@ -65,7 +65,7 @@ def restore_vocab(detector, root: Path, manifest: MapManifest, sessions: list[Se
     if manifest.vocab_file is None or not db.online or len(db) or db.words is not None:
         return None
     state = store.read_vocab(root, manifest, vocab_fh)
-    ids = np.concatenate([s.ids[s.kept()] for s in sessions]) if sessions else np.zeros(0, np.int64)
+    ids = kept_ids(sessions)
     if state is None or not np.array_equal(state["kf_ids"], ids):
         return None
     try:

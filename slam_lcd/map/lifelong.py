@@ -19,7 +19,7 @@ from dataclasses import replace
 import numpy as np
 
 from .contents import REMOVED, MapGraph, SessionKeyframes
-from .places import REDUNDANT, Kept, Verdicts, judge
+from .places import Kept, Verdicts, judge
 
 
 def strip(sess: SessionKeyframes, keep: np.ndarray) -> SessionKeyframes:
@@ -154,4 +154,4 @@ def counts(graph: MapGraph, sessions: list[SessionKeyframes]) -> dict:
     return {"places": places, "variants": kept - places, "kept_keyframes": kept, "keyframes": total}
 
 
-__all__ = ["REDUNDANT", "apply", "compact", "counts", "judge_session", "kept_keyframes", "reduce_append", "strip"]
+__all__ = ["apply", "compact", "counts", "judge_session", "kept_keyframes", "reduce_append", "strip"]

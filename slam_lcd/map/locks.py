@@ -65,10 +65,6 @@ class WriterLock:
         self._new_fd: int | None = None  # the creation lock
         self._created: list[Path] = []  # what a first commit's preparation made (removed if it fails)
 
-    @property
-    def held(self) -> bool:
-        return self._map_fd is not None or self._new_fd is not None
-
     def acquire(self) -> WriterLock:
         deadline = time.monotonic() + self.timeout_s
         while True:

@@ -24,6 +24,7 @@ import numpy as np
 from ..types import Trajectory
 from . import store
 from .config import MapConfig
+from .contents import kept_ids
 from .detector_load import load_into
 from .joint_graph import JointLoop, JointResult, SessionPoses, solve
 from .keyframe_arrays import (
@@ -190,6 +191,12 @@ class Map:
         return (f"{log_path}: already in the map {self.root} as session {name!r} (same sha256"
                 + (f", topic {image_topic}" if image_topic else "") + "): not appended again")
 
+    def refuse_held(self, log_path: str | Path, image_topic: str | None = None) -> None:
+        """Raise :class:`LogAlreadyInMapError` (naming the session) when the map holds this log already."""
+        name = self.session_of_log(log_path, image_topic)
+        if name is not None:
+            raise LogAlreadyInMapError(self.already_holds(log_path, image_topic) or "", session=name)
+
     def next_kf_id(self) -> int:
         return self.manifest.next_kf_id()
 
@@ -230,9 +237,8 @@ class Map:
         if not kfs:
             raise MapError(f"the session has no keyframe: nothing to add to the map {self.root}",
                            log_path or self.root)
-        topic = (extra or {}).get("image_topic")
-        if log_path is not None and (held := self.already_holds(log_path, topic)) is not None:
-            raise LogAlreadyInMapError(held, session=str(self.session_of_log(log_path, topic)))
+        if log_path is not None:
+            self.refuse_held(log_path, (extra or {}).get("image_topic"))
         sess = session_arrays(pipeline.detector, kfs, ground_truth,
                               self.manifest.features.get("descriptor_form", self.conf.descriptor_form))
         name = name or f"session{len(self.sessions) + 1}"
@@ -277,7 +283,7 @@ class Map:
                 "camera": camera_json(cam), "T_body_camera": np.asarray(pipeline.T_body_camera, float).tolist(),
                 "features": self.manifest.features.get("kind"), "T_map_session": np.eye(4).tolist(),
                 "component": 0, **(extra or {})}
-        expected = np.concatenate([s.ids[s.kept()] for s in self.sessions] + [sess.ids])  # the detector's keyframes
+        expected = np.concatenate([kept_ids(self.sessions), sess.ids])  # the detector's keyframes
         if self.conf.lifelong:  # keep places and variants, not every keyframe (slam_lcd.map.lifelong)
             table = [dict(m) for m in self.manifest.sessions]
             after, changed, graph = reduce_append(table, self.sessions, self.graph, graph, result, meta, sess, loops,
@@ -311,19 +317,21 @@ class Map:
         map's kept ones; after an append, those before it and the new session's), in order; pruned to the
         keyframes the map keeps now."""
         from ..vocab.database import snapshot
+        from ..vocab.snapshot import keep_only
 
-        kept = np.concatenate([s.ids[s.kept()] for s in self.sessions])
+        kept = kept_ids(self.sessions)
         expected = kept if expected is None else expected
         state = snapshot(detector.db, self.conf.vocab_centres)
         if state is None or not np.array_equal(state["kf_ids"], expected):
             return None
-        return state if len(kept) == len(expected) else self._vocab_pruned(state)
+        return state if len(kept) == len(expected) else keep_only(state, kept)
 
     def compact(self) -> dict:
         """Keep places and variants, not every keyframe, in a map built without ``map.lifelong`` (in memory:
         :meth:`save` commits it). Returns the map's counts (:func:`slam_lcd.map.lifelong.counts`) before and after."""
         if self._lock is None:
             raise MapError("the map was opened read-only: open it with write=True to compact it", self.root)
+        from ..vocab.snapshot import keep_only
         from .lifelong import compact, counts
         from .store import read_vocab
 
@@ -333,16 +341,9 @@ class Map:
         state = read_vocab(self.root, self.manifest) if self.manifest.vocab_file else None
         self.sessions, self.graph = after, graph
         self._rewritten.update({self.manifest.sessions[i]["name"]: after[i] for i in changed})
-        self._vocab = self._vocab_pruned(state)
+        self._vocab = keep_only(state, kept_ids(self.sessions)) if state is not None else None
         self._dirty = True
         return {"before": before, "after": counts(self.graph, self.sessions)}
-
-    def _vocab_pruned(self, state: dict | None) -> dict | None:
-        from ..vocab.snapshot import keep_only
-
-        if state is None:
-            return None
-        return keep_only(state, np.concatenate([s.ids[s.kept()] for s in self.sessions]))
 
     def save(self) -> None:
         """Commit the sessions added (or the map compacted) since the last save: one atomic step (the manifest's
