@@ -22,6 +22,7 @@ held-out logs' share localised, median error, keyframes more than 1 m off.
 from __future__ import annotations
 
 import json
+import logging
 import shutil
 import subprocess
 import sys
@@ -254,6 +255,9 @@ def section_lifelong(args) -> None:
     from slam_lcd.runtime.machine import machine_line
 
     t_start = time.perf_counter()
+    judged = logging.getLogger("slam_lcd.map.lifelong")  # each append's appearance verdict, printed
+    judged.setLevel(logging.INFO)
+    judged.addHandler(logging.StreamHandler(sys.stdout))
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
     size = tuple(int(v) for v in args.size.split("x"))

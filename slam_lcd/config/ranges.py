@@ -192,6 +192,7 @@ RANGES: dict[str, str] = {
     "map.place_angle_deg": "(0, 180]",
     "map.place_compare": "[1, inf)",
     "map.redundant_match_ratio": "(0, 1]",
+    "map.appearance_share": "[0, 1]",
     "map.max_variants": "[1, inf)",
     "run.loop_pictures_rejected": "[0, inf)",
     # map_cloud (the map as a point cloud)

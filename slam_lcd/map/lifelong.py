@@ -14,12 +14,15 @@ every loop and visual link, so its size still follows the keyframes of every vis
 """
 from __future__ import annotations
 
+import logging
 from dataclasses import replace
 
 import numpy as np
 
 from .contents import REMOVED, MapGraph, SessionKeyframes
-from .places import Kept, Verdicts, judge
+from .places import Kept, Ratios, Verdicts, familiarity, judge
+
+log = logging.getLogger(__name__)
 
 
 def strip(sess: SessionKeyframes, keep: np.ndarray) -> SessionKeyframes:
@@ -79,7 +82,15 @@ def judge_session(meta: dict, sess: SessionKeyframes, component: int, poses: dic
     which = np.ones(len(sess), bool) if only is None else np.asarray(only, bool)
     new = [(int(sess.ids[i]), camera_pose(poses[int(sess.ids[i])], meta), _descriptors(sess, int(i)))
            for i in np.flatnonzero(which)]
-    out = judge(new, component, kept, conf, now, next_place)
+    ratios = Ratios()
+    known = familiarity(new, component, kept, conf, ratios)
+    strict = known is not None and known[0] < conf.appearance_share * known[1]
+    threshold = max(conf.redundant_match_ratio, conf.appearance_share * known[1]) if strict and known else None
+    out = judge(new, component, kept, conf, now, next_place, threshold, ratios)
+    out.familiarity, out.new_appearance = known, strict
+    if known is not None:
+        log.info("session %s: median match ratio %.2f with the map, %.2f with itself: %s", meta.get("name"),
+                 known[0], known[1], "a new appearance" if strict else "a known appearance")
     out.used |= set(used)
     return out
 

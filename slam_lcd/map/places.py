@@ -17,6 +17,13 @@ keyframe is judged against the keyframes the map keeps, in order:
   that has gone longest without being matched (by a later append's keyframe or loop), so what
   the map's users still meet stays.
 
+A session the map knows poorly as a whole is a new appearance (night in a map of days): the median
+of its keyframes' best ratios with the kept keyframes near them is under ``map.appearance_share``
+of the median ratio between its own consecutive keyframes (:func:`familiarity`). Its keyframes are
+then redundant only at that share of its own ratio (when that is stricter than
+``map.redundant_match_ratio``), so the places it passes get a variant in its appearance, which the
+next session in that appearance then matches.
+
 Why mutual nearest neighbours of the stored descriptors rather than the loop chain: the question
 is whether the map would recognise this view from what it keeps, and the share of mutual matches
 between two views of one place falls with the change of appearance (the table in
@@ -73,17 +80,65 @@ class Verdicts:
     matched: dict[int, int] = field(default_factory=dict)  # redundant new kf id -> the kept kf it matched
     used: set[int] = field(default_factory=set)  # kept kf ids matched now (their last_used becomes now)
     evicted: list[int] = field(default_factory=list)  # kept kf ids no longer kept (a full place's oldest variant)
+    familiarity: tuple[float, float] | None = None  # the session's median ratio with the map and with itself
+    new_appearance: bool = False  # judged at map.appearance_match_ratio (the map knew its appearance poorly)
 
 
-def judge(new: list[tuple[int, np.ndarray, Callable[[], np.ndarray]]], component: int, kept: list[Kept],
-          conf, now: int, next_place: int) -> Verdicts:
+New = tuple[int, np.ndarray, Callable[[], np.ndarray]]  # kf id, camera pose in the map frame, descriptors
+
+
+class Ratios:
+    """:func:`match_ratio` of (new keyframe, kept keyframe) pairs, each computed once."""
+
+    def __init__(self) -> None:
+        self._seen: dict[tuple[int, int], float] = {}
+
+    def __call__(self, kf_id: int, desc: Callable[[], np.ndarray], k: Kept) -> float:
+        key = (kf_id, k.kf_id)
+        if key not in self._seen:
+            self._seen[key] = match_ratio(desc(), k.descriptors())
+        return self._seen[key]
+
+
+def familiarity(new: list[New], component: int, kept: list[Kept], conf, ratios: Ratios) -> tuple[float, float] | None:
+    """How well the map as it is knows a session's appearance: (the median over its keyframes that
+    have kept keyframes near of their best :func:`match_ratio` with those, the median ratio of its
+    keyframes with the one before them where that lies within the place's reach); None when
+    nothing is near or no two keyframes are.
+
+    Why a session's median and not each keyframe alone: at nearly the same pose another appearance
+    still shares half its descriptors with a kept view (night against day: 0.49), while a view of
+    that appearance a little off the pose shares a sixth (0.17); a keyframe alone looks redundant,
+    the session as a whole does not. Why against the session's own consecutive keyframes: what a
+    good match is depends on the descriptors (SuperPoint's revisits share about 0.65, ORB's about
+    0.35), and the session's own views of one place in one appearance measure it."""
+    cos_max = np.cos(np.radians(conf.place_angle_deg))
+    best, own = [], []
+    for j, (kf_id, T, desc) in enumerate(new):
+        near = _near(T, component, kept, conf.place_radius_m, cos_max)[: max(1, int(conf.place_compare))]
+        if near:
+            best.append(max(ratios(kf_id, desc, k) for k in near))
+        if j:
+            prev_id, P, prev_desc = new[j - 1]
+            if np.linalg.norm(P[:3, 3] - T[:3, 3]) <= conf.place_radius_m and P[:3, 2] @ T[:3, 2] >= cos_max:
+                own.append(match_ratio(desc(), prev_desc()))
+    if not best or not own:
+        return None
+    return float(np.median(best)), float(np.median(own))
+
+
+def judge(new: list[New], component: int, kept: list[Kept], conf, now: int, next_place: int,
+          threshold: float | None = None, ratios: Ratios | None = None) -> Verdicts:
     """Judge the new keyframes ``(kf id, camera pose in the map frame, descriptors)`` in order (module docstring).
 
     ``kept``: the map's kept keyframes (changed in place: new kept keyframes are added, evicted
     ones removed); ``now``: the append's generation (what ``last_used`` records); ``next_place``:
-    the first free place id.
+    the first free place id; ``threshold``: the share of matches that makes a keyframe redundant
+    (default ``map.redundant_match_ratio``).
     """
     out = Verdicts()
+    ratios = ratios or Ratios()
+    threshold = conf.redundant_match_ratio if threshold is None else threshold
     cos_max = np.cos(np.radians(conf.place_angle_deg))
     for kf_id, T, desc in new:
         near = _near(T, component, kept, conf.place_radius_m, cos_max)[: max(1, int(conf.place_compare))]
@@ -92,10 +147,9 @@ def judge(new: list[tuple[int, np.ndarray, Callable[[], np.ndarray]]], component
             out.status[kf_id], out.place[kf_id] = NEW_PLACE, next_place
             next_place += 1
             continue
-        mine = desc()
-        ratios = [match_ratio(mine, k.descriptors()) for k in near]
-        best = int(np.argmax(ratios))
-        if ratios[best] >= conf.redundant_match_ratio:
+        scores = [ratios(kf_id, desc, k) for k in near]
+        best = int(np.argmax(scores))
+        if scores[best] >= threshold:
             near[best].last_used = now
             out.status[kf_id], out.matched[kf_id] = REDUNDANT, near[best].kf_id
             out.used.add(near[best].kf_id)
