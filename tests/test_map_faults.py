@@ -102,7 +102,6 @@ HOOK = textwrap.dedent('''
     signal.signal(signal.SIGINT, signal.default_int_handler)  # as a terminal starts it
     _spec = os.environ.get("MAPFAULT")
     if _spec:
-        import numpy as _np
         _point, _sig, _root = _spec.split(":", 2)
         _sig = getattr(signal, _sig)
 
@@ -118,13 +117,14 @@ HOOK = textwrap.dedent('''
             if point == _point:
                 os.kill(os.getpid(), _sig)
 
-        _savez = _np.savez
-        def savez(file, *a, **k):
+        import slam_lcd.map.store as _store
+        _write_npz = _store.write_npz
+        def write_npz(file, *a, **k):
             w = _where(getattr(file, "name", file))
             if w in ("session", "graph"):
                 _kill(w + "-write")
-            return _savez(file, *a, **k)
-        _np.savez = savez
+            return _write_npz(file, *a, **k)
+        _store.write_npz = write_npz
 
         _replace = os.replace
         def replace(src, dst, *a, **k):
@@ -336,13 +336,13 @@ def test_disk_full_at_every_write_of_the_commit_leaves_the_map_as_it_was(world, 
         if len(events) == fail_at[0]:
             raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
-    real_savez, real_replace, real_fsync, real_open = np.savez, os.replace, os.fsync, open
+    real_write_npz, real_replace, real_fsync, real_open = store.write_npz, os.replace, os.fsync, open
 
-    def savez(file, *a, **k):
+    def write_npz(file, *a, **k):
         if inside(getattr(file, "name", file)):
             file.write(b"PK\x03\x04 half a zip")  # the disk filled up part way
             event("savez")
-        return real_savez(file, *a, **k)
+        return real_write_npz(file, *a, **k)
 
     def replace(src, dst, *a, **k):
         if inside(dst):
@@ -383,7 +383,7 @@ def test_disk_full_at_every_write_of_the_commit_leaves_the_map_as_it_was(world, 
     before = files(mapdir)
     m = Map.open(mapdir, features=extractor_meta(extractor, cfg.map.descriptor_form), conf=cfg.map, write=True)
     try:
-        monkeypatch.setattr(np, "savez", savez)
+        monkeypatch.setattr(store, "write_npz", write_npz)
         monkeypatch.setattr(os, "replace", replace)
         monkeypatch.setattr(os, "fsync", fsync)
         monkeypatch.setattr(store, "open", open_, raising=False)

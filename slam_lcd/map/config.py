@@ -73,8 +73,8 @@ class MapConfig:
     redundant_match_ratio: float = 0.3
     # a session whose keyframes match the kept keyframes near them (median best ratio) less than
     # this share of how well they match each other (median of consecutive keyframes) is a new
-    # appearance of the map's places (night in a map of days): its keyframes are redundant only at
-    # this share of their own ratio; 0 turns the session rule off
+    # appearance of the map's places (night in a map of days): its keyframes are judged redundant
+    # only against the variants it adds itself; 0 turns the session rule off
     appearance_share: float = 0.8
     # kept keyframes (appearance variants) of one place at most; a new one beyond that evicts the
     # variant matched longest ago

@@ -85,9 +85,8 @@ def judge_session(meta: dict, sess: SessionKeyframes, component: int, poses: dic
     ratios = Ratios()
     known = familiarity(new, component, kept, conf, ratios)
     strict = known is not None and known[0] < conf.appearance_share * known[1]
-    threshold = max(conf.redundant_match_ratio, conf.appearance_share * known[1]) if strict and known else None
-    out = judge(new, component, kept, conf, now, next_place, threshold, ratios)
-    out.familiarity, out.new_appearance = known, strict
+    out = judge(new, component, kept, conf, now, next_place, strict, ratios)
+    out.familiarity = known
     if known is not None:
         log.info("session %s: median match ratio %.2f with the map, %.2f with itself: %s", meta.get("name"),
                  known[0], known[1], "a new appearance" if strict else "a known appearance")

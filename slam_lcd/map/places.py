@@ -20,9 +20,9 @@ keyframe is judged against the keyframes the map keeps, in order:
 A session the map knows poorly as a whole is a new appearance (night in a map of days): the median
 of its keyframes' best ratios with the kept keyframes near them is under ``map.appearance_share``
 of the median ratio between its own consecutive keyframes (:func:`familiarity`). Its keyframes are
-then redundant only at that share of its own ratio (when that is stricter than
-``map.redundant_match_ratio``), so the places it passes get a variant in its appearance, which the
-next session in that appearance then matches.
+then judged redundant only against the variants the session itself adds, never against the other
+appearance's views (which a view a little off their pose would not match), so the places it passes
+get a variant in its appearance, which the next session in that appearance then matches.
 
 Why mutual nearest neighbours of the stored descriptors rather than the loop chain: the question
 is whether the map would recognise this view from what it keeps, and the share of mutual matches
@@ -128,31 +128,33 @@ def familiarity(new: list[New], component: int, kept: list[Kept], conf, ratios: 
 
 
 def judge(new: list[New], component: int, kept: list[Kept], conf, now: int, next_place: int,
-          threshold: float | None = None, ratios: Ratios | None = None) -> Verdicts:
+          new_appearance: bool = False, ratios: Ratios | None = None) -> Verdicts:
     """Judge the new keyframes ``(kf id, camera pose in the map frame, descriptors)`` in order (module docstring).
 
     ``kept``: the map's kept keyframes (changed in place: new kept keyframes are added, evicted
     ones removed); ``now``: the append's generation (what ``last_used`` records); ``next_place``:
-    the first free place id; ``threshold``: the share of matches that makes a keyframe redundant
-    (default ``map.redundant_match_ratio``).
+    the first free place id; ``new_appearance``: the session is a new appearance of the map's
+    places (:func:`familiarity`): its keyframes are redundant only against the variants it adds.
     """
-    out = Verdicts()
+    out = Verdicts(new_appearance=new_appearance)
     ratios = ratios or Ratios()
-    threshold = conf.redundant_match_ratio if threshold is None else threshold
+    own = {kf_id for kf_id, _, _ in new} if new_appearance else None
     cos_max = np.cos(np.radians(conf.place_angle_deg))
+    compare = max(1, int(conf.place_compare))
     for kf_id, T, desc in new:
-        near = _near(T, component, kept, conf.place_radius_m, cos_max)[: max(1, int(conf.place_compare))]
+        near = _near(T, component, kept, conf.place_radius_m, cos_max)
         if not near:
             kept.append(Kept(kf_id, T, component, next_place, now, desc))
             out.status[kf_id], out.place[kf_id] = NEW_PLACE, next_place
             next_place += 1
             continue
-        scores = [ratios(kf_id, desc, k) for k in near]
-        best = int(np.argmax(scores))
-        if scores[best] >= threshold:
-            near[best].last_used = now
-            out.status[kf_id], out.matched[kf_id] = REDUNDANT, near[best].kf_id
-            out.used.add(near[best].kf_id)
+        alike = (near if own is None else [k for k in near if k.kf_id in own])[:compare]
+        scores = [ratios(kf_id, desc, k) for k in alike]
+        if scores and max(scores) >= conf.redundant_match_ratio:
+            match = alike[int(np.argmax(scores))]
+            match.last_used = now
+            out.status[kf_id], out.matched[kf_id] = REDUNDANT, match.kf_id
+            out.used.add(match.kf_id)
             continue
         place = near[0].place
         kept.append(Kept(kf_id, T, component, place, now, desc))

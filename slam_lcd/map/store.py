@@ -33,6 +33,7 @@ from typing import BinaryIO
 import numpy as np
 
 from ..features.weights import sha256_of
+from ..files.npz import write_npz
 from ..runtime.interrupts import defer_sigint
 from .contents import (  # noqa: F401 - the folder's names, read and written here
     FORMAT_NAME,
@@ -214,12 +215,18 @@ def _fsync_dir(path: Path) -> None:
             os.close(fd)
 
 
+# dense arrays that hardly deflate (quantised descriptors, keypoints, points, vocabulary centres):
+# stored as they are; every other array of a map file is deflated (slam_lcd.files.npz)
+STORED = frozenset({"keypoints", "descriptors", "scales", "points3d", "centres_q", "centres_scale", "centres_f16",
+                    "proj"})
+
+
 def _write_npz(path: Path, arrays: dict[str, np.ndarray]) -> dict:
     """Write arrays to ``path`` (a fresh name), fsync; returns its manifest entry."""
     tmp = path.with_name(f".{path.name}.tmp")
     try:
         with open(tmp, "wb") as fh:
-            np.savez(fh, **arrays)
+            write_npz(fh, arrays, STORED)
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)
