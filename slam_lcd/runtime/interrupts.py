@@ -35,7 +35,7 @@ class Terminated(KeyboardInterrupt):
         self.signum = signum
 
 
-def _terminate(signum, frame):  # noqa: ARG001 - signal handler signature
+def _terminate(signum, frame):  # signal handler signature
     _received.append(signum)
     raise Terminated(signum)
 
@@ -111,7 +111,7 @@ def defer_sigint():
     held = {s: h for s, h in held.items() if _is_ours(s, h)}  # a custom handler (or SIG_IGN) owns the rest
     received: list[int] = []
 
-    def hold(signum, frame):  # noqa: ARG001 - signal handler signature
+    def hold(signum, frame):  # signal handler signature
         received.append(signum)
 
     installed = []
