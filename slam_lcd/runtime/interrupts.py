@@ -85,7 +85,7 @@ def exit_status(exc: BaseException | None = None) -> int:
     return 128 + signal.SIGINT
 
 
-def interrupt_behind(exc: BaseException) -> KeyboardInterrupt | None:
+def interrupt_behind(exc: BaseException | None) -> KeyboardInterrupt | None:
     """The Ctrl-C / SIGTERM that caused ``exc``, if any (an extension module whose initialisation
     the signal interrupted raises ``ImportError: initialization failed`` from it)."""
     seen = set()
@@ -198,7 +198,7 @@ def keep_lost_interrupts() -> None:
                 return
         previous(unraisable)
 
-    hook._slam_lcd_keeps_interrupts = True
+    hook._slam_lcd_keeps_interrupts = True  # type: ignore[attr-defined]  # a mark on the function object
     sys.unraisablehook = hook
 
 
