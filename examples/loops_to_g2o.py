@@ -16,9 +16,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from slam_lcd.backend.g2o import G2oEdge, write_g2o  # noqa: E402
-from slam_lcd.backend.loop_factors import closure_edges  # noqa: E402
-from slam_lcd.geometry import inv  # noqa: E402
+from slam_lcd.backend.g2o import G2oEdge, write_g2o
+from slam_lcd.backend.loop_factors import closure_edges
+from slam_lcd.geometry import inv
 
 
 def write_loops_g2o(path, ids: list[int], odometry: np.ndarray, odom_information: np.ndarray, closures) -> int:

@@ -24,15 +24,15 @@ from gtsam.symbol_shorthand import X
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from slam_lcd.config import load_config  # noqa: E402
-from slam_lcd.features import load_extractor  # noqa: E402
-from slam_lcd.io import open_log  # noqa: E402
-from slam_lcd.io.decode import decode_camera_info, decode_image, decode_pose  # noqa: E402
-from slam_lcd.io.tf import TfBuffer  # noqa: E402
-from slam_lcd.map import Map, extractor_meta  # noqa: E402
-from slam_lcd.pipeline import Pipeline  # noqa: E402
-from slam_lcd.sim import make_demo_log  # noqa: E402
-from slam_lcd.types import Keyframe  # noqa: E402
+from slam_lcd.config import load_config
+from slam_lcd.features import load_extractor
+from slam_lcd.io import open_log
+from slam_lcd.io.decode import decode_camera_info, decode_image, decode_pose
+from slam_lcd.io.tf import TfBuffer
+from slam_lcd.map import Map, extractor_meta
+from slam_lcd.pipeline import Pipeline
+from slam_lcd.sim import make_demo_log
+from slam_lcd.types import Keyframe
 
 
 def feed(pipe: Pipeline, log_path: Path) -> None:

@@ -28,12 +28,12 @@ from gtsam.symbol_shorthand import X
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from slam_lcd.backend import PoseGraph  # noqa: E402
-from slam_lcd.backend.config import BackendConfig  # noqa: E402
-from slam_lcd.geometry import inv, se3_exp  # noqa: E402
-from slam_lcd.lcd import LcdConfig, LoopDetector  # noqa: E402
-from slam_lcd.sim import simulate_odometry  # noqa: E402
-from slam_lcd.types import Keyframe, Trajectory  # noqa: E402
+from slam_lcd.backend import PoseGraph
+from slam_lcd.backend.config import BackendConfig
+from slam_lcd.geometry import inv, se3_exp
+from slam_lcd.lcd import LcdConfig, LoopDetector
+from slam_lcd.sim import simulate_odometry
+from slam_lcd.types import Keyframe, Trajectory
 
 # the user's own noise models
 ODOM_SIGMAS = np.array([1e-3, 1e-3, 0.01, 0.03, 0.03, 1e-3])  # per keyframe step, [rx ry rz tx ty tz]

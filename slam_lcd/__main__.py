@@ -15,7 +15,7 @@ from .runtime.interrupts import Terminated, exit_status, install_stop_signals, i
 
 def _forget_caught_keyboard_interrupt() -> None:
     """Clear CPython's record of a caught Ctrl-C in string-evaluated code (see the module docstring)."""
-    exec("None", {})  # noqa: S102 - a constant; the call itself is what clears the flag
+    exec("None", {})  # a constant; the call itself is what clears the flag
 
 
 install_stop_signals()  # SIGTERM / SIGHUP while the command line loads: one line too

@@ -232,7 +232,7 @@ def _import_in_background(module: str) -> None:
     def load():
         try:
             importlib.import_module(module)
-        except Exception:  # noqa: BLE001 - reported by the import at output time
+        except Exception:  # reported by the import at output time
             pass
 
     threading.Thread(target=load, name="slam-lcd-import", daemon=True).start()

@@ -253,7 +253,7 @@ def test_ctrl_c_and_sigterm_at_every_step_of_the_commit(world, tmp_path):
             continue
         try:
             assert_tidy_after_next_writer(d, _manifest(world.base)["features"])
-        except Exception as e:  # noqa: BLE001 - collected, reported together
+        except Exception as e:  # collected, reported together
             problems.append(f"{point} {sig} {'new' if new else 'append'}: next writer: {e}")
             continue
         if got == before and new:  # a new map's first append killed: the folder takes a new map

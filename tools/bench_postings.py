@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_scaling import LandmarkTable, PlaceStream  # noqa: E402
+from bench_scaling import LandmarkTable, PlaceStream
 
 
 class PerWordPostings:

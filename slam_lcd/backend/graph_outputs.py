@@ -5,7 +5,9 @@ A mixin so the graph's bookkeeping module stays about iSAM2; it reads the graph'
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -14,8 +16,25 @@ from .g2o import G2oEdge, write_g2o
 from .poses import values_to_array
 from .records import ACCEPTED
 
+if TYPE_CHECKING:
+    import gtsam
+
+    from .gate import ChainRelatives
+    from .records import LoopEntry
+
 
 class GraphOutputs:
+    # set by PoseGraph (annotations only: no class attribute is created)
+    _ids: list[int]
+    _keys: list[int]
+    _stamps: list[int]
+    _chain: ChainRelatives
+    _loops: list[LoopEntry]
+    _base_edges: list[G2oEdge]
+    _key_fn: Callable[[int], int] | None
+    _user_graph: bool
+    _values: Callable[[], gtsam.Values]
+
     def estimate(self) -> dict[int, np.ndarray]:
         """Current estimate: keyframe id -> corrected ``T_world_body`` (4x4)."""
         if not self._ids:

@@ -130,11 +130,11 @@ def main(argv: list[str] | None = None) -> int:
         print(stopped_line(f"slam-lcd {args.command}", e), file=sys.stderr)
         return exit_status(e)
     except ImportError as caught:  # a module imported late (torch, GTSAM) whose initialisation a signal stopped
-        e = interrupt_behind(caught)
-        if e is None or args.debug:
+        interrupted = interrupt_behind(caught)
+        if interrupted is None or args.debug:
             raise
-        print(stopped_line(f"slam-lcd {args.command}", e), file=sys.stderr)
-        return exit_status(e)
+        print(stopped_line(f"slam-lcd {args.command}", interrupted), file=sys.stderr)
+        return exit_status(interrupted)
 
 
 def console() -> int:

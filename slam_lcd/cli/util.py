@@ -10,7 +10,7 @@ def one_line_errors(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     """Make argparse usage errors one line on stderr with exit status 2 (no usage dump), with a
     near-miss suggestion for a mistyped subcommand, choice or option."""
 
-    def error(self, message: str):  # noqa: ANN001 - argparse's signature
+    def error(self, message: str):  # argparse's signature
         message = " ".join(str(message).split())
         print(f"{self.prog}: error: {message}{_suggest_choice(message)}", file=sys.stderr)
         sys.exit(2)

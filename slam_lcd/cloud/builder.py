@@ -171,7 +171,7 @@ class MapCloudBuilder:
                     self._take(kf)
                 else:
                     self.skips.add(self.failed, later=True)
-            except Exception as e:  # noqa: BLE001 - the map is a view of the run: said once, never raised into it
+            except Exception as e:  # the map is a view of the run: said once, never raised into it
                 self.failed = f"failed from keyframe {kf.id} on ({e.__class__.__name__}: {e})"
                 self.skips.add(self.failed, later=True)
             finally:

@@ -121,7 +121,8 @@ def stereo_points(camera: CameraModel, left: np.ndarray, right: np.ndarray, imag
     # disparities up to the one of min_depth, in the scaled image (a multiple of 16, as SGBM wants)
     need = camera.fx * abs(camera.baseline) / max(min_depth, 1e-3) / ms
     n_disp = int(min(max(16, 16 * np.ceil(need / 16)), 16 * max(1, (L.shape[1] // 2) // 16)))
-    sgbm = cv2.StereoSGBM_create(minDisparity=0, numDisparities=n_disp, blockSize=5, P1=8 * 25, P2=32 * 25,
+    # OpenCV's stubs leave this factory out
+    sgbm = cv2.StereoSGBM_create(minDisparity=0, numDisparities=n_disp, blockSize=5, P1=8 * 25, P2=32 * 25,  # type: ignore[attr-defined]
                                  uniquenessRatio=10, speckleWindowSize=100, speckleRange=2,
                                  mode=cv2.STEREO_SGBM_MODE_SGBM_3WAY)
     disp = sgbm.compute(L, R).astype(np.float32) / 16.0  # pixels of the matched image

@@ -12,12 +12,12 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg", force=False)
-import numpy as np  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
+import numpy as np
+from matplotlib.figure import Figure
 
-from ..files.atomic import atomic_path  # noqa: E402
-from ..types import Trajectory  # noqa: E402
-from .metrics import AteResult  # noqa: E402
+from ..files.atomic import atomic_path
+from ..types import Trajectory
+from .metrics import AteResult
 
 _PLANES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2)}
 

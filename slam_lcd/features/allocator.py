@@ -118,7 +118,7 @@ def trim_when_fragmented(limit: int = FREE_LIMIT, min_calls: int = TRIM_MIN_CALL
     if _calls_since_trim < min_calls:
         return False
     free = heap_free_bytes()
-    if free is None or free - _free_after_trim <= limit:
+    if free is None or _libc is None or free - _free_after_trim <= limit:  # free is None without libc
         return False
     _libc.malloc_trim(0)
     _calls_since_trim = 0

@@ -27,7 +27,7 @@ class Extractor(ABC):
 
     kind: str = ""
     descriptor_dim: int = 0
-    descriptor_dtype = np.float32
+    descriptor_dtype: type[np.generic] = np.float32
 
     def __init__(self, conf: FeaturesConfig):
         self.conf = conf
@@ -58,7 +58,8 @@ class OrbExtractor(Extractor):
 
     def __init__(self, conf: FeaturesConfig):
         super().__init__(conf)
-        self.orb = cv2.ORB_create(
+        # OpenCV's stubs leave this factory out
+        self.orb = cv2.ORB_create(  # type: ignore[attr-defined]
             nfeatures=conf.orb_n_features,
             scaleFactor=conf.orb_scale_factor,
             nlevels=conf.orb_n_levels,

@@ -59,7 +59,7 @@ class SuperPointExtractor(Extractor):
         super().__init__(conf)
         self.device = resolve_device(device)
         if model is None:
-            self.weights_path = resolve_weights(
+            self.weights_path: Path | None = resolve_weights(
                 weights or conf.weights,
                 cache=conf.cache_dir,
                 url=conf.weights_url,
@@ -79,7 +79,8 @@ class SuperPointExtractor(Extractor):
         self.model = model.eval().to(self.device)
         self._channels_last = self.device.type == "cpu" and conf.cpu_channels_last
         if self._channels_last:
-            self.model = self.model.to(memory_format=torch.channels_last)
+            # torch's stubs leave memory_format out of Module.to
+            self.model = self.model.to(memory_format=torch.channels_last)  # type: ignore[call-overload]
         self._trim_heap = self.device.type == "cpu" and conf.cpu_allocator == "retain"
         if self._trim_heap:
             retain_freed_memory()

@@ -166,6 +166,7 @@ class KeyframeSelector:
             raise UnsortedStampsError(f"stamp {stamp_ns} is earlier than the previous one ({prev.stamp})")
 
         kf = self.last_keyframe
+        assert kf is not None  # the first pose (prev is None above) made one
         T_prev_cur = inv(prev.T) @ T
         T_kf_cur = inv(kf.T_world_body) @ T
         # --- covariance of the motion since the last keyframe

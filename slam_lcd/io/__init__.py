@@ -8,7 +8,7 @@ and the trajectory-file functions of :mod:`.trajectory_files`.
 from . import trajectory_files as _tf_files
 from .log_trajectory import read_trajectory_from_log
 from .reader import LogMessage, LogReader, RawMessage, TopicInfo, open_log
-from .trajectory_files import *  # noqa: F401,F403
+from .trajectory_files import *  # noqa: F403
 
 __all__ = ["open_log", "LogReader", "LogMessage", "RawMessage", "TopicInfo", "read_trajectory_from_log",
            *_tf_files.__all__]

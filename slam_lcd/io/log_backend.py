@@ -8,7 +8,7 @@ A backend (:mod:`.rosbags_backend`, :mod:`.mcap_backend`) opens a log and return
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 from ..errors import CorruptLogError, stamp_text
 
@@ -18,7 +18,7 @@ TF_TYPE = "tf2_msgs/msg/TFMessage"
 class TopicInfo(NamedTuple):
     name: str
     msgtype: str  # e.g. 'sensor_msgs/msg/Image'
-    count: int
+    count: int  # type: ignore[assignment]  # a field named as tuple.count, which it hides
 
 
 class RawMessage(NamedTuple):
@@ -33,7 +33,7 @@ class LogMessage(NamedTuple):
     msgtype: str
     stamp: int  # ns, from the header (fallback: log time)
     log_time: int  # ns, when the message was recorded
-    msg: object  # rosbags message object
+    msg: Any  # rosbags message object: its attributes are the message type's fields
 
 
 @dataclass

@@ -40,7 +40,7 @@ def read_trajectory_from_log(
     messages. A NaN pose raises :class:`InvalidPoseError` naming the stamp.
     """
     own = not isinstance(path, LogReader)
-    reader = open_log(path, stamp_source) if own else path
+    reader = path if isinstance(path, LogReader) else open_log(path, stamp_source)
     try:
         if topic is None and not (parent_frame and child_frame):
             raise InputError("give a pose topic, or parent_frame and child_frame for a TF pair", reader.path)
@@ -56,6 +56,7 @@ def read_trajectory_from_log(
                     f"topic {name!r} carries {msgtype}, not a pose type ({', '.join(POSE_TYPES)})", reader.path
                 )
             return _from_topic(reader, name, with_covariance)
+        assert parent_frame and child_frame  # no topic: the check above required both
         return _from_tf(reader, parent_frame, child_frame)
     finally:
         if own:

@@ -91,7 +91,7 @@ class Prefetched(Iterator[T]):
             if batch and not self._put(batch):
                 return
             self._put(_END)
-        except BaseException as e:  # noqa: BLE001 - handed to the consumer, raised there
+        except BaseException as e:  # handed to the consumer, raised there
             if not batch or self._put(batch):  # the items read before it come first
                 self._put(_Failed(e))
         finally:
@@ -102,7 +102,7 @@ class Prefetched(Iterator[T]):
         if close is not None:
             try:
                 close()
-            except Exception:  # noqa: BLE001 - closing must not mask what happened
+            except Exception:  # closing must not mask what happened
                 pass
 
     def __iter__(self) -> Prefetched[T]:

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # the vocabulary's candidate type, for the annotation only
-    from ..vocab import LoopCandidate
+    from ..types import LoopCandidate
 
 
 @dataclass
@@ -33,7 +33,7 @@ class IslandMember:
     island_score: float
 
 
-def group_islands(candidates: Sequence, positions: dict[int, int], top_k: int, gap: int,
+def group_islands(candidates: Sequence[LoopCandidate], positions: dict[int, int], top_k: int, gap: int,
                   tries: int) -> list[IslandMember]:
     """Candidates (BoW order, best first) -> the members to verify, island by island.
 
@@ -46,7 +46,7 @@ def group_islands(candidates: Sequence, positions: dict[int, int], top_k: int, g
         return []
     ranked = list(enumerate(candidates))  # (BoW rank, candidate)
     ranked.sort(key=lambda rc: positions[rc[1].match_id])
-    islands: list[list[tuple[int, object]]] = []
+    islands: list[list[tuple[int, LoopCandidate]]] = []
     last_pos = None
     for rank, cand in ranked:
         pos = positions[cand.match_id]

@@ -23,6 +23,7 @@ import os
 import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import IO
 
 import numpy as np
 
@@ -63,7 +64,7 @@ class DescriptorStore:
         self._directory = directory
         self._arrays: dict[int, np.ndarray] = {}
         self._slots: dict[int, tuple[int, tuple[int, ...], np.dtype]] = {}
-        self._file = None
+        self._file: IO[bytes] | None = None
         self._end = 0
         self._sources: dict[int, Callable[[], np.ndarray]] = {}
 
@@ -104,6 +105,7 @@ class DescriptorStore:
             return self._arrays[key]
         offset, shape, dtype = self._slots[key]
         n = int(np.prod(shape)) * dtype.itemsize
+        assert self._file is not None  # a slot is made only after its bytes went into the file
         data = os.pread(self._file.fileno(), n, offset)
         if len(data) != n:
             raise OSError(f"short read from the descriptor store ({len(data)} of {n} bytes)")
@@ -117,6 +119,7 @@ class DescriptorStore:
         return self._end
 
     def close(self) -> None:
-        if getattr(self, "_file", None) is not None:  # also when __init__ raised
-            self._file.close()
+        file = getattr(self, "_file", None)  # also when __init__ raised
+        if file is not None:
+            file.close()
             self._file = None

@@ -35,7 +35,7 @@ class Terminated(KeyboardInterrupt):
         self.signum = signum
 
 
-def _terminate(signum, frame):  # noqa: ARG001 - signal handler signature
+def _terminate(signum, frame):  # signal handler signature
     _received.append(signum)
     raise Terminated(signum)
 
@@ -85,7 +85,7 @@ def exit_status(exc: BaseException | None = None) -> int:
     return 128 + signal.SIGINT
 
 
-def interrupt_behind(exc: BaseException) -> KeyboardInterrupt | None:
+def interrupt_behind(exc: BaseException | None) -> KeyboardInterrupt | None:
     """The Ctrl-C / SIGTERM that caused ``exc``, if any (an extension module whose initialisation
     the signal interrupted raises ``ImportError: initialization failed`` from it)."""
     seen = set()
@@ -111,7 +111,7 @@ def defer_sigint():
     held = {s: h for s, h in held.items() if _is_ours(s, h)}  # a custom handler (or SIG_IGN) owns the rest
     received: list[int] = []
 
-    def hold(signum, frame):  # noqa: ARG001 - signal handler signature
+    def hold(signum, frame):  # signal handler signature
         received.append(signum)
 
     installed = []
@@ -198,7 +198,7 @@ def keep_lost_interrupts() -> None:
                 return
         previous(unraisable)
 
-    hook._slam_lcd_keeps_interrupts = True
+    hook._slam_lcd_keeps_interrupts = True  # type: ignore[attr-defined]  # a mark on the function object
     sys.unraisablehook = hook
 
 

@@ -32,7 +32,7 @@ def quiet_opencv() -> None:
     import cv2
 
     try:
-        cv2.setLogLevel(0)  # LOG_LEVEL_SILENT
+        cv2.setLogLevel(0)  # type: ignore[attr-defined]  # LOG_LEVEL_SILENT; OpenCV's stubs leave it out
     except AttributeError:  # pragma: no cover - older OpenCV
         cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
     _opencv_quiet = True

@@ -45,6 +45,7 @@ def dense_disparity(left, right) -> np.ndarray | None:
     if left is None or right is None:
         return None
     L, R = to_gray_uint8(left), to_gray_uint8(right)
-    sgbm = cv2.StereoSGBM_create(minDisparity=0, numDisparities=128, blockSize=5, P1=8 * 25, P2=32 * 25,
+    # OpenCV's stubs leave this factory out
+    sgbm = cv2.StereoSGBM_create(minDisparity=0, numDisparities=128, blockSize=5, P1=8 * 25, P2=32 * 25,  # type: ignore[attr-defined]
                                  uniquenessRatio=10, speckleWindowSize=100, speckleRange=2)
     return sgbm.compute(L, R).astype(np.float64) / 16.0
