@@ -15,6 +15,7 @@ every loop and visual link, so its size still follows the keyframes of every vis
 from __future__ import annotations
 
 import logging
+from collections.abc import Collection
 from dataclasses import replace
 
 import numpy as np
@@ -71,7 +72,7 @@ def _descriptors(s: SessionKeyframes, i: int):
 
 
 def judge_session(meta: dict, sess: SessionKeyframes, component: int, poses: dict[int, np.ndarray],
-                  kept: list[Kept], conf, now: int, next_place: int, used: set[int] = frozenset(),
+                  kept: list[Kept], conf, now: int, next_place: int, used: Collection[int] = (),
                   only: np.ndarray | None = None) -> Verdicts:
     """Judge a session's keyframes (module docstring of :mod:`slam_lcd.map.places`); ``used``: map keyframes
     its accepted loops matched (marked used now, before the judging, so a place's variant in use stays);
