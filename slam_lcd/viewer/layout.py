@@ -27,7 +27,9 @@ def blueprint(*, images: bool, ate: bool, map_folder: bool = False):
         texts.append(rrb.TextLogView(origin="loops/events", name="loop events"))
     side.append(rrb.Tabs(*texts))
     return rrb.Blueprint(
-        rrb.Horizontal(rrb.Spatial3DView(origin="world", name="map frame" if map_folder else "3-D"),
+        # the odometry's cloud is logged but not drawn at first: two clouds on top of each other hide both
+        rrb.Horizontal(rrb.Spatial3DView(origin="world", name="map frame" if map_folder else "3-D",
+                                         contents=["+ /world/**", "- /world/map/odometry"]),
                        rrb.Vertical(*side), column_shares=[3, 2]),
         rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"),
         rrb.TimePanel(state="collapsed" if map_folder else "expanded"),
