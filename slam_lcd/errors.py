@@ -106,6 +106,10 @@ class NotBuiltError(SlamLcdError):
     """A feature that is not implemented yet; raised instead of faking a result."""
 
 
+class ViewerMissingError(SlamLcdError):
+    """The optional viewer extra (rerun-sdk) is not installed; the message says how to install it."""
+
+
 class PipelineError(SlamLcdError):
     """A run that cannot proceed (e.g. log without the image topic it needs)."""
 

@@ -88,6 +88,7 @@ def run_log(
     session_name: str | None = None,
     map_mode: str = "append",
     surfaces=None,
+    live=None,
 ) -> RunResult:
     """Correct the trajectory of ``log_path`` with loop closures; write outputs into ``out_dir``.
 
@@ -110,7 +111,8 @@ def run_log(
     read-only) is not changed; each keyframe is localised against it (``result.localization``).
     ``surfaces``: ``(name, {ground-truth frame: Rectangles})``, the true surfaces of the world the log was
     rendered in (the demo world: :func:`slam_lcd.sim.demo_surfaces`): the map cloud's points are measured
-    against those in the ground truth's frame.
+    against those in the ground truth's frame. ``live`` (a :class:`slam_lcd.viewer.live.LiveRecorder`) sees
+    each keyframe and verified loop as the run goes, beside the loop pictures' album.
     """
     cfg = validate_config(config or Config())
     log_path = Path(log_path)
@@ -161,7 +163,7 @@ def run_log(
             if copy_topics:  # the topics corrected.mcap copies, kept undecoded from the one pass over the log
                 spool = RawSpool(outputs.staging / ".corrected_mcap_spool", copied_topics(copy_topics))
             map_cloud = map_cloud_builder(cfg, topics, stereo, outputs, result, log_path)
-            pipe = make_pipeline(cfg, extractor, vocab, log_path, topics, album,
+            pipe = make_pipeline(cfg, extractor, vocab, log_path, topics, album if live is None else live.sink(album),
                                   rectified=stereo is not None and stereo.rectifier is not None, map=map,
                                   map_mode=map_mode, map_cloud=map_cloud)
             if calibrated is not None:  # the calibration file's camera (CameraInfo is not read then)

@@ -35,6 +35,7 @@ COMMAND_MODULES = [
     "export",
     "export_map",
     "weights",
+    "view",
 ]
 
 # flags every command takes, before or after the subcommand name

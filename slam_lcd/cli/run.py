@@ -118,6 +118,10 @@ def register(sub) -> None:
     p.add_argument("--truth-world", type=int, default=None, metavar="SEED",
                    help="the log was rendered from the demo world of this seed (make-demo-log --seed / --world-seed):"
                         " map.ply's points are measured against its true surfaces too (default: none)")
+    p.add_argument("--rerun", nargs="?", const="spawn", default=None, metavar="spawn|FILE.rrd",
+                   help="log keyframes (image, keypoints, pose) and loops to Rerun while the run goes, then the run "
+                        "folder's contents: 'spawn' (the default when no value is given) opens the native viewer, "
+                        "FILE.rrd writes a recording (default: none; needs `pip install 'slam-lcd[viewer]'`)")
     add_config_args(p)
     p.set_defaults(func=run)
 
@@ -133,6 +137,8 @@ def run(args) -> int:
     if len(logs) > 1 and args.map is None:
         raise InputError(f"{len(logs)} logs given: several logs go into one map (--map DIR); "
                          "to run them separately use `slam-lcd batch`")
+    if len(logs) > 1 and args.rerun is not None:
+        raise InputError(f"--rerun records one run: give one log ({len(logs)} given)")
     if len(logs) > 1 and args.session_name:
         raise InputError("--session-name names one session: give it with one log")
     if args.map is None:
@@ -178,12 +184,43 @@ def _run_one(args, cfg, log_path: Path, out: Path, m, extractor=None):
     from ..runner import run_log
 
     inputs = config_inputs(args)
+    live = _live(args, log_path, out)
+    try:
+        res = _run_log(run_log, args, cfg, log_path, out, m, extractor, inputs, live)
+    except BaseException:
+        if live is not None:
+            live.discard()
+        raise
+    if live is not None:
+        saved = live.finish(out)
+        if saved is not None:
+            res.outputs.append(f"{saved} (Rerun recording)")
+    return res
+
+
+def _live(args, log_path: Path, out: Path):
+    """The live Rerun recorder of ``--rerun`` (its file checked against every input first), or None."""
+    if args.rerun is None:
+        return None
+    from ..viewer.live import SPAWN, LiveRecorder
+
+    if args.rerun != SPAWN:
+        from ..files.atomic import check_no_clash
+        from ..viewer.targets import check_rrd_target
+
+        inputs = {"the log": log_path, "--gt": args.gt, "--map": args.map, **run_input_paths(args)}
+        check_rrd_target(args.rerun, inputs)
+        check_no_clash({"--rerun": args.rerun, "--out": out}, {}, merged=[out])
+    return LiveRecorder(args.rerun, log_path.stem)
+
+
+def _run_log(run_log, args, cfg, log_path, out, m, extractor, inputs, live):
     return run_log(log_path, out, cfg, image_topic=args.image_topic, odom_topic=args.odom_topic,
                    depth_topic=args.depth_topic, gt_topic=args.gt_topic, gt_file=args.gt,
                    progress=not args.no_progress, write_mcap=not args.no_mcap, input_paths=inputs,
                    command_line=getattr(args, "command_line", None), overrides=list(args.overrides),
                    calib=args.calib, right_topic=args.right_topic, map=m, extractor=extractor,
-                   session_name=args.session_name, surfaces=_truth(args))
+                   session_name=args.session_name, surfaces=_truth(args), live=live)
 
 
 def _truth(args):

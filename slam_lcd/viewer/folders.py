@@ -1,0 +1,225 @@
+"""What `slam-lcd view` shows, read from folders slam-lcd already wrote (no rerun here, no re-run).
+
+Why read and checked before anything is logged: a folder that is neither a run nor a map, or a
+run folder with a file missing, is one line naming the path and the problem (an
+:class:`~slam_lcd.errors.InputError`), and no recording is started. The readers are the
+library's own (TUM files, ``map.ply``, the map's manifest and graph); ``loops.csv`` is read
+against the header the runner writes (:func:`slam_lcd.outputs.loops.loop_columns`).
+
+The run folder holds no keyframe images (the loop pictures' album is removed before the set is
+published), so a run folder gives camera frusta without images; ``slam-lcd run --rerun`` logs
+each keyframe's image and keypoints while it still has them (:mod:`.live`).
+"""
+from __future__ import annotations
+
+import csv
+import json
+import logging
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import FileMissingError, InputError, SlamLcdError
+from ..types import Trajectory
+
+log = logging.getLogger(__name__)
+
+# a run folder without these is not one `view` can show
+RUN_FILES = ("report.json", "odometry.tum", "corrected.tum", "keyframes_corrected.tum", "loops.csv")
+CLOUDS = {"corrected": "map.ply", "odometry": "map_odometry.ply"}
+LOCALIZATION_FILES = ("report.json", "keyframes_localized.tum")
+
+
+@dataclass
+class RunFolder:
+    """A finished run's outputs: trajectories, loops (``loops.csv`` rows), clouds, camera, ATE over time."""
+
+    root: Path
+    report: dict
+    odometry: Trajectory
+    corrected: Trajectory
+    keyframes: Trajectory
+    loops: list[dict]
+    clouds: dict = field(default_factory=dict)  # "corrected" / "odometry" -> Cloud
+    camera: dict | None = None  # report.json's map_cloud.sensor.camera (intrinsics, T_body_camera)
+    ate: dict = field(default_factory=dict)  # "odometry" / "corrected" -> (stamps ns, errors m)
+    notes: list[str] = field(default_factory=list)
+
+
+@dataclass
+class MapSession:
+    name: str
+    keyframes: Trajectory  # in the map frame (its component's)
+    ids: np.ndarray
+    component: int
+
+
+@dataclass
+class MapFolder:
+    """A map folder: each session's keyframes in the map frame and every loop of the joint graph."""
+
+    root: Path
+    sessions: list[MapSession]
+    loops: list[dict]  # query / match ids and sessions, accepted, reason, inter_session
+
+
+@dataclass
+class LocalizationFolder:
+    root: Path
+    name: str
+    keyframes: Trajectory  # keyframes_localized.tum (map frame)
+    localized: Trajectory | None  # localized.tum, every odometry stamp
+
+
+def folder_kind(path: str | Path) -> str:
+    """``'run'`` or ``'map'``; anything else is an :class:`InputError` naming the path."""
+    from ..map.store import is_map
+
+    p = Path(path)
+    if not p.exists():
+        raise FileMissingError("no such folder", p)
+    if not p.is_dir():
+        raise InputError("not a folder: give a run output folder (slam-lcd run --out) or a map folder (--map)", p)
+    if is_map(p):
+        return "map"
+    if (p / "report.json").is_file():
+        return "run"
+    raise InputError("neither a slam-lcd run folder (no report.json) nor a map folder (no map.json)", p)
+
+
+def _report(root: Path) -> dict:
+    path = root / "report.json"
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError, UnicodeDecodeError) as e:
+        raise InputError(f"not a readable slam-lcd report ({e.__class__.__name__})", path) from None
+    if not isinstance(doc, dict) or "schema" not in doc:
+        raise InputError("not a slam-lcd report (no schema)", path)
+    return doc
+
+
+def _tum(path: Path) -> Trajectory:
+    from ..io.trajectory_files import read_tum
+
+    return read_tum(path)
+
+
+def read_loops_csv(path: Path) -> list[dict]:
+    """``loops.csv`` rows as dicts (strings), its header checked against the runner's."""
+    from ..outputs.loops import loop_columns
+
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            reader = csv.DictReader(fh)
+            missing = [c for c in ("query_id", "match_id", "query_stamp_ns", "match_stamp_ns", "backend_verdict")
+                       if c not in (reader.fieldnames or [])]
+            if missing:
+                raise InputError(f"not a slam-lcd loops.csv (no column {', '.join(missing)}; expected "
+                                 f"{len(loop_columns())} columns)", path)
+            return list(reader)
+    except (OSError, UnicodeDecodeError, csv.Error) as e:
+        raise InputError(f"cannot read loops.csv ({e})", path) from None
+
+
+def read_run(root: str | Path, *, ground_truth: bool = True) -> RunFolder:
+    """Read run folder ``root`` (typed errors naming the file). ``ground_truth``: read the log's ground
+    truth (a topic of the log or a file, as report.json names it) for the ATE over time, when it is there."""
+    from ..cloud.files import read_cloud
+
+    root = Path(root)
+    missing = [n for n in RUN_FILES if not (root / n).is_file()]
+    if missing:
+        raise InputError(f"not a complete slam-lcd run folder (no {', '.join(missing)})", root)
+    report = _report(root)
+    run = RunFolder(root, report, _tum(root / "odometry.tum"), _tum(root / "corrected.tum"),
+                    _tum(root / "keyframes_corrected.tum"), read_loops_csv(root / "loops.csv"))
+    listed = set(report.get("outputs") or [])
+    for kind, name in CLOUDS.items():
+        if (root / name).is_file():
+            run.clouds[kind] = read_cloud(root / name)
+        elif name in listed:
+            raise InputError(f"the run's report lists {name} but the folder lacks it", root / name)
+    sensor = (report.get("map_cloud") or {}).get("sensor") or {}
+    run.camera = sensor.get("camera") or None
+    if run.camera is None:
+        run.notes.append("the run recorded no camera model: keyframes are shown as poses without frusta")
+    if ground_truth:
+        _add_ate(run)
+    return run
+
+
+def _ground_truth(report: dict) -> Trajectory | None:
+    """The run's ground truth as report.json names it (``file PATH`` / ``topic NAME`` of its log), or None."""
+    from ..sensors.trajectories import load_trajectory_source
+
+    source = (report.get("input") or {}).get("gt_source") or ""
+    kind, _, name = source.partition(" ")
+    if kind == "file":
+        return load_trajectory_source(name)
+    if kind == "topic":
+        log_path = (report.get("input") or {}).get("log")
+        if not log_path or not Path(log_path).exists():
+            raise FileMissingError("the run's log is not here (its ground truth is not read)", log_path or "?")
+        return load_trajectory_source(f"{log_path}:{name}")
+    return None
+
+
+def _add_ate(run: RunFolder) -> None:
+    """Per-pose ATE of the odometry and the corrected trajectory, with the run's own evaluation settings."""
+    from ..eval.config import EvalConfig
+    from ..eval.metrics import ate_with_config
+
+    ev = run.report.get("eval") or {}
+    try:
+        gt = _ground_truth(run.report)
+        if gt is None:
+            run.notes.append("no ground truth: no ATE over time")
+            return
+        conf = EvalConfig(align=str(ev.get("alignment", "se3")).split(";")[0].strip() or "se3",
+                          t_max_diff=float(ev.get("t_max_diff_s", 0.02)), t_offset=float(ev.get("t_offset_s", 0.0)))
+        for kind, traj in (("odometry", run.odometry), ("corrected", run.corrected)):
+            res = ate_with_config(gt, traj, conf)
+            run.ate[kind] = (np.asarray(res.stamps, np.int64), np.asarray(res.errors, float))
+    except (SlamLcdError, ValueError) as e:  # a moved log, a ground truth that does not match: said, not fatal
+        run.notes.append(f"ATE over time not shown: {e}")
+        log.info("ATE over time not shown: %s", e)
+
+
+def read_map(root: str | Path) -> MapFolder:
+    """Map folder ``root``, read only (no lock): sessions in the map frame and the joint graph's loops."""
+    from ..map.session_map import Map
+
+    root = Path(root)
+    m = Map.open(root)
+    try:
+        session_of: dict[int, str] = {}
+        sessions = []
+        for i, meta in enumerate(m.manifest.sessions):
+            s = m.sessions[i]
+            sessions.append(MapSession(meta["name"], m.session_trajectory(i), np.asarray(s.ids, np.int64).copy(),
+                                       int(meta.get("component", 0))))
+            session_of.update({int(k): meta["name"] for k in s.ids})
+        g = m.graph
+        loops = []
+        for q, t, ok, why in zip(g.loop_query, g.loop_match, g.loop_accepted, g.loop_reason, strict=True):
+            qs, ts = session_of.get(int(q), "?"), session_of.get(int(t), "?")
+            loops.append({"query_id": int(q), "match_id": int(t), "query_session": qs, "match_session": ts,
+                          "accepted": bool(ok), "reason": str(why), "inter_session": qs != ts})
+    finally:
+        m.close()
+    return MapFolder(root, sessions, loops)
+
+
+def read_localization(root: str | Path) -> LocalizationFolder:
+    """A ``slam-lcd localize`` output folder: its keyframes (and every stamp) in the map frame."""
+    root = Path(root)
+    if not root.is_dir():
+        raise FileMissingError("no such localize output folder", root)
+    missing = [n for n in LOCALIZATION_FILES if not (root / n).is_file()]
+    if missing:
+        raise InputError(f"not a slam-lcd localize output folder with localised keyframes (no {', '.join(missing)})",
+                         root)
+    full = root / "localized.tum"
+    return LocalizationFolder(root, root.name, _tum(root / "keyframes_localized.tum"),
+                              _tum(full) if full.is_file() else None)
