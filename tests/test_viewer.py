@@ -15,7 +15,7 @@ import pytest
 
 pytest.importorskip("rerun", reason="the viewer extra (rerun-sdk) is not installed")
 
-from bad_input_files import assert_one_line, leftovers, run_cli, sha256_tree  # noqa: E402
+from bad_input_files import assert_one_line, leftovers, run_cli, sha256_tree
 
 ORB = ["--features", "orb", "--no-feature-cache", "--no-progress"]
 
