@@ -199,6 +199,7 @@ def run_log(
             gt_traj = gt_traj_from_log
         if gt_traj is None:
             result.gt_source = None  # a ground-truth topic without a message
+        result.ground_truth = gt_traj
         if map is not None and map_mode == "localize":
             from .map.summary import localisation_report
 

@@ -192,7 +192,7 @@ def _run_one(args, cfg, log_path: Path, out: Path, m, extractor=None):
             live.discard()
         raise
     if live is not None:
-        saved = live.finish(out)
+        saved = live.finish(out, res.ground_truth)
         if saved is not None:
             res.outputs.append(f"{saved} (Rerun recording)")
     return res

@@ -5,6 +5,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..eval.metrics import ratio_or_none
+from ..types import Trajectory
 
 
 @dataclass
@@ -49,6 +50,8 @@ class RunResult:
     map_cloud: dict | None = None
     # the sensor the cloud was built from (kind, topics, camera, mounting, rectification): export-map rebuilds it
     map_cloud_sensor: dict | None = field(default=None, repr=False)
+    # the ground truth the run evaluated against (a Trajectory), or None; what a viewer of the run reuses
+    ground_truth: Trajectory | None = field(default=None, repr=False)
 
     @property
     def gt_position_only(self) -> bool:

@@ -122,9 +122,10 @@ def read_loops_csv(path: Path) -> list[dict]:
         raise InputError(f"cannot read loops.csv ({e})", path) from None
 
 
-def read_run(root: str | Path, *, ground_truth: bool = True) -> RunFolder:
+def read_run(root: str | Path, *, ground_truth: bool = True, gt: Trajectory | None = None) -> RunFolder:
     """Read run folder ``root`` (typed errors naming the file). ``ground_truth``: read the log's ground
-    truth (a topic of the log or a file, as report.json names it) for the ATE over time, when it is there."""
+    truth (a topic of the log or a file, as report.json names it) for the ATE over time, when it is there;
+    ``gt``: that ground truth already in hand (the run that just wrote the folder), not read again."""
     from ..cloud.files import read_cloud
 
     root = Path(root)
@@ -145,7 +146,7 @@ def read_run(root: str | Path, *, ground_truth: bool = True) -> RunFolder:
     if run.camera is None:
         run.notes.append("the run recorded no camera model: keyframes are shown as poses without frusta")
     if ground_truth:
-        _add_ate(run)
+        _add_ate(run, gt)
     return run
 
 
@@ -165,18 +166,19 @@ def _ground_truth(report: dict) -> Trajectory | None:
     return None
 
 
-def _add_ate(run: RunFolder) -> None:
+def _add_ate(run: RunFolder, gt: Trajectory | None = None) -> None:
     """Per-pose ATE of the odometry and the corrected trajectory, with the run's own evaluation settings."""
     from ..eval.config import EvalConfig
     from ..eval.metrics import ate_with_config
 
     ev = run.report.get("eval") or {}
     try:
-        gt = _ground_truth(run.report)
+        gt = gt if gt is not None else _ground_truth(run.report)
         if gt is None:
             run.notes.append("no ground truth: no ATE over time")
             return
-        conf = EvalConfig(align=str(ev.get("alignment", "se3")).split(";")[0].strip() or "se3",
+        align = str(ev.get("alignment", "se3")).split(";")[0].strip()
+        conf = EvalConfig(align=align if align in ("none", "se3", "sim3", "scale") else "se3",  # type: ignore[arg-type]
                           t_max_diff=float(ev.get("t_max_diff_s", 0.02)), t_offset=float(ev.get("t_offset_s", 0.0)))
         for kind, traj in (("odometry", run.odometry), ("corrected", run.corrected)):
             res = ate_with_config(gt, traj, conf)

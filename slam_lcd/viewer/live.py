@@ -34,24 +34,53 @@ class LiveRecorder:
     """A recording fed while a run goes: ``target`` is ``'spawn'`` (the native viewer) or an ``.rrd`` path."""
 
     def __init__(self, target: str, name: str):
-        rr = require_rerun()
-        from .layout import blueprint
-        from .targets import AtomicRrd, check_display, new_stream
+        import importlib.util
+        import threading
 
-        self.file: AtomicRrd | None = None
-        bp = blueprint(images=True, ate=True)
-        self.rec = new_stream(name)
+        from ..errors import ViewerMissingError
+        from . import INSTALL_HINT
+        from .targets import AtomicRrd, check_display
+
+        if importlib.util.find_spec("rerun") is None:  # said now, before the run starts, not at its first keyframe
+            raise ViewerMissingError(f"the Rerun viewer needs rerun-sdk, which is not installed: {INSTALL_HINT}")
         if target == SPAWN:
             check_display()
-            self.rec.spawn(default_blueprint=bp)
-        else:
-            self.file = AtomicRrd(target)
-            self.rec.set_sinks(rr.FileSink(self.file.tmp), default_blueprint=bp)
-        self.rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        self.file: AtomicRrd | None = None if target == SPAWN else AtomicRrd(target)
         self.positions: dict[int, np.ndarray] = {}
         self.loops: list[np.ndarray] = []
         self.failed: str | None = None
         self.keyframes = 0
+        self._setup_error: BaseException | None = None
+        # importing rerun and building the layout take about 0.6 s: done beside the run's own start
+        # (reading the log's index, loading the model), not before it
+        self._setup = threading.Thread(target=self._open_stream, args=(target, name), name="rerun-setup",
+                                       daemon=True)
+        self._setup.start()
+
+    def _open_stream(self, target: str, name: str) -> None:
+        try:
+            rr = require_rerun()
+            from .layout import blueprint
+            from .targets import new_stream
+
+            bp = blueprint(images=True, ate=True)
+            rec = new_stream(name)
+            if self.file is None:
+                rec.spawn(default_blueprint=bp)
+            else:
+                rec.set_sinks(rr.FileSink(self.file.tmp), default_blueprint=bp)
+            rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+            self._rec = rec
+        except BaseException as e:  # raised where the stream is first used
+            self._setup_error = e
+
+    @property
+    def rec(self):
+        """The recording stream, once the setup thread has opened it (its error raised here)."""
+        self._setup.join()
+        if self._setup_error is not None:
+            raise self._setup_error
+        return self._rec
 
     # ------------------------------------------------------------------ the pipeline's side
     def sink(self, album=None) -> _Tee:
@@ -101,27 +130,38 @@ class LiveRecorder:
         log.warning("rerun: live logging stopped (%s); the run goes on", self.failed)
 
     # ------------------------------------------------------------------ the end of the run
-    def finish(self, out_dir: str | Path) -> Path | None:
-        """Add the run folder's contents, close the stream and (a file) rename it into place; its path or None."""
+    def finish(self, out_dir: str | Path, gt=None) -> Path | None:
+        """Add the run folder's contents, close the stream and (a file) rename it into place; its path or None.
+
+        ``gt``: the ground truth the run evaluated against (``RunResult.ground_truth``): reading it
+        again from the log would cost as much as a tenth of the run."""
         from ..errors import SlamLcdError
         from .folders import read_run
         from .record import log_run
         from .targets import close
 
         try:
-            run = read_run(out_dir)
+            rec = self.rec
+        except Exception as e:  # the stream never opened (a viewer that would not start): the run stands
+            self.stop(e)
+            self.discard()
+            return None
+        try:
+            run = read_run(out_dir, gt=gt)
         except SlamLcdError as e:  # an interrupted run's partial set: the live part is kept
             log.warning("rerun: the run folder is not added to the recording (%s)", e)
         else:
-            log_run(self.rec, run)
-        close(self.rec)
+            log_run(rec, run)
+        close(rec)
         return self.file.commit() if self.file is not None else None
 
     def discard(self) -> None:
         from .targets import close
 
         try:
-            close(self.rec)
+            self._setup.join()
+            if self._setup_error is None:
+                close(self._rec)
         finally:
             if self.file is not None:
                 self.file.discard()

@@ -115,17 +115,28 @@ def _endpoint_frames(run: RunFolder) -> dict[str, tuple[np.ndarray, np.ndarray]]
     return frames
 
 
+def _loop_ends(rows: list[dict], frames: dict[str, tuple[np.ndarray, np.ndarray]]) -> list[tuple]:
+    """Each loop's query and match positions, interpolated at their stamps (one call per session: a
+    call per loop cost a second on the 2-lap demo's candidates)."""
+    q = interpolate_poses(*frames[""], np.array([int(r["query_stamp_ns"]) for r in rows], np.int64))[:, :3, 3] \
+        if rows else np.zeros((0, 3))
+    m = np.zeros((len(rows), 3))
+    sessions = np.array([r.get("match_session") or "" for r in rows])
+    for s in set(sessions.tolist()):
+        idx = np.flatnonzero(sessions == s)
+        stamps = np.array([int(rows[i]["match_stamp_ns"]) for i in idx], np.int64)
+        m[idx] = interpolate_poses(*frames[s], stamps)[:, :3, 3]
+    return list(zip(q, m, strict=True))
+
+
 def log_run_loops(rec, run: RunFolder) -> None:
     """``loops.csv`` as segments coloured by verdict, any-values, a text line per loop and a table."""
     rr = require_rerun()
     frames = _endpoint_frames(run)
     groups: dict[str, list] = {"accepted": [], "rejected": []}
-    for r in run.loops:
-        session = r.get("match_session") or ""
-        if session not in frames:
-            continue  # an earlier session the run folder does not hold (said in the table's note)
-        q = interpolate_poses(*frames[""], np.array([int(r["query_stamp_ns"])], np.int64))[0, :3, 3]
-        m = interpolate_poses(*frames[session], np.array([int(r["match_stamp_ns"])], np.int64))[0, :3, 3]
+    drawn = [r for r in run.loops if (r.get("match_session") or "") in frames]  # the others: said in the table
+    ends = _loop_ends(drawn, frames)
+    for r, (q, m) in zip(drawn, ends, strict=True):
         ok = r.get("backend_verdict") == "accepted"
         groups["accepted" if ok else "rejected"].append((r, q, m))
     for verdict, rows in groups.items():
