@@ -21,7 +21,17 @@ import pytest
 from bad_input_files import REPO, run_cli
 
 from slam_lcd.map.config import MapConfig
-from slam_lcd.map.places import NEW_PLACE, REDUNDANT, VARIANT, Kept, judge, match_ratio
+from slam_lcd.map.places import (
+    NEW_PLACE,
+    REDUNDANT,
+    VARIANT,
+    Kept,
+    Ratios,
+    appearance_of,
+    familiarity,
+    judge,
+    match_ratio,
+)
 
 ORB = ["--features", "orb", "--no-mcap", "--no-progress", "--set", "run.plots=false",
        "--set", "run.loop_pictures=false", "--set", "lcd.top_k=1"]
@@ -56,6 +66,50 @@ def test_match_ratio_separates_the_same_view_from_another():
     assert match_ratio(a, _desc(3)) < 0.05
     bits = np.random.default_rng(4).integers(0, 256, (100, 32), dtype=np.uint8)
     assert match_ratio(bits, bits) == 1.0
+
+
+def _route(kind: str, first_id: int, shift_m: float = 0.0) -> list:
+    """A route of six views 0.4 m apart along a wall of 300 points; each view sees 100 of them, 30 on from
+    the last. ``day`` and ``night`` describe each point differently except for 45 % of the points (what
+    lighting leaves alike): night against day at one pose shares 0.45, night against night 0.4 m on 0.7."""
+    rng = np.random.default_rng(7)
+    day = rng.normal(size=(300, 64)).astype(np.float32)
+    night = np.where(rng.random((300, 1)) < 0.45, day, rng.normal(size=(300, 64)).astype(np.float32))
+    pts = {"day": day, "night": night}[kind]
+    pts = pts / np.linalg.norm(pts, axis=1, keepdims=True)
+    return [(first_id + i, _pose(0.4 * i + shift_m), (lambda d: (lambda: d))(pts[30 * i: 30 * i + 100]))
+            for i in range(6)]
+
+
+def _judged(route, kept, conf, now):
+    ratios = Ratios()
+    known, own = familiarity(route, 0, kept, conf, ratios)
+    look, fresh = appearance_of(known, own, kept, conf)
+    return look, fresh, judge(route, 0, kept, conf, now, max((k.place for k in kept), default=-1) + 1, look, ratios)
+
+
+def test_a_session_in_another_appearance_keeps_variants_the_next_one_matches():
+    """Night in a map of days: each night view shares 0.45 with the day view at its pose (a keyframe alone
+    looks redundant at map.redundant_match_ratio 0.3), but the session as a whole matches the days far
+    less than its own views match each other: it founds appearance 1 and keeps night variants, which
+    the next night matches; judged against the days, as a keyframe-by-keyframe rule would, it keeps none."""
+    conf = MapConfig()
+    kept: list[Kept] = []
+    look, fresh, v = _judged(_route("day", 0), kept, conf, 1)
+    assert (look, fresh) == (0, False) and NEW_PLACE in v.status.values()
+    days = {k.kf_id for k in kept}
+    without = judge(_route("night", 100), 0, list(kept), conf, 2, 10, appearance=0)
+    assert {without.matched.get(100), without.matched.get(103)} == days  # the day views' places: no night variant
+    look, fresh, v = _judged(_route("night", 100), kept, conf, 2)
+    assert (look, fresh) == (1, True)
+    assert v.status[100] == v.status[103] == VARIANT and not set(v.matched.values()) & days
+    nights = {k.kf_id for k in kept if k.appearance == 1}
+    assert nights and nights <= set(range(100, 106))
+    look, fresh, v = _judged(_route("night", 200, shift_m=0.1), kept, conf, 3)
+    assert (look, fresh) == (1, False)
+    assert list(v.status.values()).count(REDUNDANT) >= 4 and set(v.matched.values()) <= nights
+    look, fresh, v = _judged(_route("day", 300, shift_m=0.1), kept, conf, 4)
+    assert (look, fresh) == (0, False) and set(v.matched.values()) <= days
 
 
 def test_judge_new_place_redundant_variant_and_eviction():

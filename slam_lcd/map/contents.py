@@ -124,9 +124,12 @@ class MapGraph:
     # (sessions in the map) at which it was last matched or added; None: a map that keeps every keyframe
     kf_place: np.ndarray | None = None  # (N,) int64
     kf_last_used: np.ndarray | None = None  # (N,) int64
+    # each kept keyframe's appearance (slam_lcd.map.places: sessions that look alike share one; -1: not
+    # kept); None: a map without it, whose kept keyframes are all of one appearance
+    kf_appearance: np.ndarray | None = None  # (N,) int64
 
     ARRAYS = ("kf_ids", "T_map", "loop_query", "loop_match", "loop_T", "loop_info", "loop_accepted", "loop_reason")
-    OPTIONAL = ("kf_place", "kf_last_used")
+    OPTIONAL = ("kf_place", "kf_last_used", "kf_appearance")
 
     def arrays(self) -> dict[str, np.ndarray]:
         """Every array to write (the optional ones where present), in the file's compact forms.

@@ -21,7 +21,7 @@ from dataclasses import replace
 import numpy as np
 
 from .contents import REMOVED, MapGraph, SessionKeyframes
-from .places import Kept, Ratios, Verdicts, familiarity, judge
+from .places import Kept, Ratios, Verdicts, appearance_of, familiarity, judge
 
 log = logging.getLogger(__name__)
 
@@ -54,6 +54,8 @@ def kept_keyframes(table: list[dict], sessions: list[SessionKeyframes], graph: M
         else {}
     used = dict(zip(graph.kf_ids.tolist(), graph.kf_last_used.tolist(), strict=True)) \
         if graph.kf_last_used is not None else {}
+    look = dict(zip(graph.kf_ids.tolist(), graph.kf_appearance.tolist(), strict=True)) \
+        if graph.kf_appearance is not None else {}
     out: list[Kept] = []
     next_place = max([p for p in place.values() if p >= 0], default=-1) + 1
     for si, (meta, s) in enumerate(zip(table, sessions, strict=True)):
@@ -63,7 +65,7 @@ def kept_keyframes(table: list[dict], sessions: list[SessionKeyframes], graph: M
             if p < 0:
                 p, next_place = next_place, next_place + 1
             out.append(Kept(k, camera_pose(poses[k], meta), components[meta["name"]], p, int(used.get(k, si + 1)),
-                            _descriptors(s, int(i))))
+                            _descriptors(s, int(i)), max(0, int(look.get(k, 0)))))
     return out, next_place
 
 
@@ -84,13 +86,13 @@ def judge_session(meta: dict, sess: SessionKeyframes, component: int, poses: dic
     new = [(int(sess.ids[i]), camera_pose(poses[int(sess.ids[i])], meta), _descriptors(sess, int(i)))
            for i in np.flatnonzero(which)]
     ratios = Ratios()
-    known = familiarity(new, component, kept, conf, ratios)
-    strict = known is not None and known[0] < conf.appearance_share * known[1]
-    out = judge(new, component, kept, conf, now, next_place, strict, ratios)
-    out.familiarity = known
-    if known is not None:
-        log.info("session %s: median match ratio %.2f with the map, %.2f with itself: %s", meta.get("name"),
-                 known[0], known[1], "a new appearance" if strict else "a known appearance")
+    known, own = familiarity(new, component, kept, conf, ratios)
+    look, fresh = appearance_of(known, own, kept, conf)
+    out = judge(new, component, kept, conf, now, next_place, look, ratios)
+    out.appearance, out.new_appearance = look, fresh
+    log.info("session %s: median match ratio with the kept appearances %s, %s with itself: %s %d",
+             meta.get("name"), {a: round(v, 2) for a, v in sorted(known.items())},
+             "-" if own is None else f"{own:.2f}", "a new appearance" if fresh else "judged in appearance", look)
     out.used |= set(used)
     return out
 
@@ -109,9 +111,11 @@ def apply(kept: list[Kept], sessions: list[SessionKeyframes],
         out.append(new)
     place = {k.kf_id: k.place for k in kept}
     last = {k.kf_id: k.last_used for k in kept}
+    look = {k.kf_id: k.appearance for k in kept}
     ids = graph.kf_ids.tolist()
     g = replace(graph, kf_place=np.array([place.get(int(k), -1) for k in ids], np.int64),
-                kf_last_used=np.array([last.get(int(k), -1) for k in ids], np.int64))
+                kf_last_used=np.array([last.get(int(k), -1) for k in ids], np.int64),
+                kf_appearance=np.array([look.get(int(k), -1) for k in ids], np.int64))
     return out, changed, g
 
 
@@ -158,11 +162,13 @@ def array_bytes(sessions: list[SessionKeyframes], graph: MapGraph, vocab: dict |
 
 
 def counts(graph: MapGraph, sessions: list[SessionKeyframes]) -> dict:
-    """Places, variants (kept keyframes beyond the first of their place) and kept / total keyframes."""
+    """Places, variants (kept keyframes beyond the first of their place), appearances and kept / total keyframes."""
     kept = int(sum(int(s.kept().sum()) for s in sessions))
     total = int(sum(len(s) for s in sessions))
     places = len({int(p) for p in graph.kf_place if p >= 0}) if graph.kf_place is not None else kept
-    return {"places": places, "variants": kept - places, "kept_keyframes": kept, "keyframes": total}
+    looks = len({int(a) for a in graph.kf_appearance if a >= 0}) if graph.kf_appearance is not None else int(kept > 0)
+    return {"places": places, "variants": kept - places, "appearances": looks, "kept_keyframes": kept,
+            "keyframes": total}
 
 
 __all__ = ["apply", "compact", "counts", "judge_session", "kept_keyframes", "reduce_append", "strip"]

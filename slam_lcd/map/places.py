@@ -17,12 +17,14 @@ keyframe is judged against the keyframes the map keeps, in order:
   that has gone longest without being matched (by a later append's keyframe or loop), so what
   the map's users still meet stays.
 
-A session the map knows poorly as a whole is a new appearance (night in a map of days): the median
-of its keyframes' best ratios with the kept keyframes near them is under ``map.appearance_share``
-of the median ratio between its own consecutive keyframes (:func:`familiarity`). Its keyframes are
-then judged redundant only against the variants the session itself adds, never against the other
-appearance's views (which a view a little off their pose would not match), so the places it passes
-get a variant in its appearance, which the next session in that appearance then matches.
+Each kept keyframe has an **appearance** (sessions that look alike share one: the days, the
+nights). A session is judged in the kept appearance it matches best as a whole (the median of its
+keyframes' best ratios with the kept keyframes of that appearance near them, :func:`familiarity`),
+or founds a new one when even that median is under ``map.appearance_share`` of the median ratio
+between its own consecutive keyframes (night in a map of days). Its keyframes are redundant only
+against kept keyframes of its appearance, never against another's (which a view a little off their
+pose would not match), so each place a session passes gets a variant in its appearance, which the
+next session in that appearance then matches.
 
 Why mutual nearest neighbours of the stored descriptors rather than the loop chain: the question
 is whether the map would recognise this view from what it keeps, and the share of mutual matches
@@ -69,6 +71,7 @@ class Kept:
     place: int
     last_used: int
     descriptors: Callable[[], np.ndarray]
+    appearance: int = 0
 
 
 @dataclass
@@ -80,8 +83,8 @@ class Verdicts:
     matched: dict[int, int] = field(default_factory=dict)  # redundant new kf id -> the kept kf it matched
     used: set[int] = field(default_factory=set)  # kept kf ids matched now (their last_used becomes now)
     evicted: list[int] = field(default_factory=list)  # kept kf ids no longer kept (a full place's oldest variant)
-    familiarity: tuple[float, float] | None = None  # the session's median ratio with the map and with itself
-    new_appearance: bool = False  # judged at map.appearance_match_ratio (the map knew its appearance poorly)
+    appearance: int = 0  # the appearance the session was judged in
+    new_appearance: bool = False  # one the map did not hold (map.appearance_share)
 
 
 New = tuple[int, np.ndarray, Callable[[], np.ndarray]]  # kf id, camera pose in the map frame, descriptors
@@ -100,11 +103,12 @@ class Ratios:
         return self._seen[key]
 
 
-def familiarity(new: list[New], component: int, kept: list[Kept], conf, ratios: Ratios) -> tuple[float, float] | None:
-    """How well the map as it is knows a session's appearance: (the median over its keyframes that
-    have kept keyframes near of their best :func:`match_ratio` with those, the median ratio of its
-    keyframes with the one before them where that lies within the place's reach); None when
-    nothing is near or no two keyframes are.
+def familiarity(new: list[New], component: int, kept: list[Kept], conf,
+                ratios: Ratios) -> tuple[dict[int, float], float | None]:
+    """How well the map as it is knows a session's appearance: for each appearance of the kept
+    keyframes, the median over the session's keyframes that have kept keyframes of that appearance
+    near of their best :func:`match_ratio` with those; and the median ratio of the session's
+    keyframes with the one before them where that lies within the place's reach (None: no two do).
 
     Why a session's median and not each keyframe alone: at nearly the same pose another appearance
     still shares half its descriptors with a kept view (night against day: 0.49), while a view of
@@ -113,42 +117,54 @@ def familiarity(new: list[New], component: int, kept: list[Kept], conf, ratios: 
     good match is depends on the descriptors (SuperPoint's revisits share about 0.65, ORB's about
     0.35), and the session's own views of one place in one appearance measure it."""
     cos_max = np.cos(np.radians(conf.place_angle_deg))
-    best, own = [], []
+    compare = max(1, int(conf.place_compare))
+    best: dict[int, list[float]] = {}
+    own = []
     for j, (kf_id, T, desc) in enumerate(new):
-        near = _near(T, component, kept, conf.place_radius_m, cos_max)[: max(1, int(conf.place_compare))]
-        if near:
-            best.append(max(ratios(kf_id, desc, k) for k in near))
+        near = _near(T, component, kept, conf.place_radius_m, cos_max)
+        for a in {k.appearance for k in near}:
+            alike = [k for k in near if k.appearance == a][:compare]
+            best.setdefault(a, []).append(max(ratios(kf_id, desc, k) for k in alike))
         if j:
             prev_id, P, prev_desc = new[j - 1]
             if np.linalg.norm(P[:3, 3] - T[:3, 3]) <= conf.place_radius_m and P[:3, 2] @ T[:3, 2] >= cos_max:
                 own.append(match_ratio(desc(), prev_desc()))
-    if not best or not own:
-        return None
-    return float(np.median(best)), float(np.median(own))
+    return {a: float(np.median(v)) for a, v in best.items()}, (float(np.median(own)) if own else None)
+
+
+def appearance_of(known: dict[int, float], own: float | None, kept: list[Kept], conf) -> tuple[int, bool]:
+    """The appearance a session is judged in, and whether it is a new one: the kept appearance it
+    matches best, unless even that one's median is under ``map.appearance_share`` of its own."""
+    if not known:  # nothing kept near (another area): the appearance the map holds most of
+        looks = [k.appearance for k in kept]
+        return (max(set(looks), key=lambda a: (looks.count(a), -a)) if looks else 0), False
+    a = max(known, key=lambda k: (known[k], -k))
+    if own is None or known[a] >= conf.appearance_share * own:
+        return a, False
+    return max(k.appearance for k in kept) + 1, True
 
 
 def judge(new: list[New], component: int, kept: list[Kept], conf, now: int, next_place: int,
-          new_appearance: bool = False, ratios: Ratios | None = None) -> Verdicts:
+          appearance: int = 0, ratios: Ratios | None = None) -> Verdicts:
     """Judge the new keyframes ``(kf id, camera pose in the map frame, descriptors)`` in order (module docstring).
 
     ``kept``: the map's kept keyframes (changed in place: new kept keyframes are added, evicted
     ones removed); ``now``: the append's generation (what ``last_used`` records); ``next_place``:
-    the first free place id; ``new_appearance``: the session is a new appearance of the map's
-    places (:func:`familiarity`): its keyframes are redundant only against the variants it adds.
+    the first free place id; ``appearance``: the appearance the session is judged in
+    (:func:`appearance_of`): its keyframes are redundant only against kept keyframes of it.
     """
-    out = Verdicts(new_appearance=new_appearance)
+    out = Verdicts()
     ratios = ratios or Ratios()
-    own = {kf_id for kf_id, _, _ in new} if new_appearance else None
     cos_max = np.cos(np.radians(conf.place_angle_deg))
     compare = max(1, int(conf.place_compare))
     for kf_id, T, desc in new:
         near = _near(T, component, kept, conf.place_radius_m, cos_max)
         if not near:
-            kept.append(Kept(kf_id, T, component, next_place, now, desc))
+            kept.append(Kept(kf_id, T, component, next_place, now, desc, appearance))
             out.status[kf_id], out.place[kf_id] = NEW_PLACE, next_place
             next_place += 1
             continue
-        alike = (near if own is None else [k for k in near if k.kf_id in own])[:compare]
+        alike = [k for k in near if k.appearance == appearance][:compare]
         scores = [ratios(kf_id, desc, k) for k in alike]
         if scores and max(scores) >= conf.redundant_match_ratio:
             match = alike[int(np.argmax(scores))]
@@ -157,7 +173,7 @@ def judge(new: list[New], component: int, kept: list[Kept], conf, now: int, next
             out.used.add(match.kf_id)
             continue
         place = near[0].place
-        kept.append(Kept(kf_id, T, component, place, now, desc))
+        kept.append(Kept(kf_id, T, component, place, now, desc, appearance))
         out.status[kf_id], out.place[kf_id] = VARIANT, place
         variants = [k for k in kept if k.place == place]
         if len(variants) > conf.max_variants:
