@@ -172,7 +172,10 @@ def _reason(r: dict) -> str:
 
 
 def _run_table(run: RunFolder) -> str:
-    rows = run.loops
+    """The loop table: accepted loops first, then those the back end rejected, then the detector's
+    rejections (most of a run's candidates, and the least looked at)."""
+    rows = sorted(run.loops, key=lambda r: 0 if r.get("backend_verdict") == "accepted" else
+                  1 if r.get("verdict") == "accepted" else 2)
     acc = sum(r.get("backend_verdict") == "accepted" for r in rows)
     lines = [f"**{len(rows)} loop candidates**: {acc} accepted, {len(rows) - acc} rejected", "",
              "| query | match | session | verdict | BoW score | inliers | reason |", "|---|---|---|---|---|---|---|"]
