@@ -112,6 +112,20 @@ def test_a_session_in_another_appearance_keeps_variants_the_next_one_matches():
     assert (look, fresh) == (0, False) and set(v.matched.values()) <= days
 
 
+def test_a_full_place_keeps_a_view_of_each_appearance():
+    """A full place (days 1-3, the night 4 matched longest ago) takes a variant of a third appearance: an
+    older day view goes, not the place's only night view; a day variant replaces the oldest day view."""
+    conf = MapConfig(max_variants=4)
+    d = {k: _desc(40 + k) for k in range(1, 5)}
+    kept = [Kept(k, _pose(0.1 * k), 0, 0, used, (lambda x: (lambda: x))(d[k]), look)
+            for k, used, look in ((1, 5, 0), (2, 3, 0), (3, 6, 0), (4, 1, 1))]
+    v = judge([(10, _pose(0.0), lambda: _desc(50))], 0, kept, conf, now=7, next_place=1, appearance=2)
+    assert v.status[10] == VARIANT and v.evicted == [2]
+    v = judge([(11, _pose(0.05), lambda: _desc(51))], 0, kept, conf, now=8, next_place=1, appearance=0)
+    assert v.status[11] == VARIANT and v.evicted == [1]
+    assert {k.kf_id: k.appearance for k in kept} == {3: 0, 4: 1, 10: 2, 11: 0}
+
+
 def test_judge_new_place_redundant_variant_and_eviction():
     conf = MapConfig(max_variants=2)
     d0 = _desc(10)

@@ -15,7 +15,8 @@ keyframe is judged against the keyframes the map keeps, in order:
   lighting, moved objects): it is kept as another variant of the nearest kept keyframe's place.
   A place holds at most ``map.max_variants`` variants; a new one beyond that evicts the variant
   that has gone longest without being matched (by a later append's keyframe or loop), so what
-  the map's users still meet stays.
+  the map's users still meet stays: first among the new one's appearance, then among appearances
+  the place holds twice, so that each appearance keeps its view of the place (:func:`_evicted`).
 
 Each kept keyframe has an **appearance** (sessions that look alike share one: the days, the
 nights). A session is judged in the kept appearance it matches best as a whole (the median of its
@@ -34,6 +35,7 @@ question (is this the same place), which the poses already answer here.
 """
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -177,13 +179,28 @@ def judge(new: list[New], component: int, kept: list[Kept], conf, now: int, next
         out.status[kf_id], out.place[kf_id] = VARIANT, place
         variants = [k for k in kept if k.place == place]
         if len(variants) > conf.max_variants:
-            old = min((k for k in variants if k.kf_id != kf_id), key=lambda k: (k.last_used, k.kf_id))
+            old = _evicted(variants, kf_id, appearance)
             kept.remove(old)
             out.evicted.append(old.kf_id)
             out.place.pop(old.kf_id, None)
             if old.kf_id in out.status:  # a keyframe of this append: it is not kept after all
                 out.status[old.kf_id] = REDUNDANT
     return out
+
+
+def _evicted(variants: list[Kept], new_id: int, appearance: int) -> Kept:
+    """The variant a full place gives up for ``new_id``: the one matched longest ago among those of the
+    new one's appearance, else among appearances the place holds twice or more, else among all.
+
+    Why by appearance first: a place's variants serve different appearances, and the one matched
+    longest ago is often the only view of an appearance recorded less often (the nights of a map of
+    mostly days); losing it loses the place for that appearance, losing an older view of the same one
+    loses little."""
+    others = [k for k in variants if k.kf_id != new_id]
+    count = Counter(k.appearance for k in others)
+    pool = [k for k in others if k.appearance == appearance] or [k for k in others if count[k.appearance] > 1] \
+        or others
+    return min(pool, key=lambda k: (k.last_used, k.kf_id))
 
 
 def _near(T: np.ndarray, component: int, kept: list[Kept], radius: float, cos_max: float) -> list[Kept]:
