@@ -71,11 +71,11 @@ class MapConfig:
     # redundant when at least this share of the smaller keyframe's descriptors are mutual nearest
     # neighbours of a kept keyframe of its place; below it, a new appearance of the place
     redundant_match_ratio: float = 0.3
-    # a session whose keyframes match the kept keyframes near them (median best ratio) less than
-    # this share of how well they match each other (median of consecutive keyframes) is a new
-    # appearance of the map's places (night in a map of days): its keyframes are judged redundant
-    # only against the variants it adds itself; 0 turns the session rule off
+    # a session is judged in the kept appearance its keyframes match best (median best ratio); when
+    # even that is under this share of how well they match each other (median of consecutive
+    # keyframes) it founds a new appearance (night in a map of days); a keyframe is redundant only
+    # against kept keyframes of its own appearance; 0: every session is judged in a known one
     appearance_share: float = 0.8
     # kept keyframes (appearance variants) of one place at most; a new one beyond that evicts the
-    # variant matched longest ago
+    # variant matched longest ago, first of its own appearance, then of one the place holds twice
     max_variants: int = 4
