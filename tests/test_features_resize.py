@@ -144,7 +144,7 @@ def test_a_corner_lands_on_the_same_full_resolution_pixel(superpoint_weights):
 def test_unset_gives_the_same_pipeline_result(tmp_path, superpoint_weights):
     """A short run (a little more than a lap at 160x120, so loops close) with the knob unset and with a
     resize_max the images already fit: the same keyframes, loops and corrected trajectory, bit for bit."""
-    from slam_lcd.runner import run_log
+    from slam_lcd.run.runner import run_log
     from slam_lcd.sim import make_demo_log
 
     log = tmp_path / "tiny.mcap"

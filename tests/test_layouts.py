@@ -18,7 +18,7 @@ import pytest
 
 from slam_lcd.config import load_config
 from slam_lcd.io import open_log
-from slam_lcd.runner import run_log
+from slam_lcd.run.runner import run_log
 from slam_lcd.sim import make_demo_log
 
 FRAMES, W, H = 60, 320, 240

@@ -122,7 +122,7 @@ def test_a_forced_false_loop_makes_the_ground_truth_free_figures_worse(cloud_run
     in: the query keyframe claimed to stand where a keyframe on the other side of the block stood."""
     from slam_lcd.config import load_config
     from slam_lcd.lcd.detector import LoopDetector
-    from slam_lcd.runner import run_log
+    from slam_lcd.run.runner import run_log
     from slam_lcd.types import LoopClosure
 
     out, log, rep = cloud_run

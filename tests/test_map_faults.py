@@ -323,7 +323,7 @@ def test_disk_full_at_every_write_of_the_commit_leaves_the_map_as_it_was(world, 
     from slam_lcd.map import store
     from slam_lcd.map.session_map import Map, extractor_meta
     from slam_lcd.map.store import MapError
-    from slam_lcd.runner import run_log
+    from slam_lcd.run.runner import run_log
 
     root = os.path.realpath(mapdir)
     events, fail_at = [], [1]

@@ -47,7 +47,7 @@ class MemoExtractor:
 @pytest.fixture(scope="module")
 def runs(demo_logs, superpoint_weights, tmp_path_factory):
     from slam_lcd.features import load_extractor
-    from slam_lcd.runner import run_log
+    from slam_lcd.run.runner import run_log
 
     cfg = load_config("default", [f"features.weights={superpoint_weights}", "features.feature_cache=false",
                                   "features.device=cpu"])

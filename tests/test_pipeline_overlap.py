@@ -15,7 +15,7 @@ def runs(demo_log_mcap, report_run, tmp_path_factory):
     corrected.mcap, the RPE delta) change what is written beside, not the loops or the trajectory."""
     import json
 
-    from slam_lcd.runner import run_log
+    from slam_lcd.run.runner import run_log
 
     rc, report_dir, log = report_run
     assert rc == 0 and log == demo_log_mcap
@@ -45,7 +45,7 @@ def test_plugin_reports_every_loop_once_with_lookahead():
     """add_keyframe may return a keyframe's loops on a later call; flush() returns the rest."""
     sim = pytest.importorskip("slam_lcd.sim")
     from slam_lcd.features import load_extractor
-    from slam_lcd.pipeline import Pipeline
+    from slam_lcd.run.pipeline import Pipeline
     from slam_lcd.types import Keyframe
 
     world = sim.build_world(0)
@@ -79,7 +79,7 @@ def test_parallel_extraction_workers_give_the_same_run(demo_log_mcap, tmp_path, 
     same keyframes, loops and trajectory as one worker, and torch's thread count is restored."""
     import torch
 
-    from slam_lcd.runner import run_log
+    from slam_lcd.run.runner import run_log
 
     before = torch.get_num_threads()
     out = {}

@@ -27,7 +27,7 @@ def _orb_config(*extra):
 @pytest.fixture
 def read_ahead_from_the_start(monkeypatch):
     """The log read in a thread from its first message on (the runner's judgement bypassed)."""
-    import slam_lcd.runner as runner
+    import slam_lcd.run.runner as runner
 
     monkeypatch.setattr(runner._ReadAheadJudge, "pays", lambda self: True)
 
@@ -38,8 +38,8 @@ def test_interrupt_writes_consistent_partial_result(small_log, tmp_path, monkeyp
     interrupt also stops the reading thread (not left running)."""
     import threading
 
-    from slam_lcd.pipeline import Pipeline
-    from slam_lcd.runner import run_log
+    from slam_lcd.run.pipeline import Pipeline
+    from slam_lcd.run.runner import run_log
 
     if reading == "thread":
         request.getfixturevalue("read_ahead_from_the_start")
@@ -67,7 +67,7 @@ def test_interrupt_writes_consistent_partial_result(small_log, tmp_path, monkeyp
 def test_log_without_odometry_uses_visual_odometry(small_log, tmp_path):
     from slam_lcd.io import open_log
     from slam_lcd.io.writers import copy_topics, open_writer
-    from slam_lcd.runner import run_log
+    from slam_lcd.run.runner import run_log
 
     no_odom = tmp_path / "no_odom.mcap"
     with open_log(small_log) as r, open_writer(no_odom, "mcap") as w:
@@ -82,7 +82,7 @@ def test_log_without_odometry_uses_visual_odometry(small_log, tmp_path):
 def test_odometry_break_becomes_large_noise_link_not_a_jump():
     """A flagged odometry break (tracking lost) gives the next keyframe a large-noise link."""
     from slam_lcd.geometry import make_T
-    from slam_lcd.pipeline import Pipeline
+    from slam_lcd.run.pipeline import Pipeline
 
     rng = np.random.default_rng(0)
     cfg = _orb_config()
@@ -108,7 +108,7 @@ def test_reading_ahead_in_a_thread_changes_nothing_in_the_outputs(small_log, tmp
     """run.read_ahead (the log read in a thread of its own, here from the first message on) against
     reading in the main thread."""
     from slam_lcd.io.prefetch import Prefetched
-    from slam_lcd.runner import run_log
+    from slam_lcd.run.runner import run_log
 
     started = []
     real_start = Prefetched.start
@@ -128,7 +128,7 @@ def test_damage_found_by_the_reading_thread_is_the_same_typed_error(small_log, t
     from bad_input_files import damage_zstd_chunk
 
     from slam_lcd.errors import CorruptLogError
-    from slam_lcd.runner import run_log
+    from slam_lcd.run.runner import run_log
 
     bad = damage_zstd_chunk(small_log, tmp_path / "late_damage.mcap", which=-1)  # found mid-run, by the thread
     with pytest.raises(CorruptLogError, match="damaged data") as e:

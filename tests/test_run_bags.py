@@ -14,7 +14,7 @@ import pytest
 from slam_lcd.config import load_config
 from slam_lcd.io import open_log
 from slam_lcd.io.writers import copy_topics, open_writer
-from slam_lcd.runner import run_log
+from slam_lcd.run.runner import run_log
 
 
 @pytest.fixture(scope="module")
@@ -74,7 +74,7 @@ distortion_coefficients: [0.0, 0.0, 0.0, 0.0]
 
 @pytest.fixture
 def camera_spy(monkeypatch):
-    from slam_lcd.pipeline import Pipeline
+    from slam_lcd.run.pipeline import Pipeline
 
     seen = []
     real = Pipeline.set_camera

@@ -134,7 +134,7 @@ def test_a_later_run_removes_stale_staging_folders_of_ours_only(small_log, tmp_p
     folders whose process is gone on this host, and leaves a live process's, another host's and the user's."""
     from slam_lcd.config import load_config
     from slam_lcd.outputs.output_set import STAGING_PREFIX, _host
-    from slam_lcd.runner import run_log
+    from slam_lcd.run.runner import run_log
 
     gone = subprocess.Popen([sys.executable, "-c", "pass"])
     gone.wait()

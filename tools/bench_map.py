@@ -84,7 +84,7 @@ def judge(m, true_max: float) -> dict:
 
 
 def run_session(log, out, cfg, extractor, m=None, name=None, mode="append"):
-    from slam_lcd.runner import run_log
+    from slam_lcd.run.runner import run_log
 
     t0 = time.perf_counter()
     res = run_log(log, out, cfg, extractor=extractor, progress=False, map=m, session_name=name, map_mode=mode)

@@ -26,7 +26,7 @@ def main() -> None:
     print(machine_line(), flush=True)  # figures are only comparable with the machine named
 
     from slam_lcd.config import load_config
-    from slam_lcd.runner import run_log
+    from slam_lcd.run.runner import run_log
     from slam_lcd.sim.demo_cache import ensure_demo_log
 
     overrides = [f"features.kind={args.features}", *args.overrides]

@@ -1,4 +1,4 @@
-"""What runs in a worker for one log: ``slam_lcd.runner.run_log``, turned into a summary row.
+"""What runs in a worker for one log: ``slam_lcd.run.runner.run_log``, turned into a summary row.
 
 Why this is its own module: it is the code a worker process (local pool) or a Ray node
 imports and calls, so it depends on nothing of the batch's driver side and everything it
@@ -197,7 +197,7 @@ def run_task(task: LogTask, shared: SharedWork) -> dict:
 
 
 def _run(task: LogTask, shared: SharedWork) -> dict:
-    from ..runner import run_log
+    from ..run.runner import run_log
 
     if task.problem:
         return error_row(task.name, task.log, task.out_dir, task.problem)

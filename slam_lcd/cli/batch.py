@@ -85,7 +85,7 @@ def run(args) -> int:
 
 def _check_map(args) -> None:
     from ..batch.discovery import discover_logs
-    from ..run_checks import check_map_paths
+    from ..run.checks import check_map_paths
 
     inputs = {f"log {e.name}": e.path for e in discover_logs(args.logs)}
     inputs.update({"--gt-dir": args.gt_dir, "--vocab": args.vocab, **config_inputs(args)})
@@ -98,7 +98,7 @@ def _append_to_map(args, cfg, res) -> int:
     from ..features import load_extractor
     from ..map.session_map import Map, extractor_meta
     from ..map.summary import summary_lines
-    from ..runner import run_log
+    from ..run.runner import run_log
     from ..runtime.interrupts import exit_status
 
     rows = sorted((r for r in res.rows if r["status"] in ("ok", "skipped")), key=lambda r: r["name"])

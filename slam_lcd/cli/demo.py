@@ -86,7 +86,7 @@ def load_demo_extractor(args):
 
 def run(args) -> int:
     from ..files.atomic import check_no_clash
-    from ..runner import run_log
+    from ..run.runner import run_log
     from ..sim.demo_cache import demo_log_path, ensure_demo_log
 
     width, height = args.size
@@ -122,7 +122,7 @@ def _run_sessions(args, cfg, extractor, notice) -> int:
     """``demo --sessions N``: the first N session logs of the demo world, appended one by one to OUT/map."""
     from ..map.session_map import Map, extractor_meta
     from ..map.summary import summary_lines
-    from ..runner import run_log
+    from ..run.runner import run_log
     from ..runtime.interrupts import exit_status
     from ..sim.demo_cache import ensure_demo_log
 

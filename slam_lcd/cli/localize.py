@@ -32,8 +32,8 @@ def run(args) -> int:
     from ..features import load_extractor
     from ..map.session_map import Map, extractor_meta
     from ..map.summary import localisation_lines
-    from ..run_checks import check_run_paths
-    from ..runner import run_log
+    from ..run.checks import check_run_paths
+    from ..run.runner import run_log
     from .run import run_input_paths
 
     cfg = config_from_args(args)

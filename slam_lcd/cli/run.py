@@ -145,7 +145,7 @@ def run(args) -> int:
         return _print_result(_run_one(args, cfg, logs[0], Path(args.out), None))
     from ..features import load_extractor
     from ..map.session_map import Map, extractor_meta
-    from ..run_checks import check_run_paths
+    from ..run.checks import check_run_paths
 
     names = [x.stem for x in logs]
     if len(set(names)) != len(names):
@@ -181,7 +181,7 @@ def run_input_paths(args) -> dict:
 
 
 def _run_one(args, cfg, log_path: Path, out: Path, m, extractor=None):
-    from ..runner import run_log
+    from ..run.runner import run_log
 
     inputs = config_inputs(args)
     live = _live(args, log_path, out)

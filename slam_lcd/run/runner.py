@@ -1,10 +1,10 @@
-"""``slam-lcd run``: choose the sources of a log, drive them into the :class:`~slam_lcd.pipeline.Pipeline`,
+"""``slam-lcd run``: choose the sources of a log, drive them into the :class:`~slam_lcd.run.pipeline.Pipeline`,
 write the outputs.
 
 Sources (:mod:`slam_lcd.sensors`): the topics (explicit flags win, else the log's only
 camera image, its CameraInfo and depth, the only ``nav_msgs/Odometry``, a ground-truth
 pose topic whose name says so), their decoding, the camera mounting and, for a log without
-odometry, the built-in visual odometry as the odometry source (chosen in :mod:`slam_lcd.run_sources`). Outputs
+odometry, the built-in visual odometry as the odometry source (chosen in :mod:`slam_lcd.run.sources`). Outputs
 (:mod:`slam_lcd.outputs`): :data:`RUN_OUTPUTS`, written as one set into ``out_dir``.
 
 Bad input fails before any work, in one line that names the log (and the flag, topic and
@@ -19,17 +19,34 @@ import time
 from collections import deque
 from pathlib import Path
 
-from .config import Config, validate_config
-from .errors import DamagedImageError, PipelineError
-from .io import open_log
-from .io.prefetch import prefetched
-from .io.raw_spool import RawSpool
-from .io.trajectory_files import read_trajectory
-from .outputs.corrected_log import copied_topics
-from .outputs.result import RunResult
-from .outputs.write import write_set
-from .run_checks import check_run_paths, run_inputs
-from .run_sources import (
+from ..config import Config, validate_config
+from ..errors import DamagedImageError, PipelineError
+from ..io import open_log
+from ..io.prefetch import prefetched
+from ..io.raw_spool import RawSpool
+from ..io.trajectory_files import read_trajectory
+from ..outputs.corrected_log import copied_topics
+from ..outputs.result import RunResult
+from ..outputs.write import write_set
+from ..runtime.interrupts import interrupted_word
+from ..runtime.progress import progress_bar
+from ..sensors.ground_truth import POSITION_ONLY_NOTE, decode_ground_truth, ground_truth_from_messages
+from ..sensors.messages import (
+    at_message,
+    check_first_messages,
+    check_image_sizes,
+    decode_any_image,
+    decode_camera_of,
+    decode_depth,
+    decode_gray,
+    decode_pose_of,
+)
+from ..sensors.mounting import body_frame_of, mounting_from_camera_info, static_transforms
+from ..sensors.topics import Topics, choose_topics, configured_topics, copyable_topics
+from ..types import Trajectory
+from ..vision.gray import image_to_gray
+from .checks import check_run_paths, run_inputs
+from .sources import (
     calibrated_camera,
     calibration_of,
     cloud_sensor,
@@ -41,23 +58,6 @@ from .run_sources import (
     odometry_and_stereo,
     set_calibrated_camera,
 )
-from .runtime.interrupts import interrupted_word
-from .runtime.progress import progress_bar
-from .sensors.ground_truth import POSITION_ONLY_NOTE, decode_ground_truth, ground_truth_from_messages
-from .sensors.messages import (
-    at_message,
-    check_first_messages,
-    check_image_sizes,
-    decode_any_image,
-    decode_camera_of,
-    decode_depth,
-    decode_gray,
-    decode_pose_of,
-)
-from .sensors.mounting import body_frame_of, mounting_from_camera_info, static_transforms
-from .sensors.topics import Topics, choose_topics, configured_topics, copyable_topics
-from .types import Trajectory
-from .vision.gray import image_to_gray
 
 log = logging.getLogger(__name__)
 
@@ -157,7 +157,7 @@ def run_log(
                 result.topics["right"] = right
             tf = static_transforms(reader, log_path)
             if cfg.run.loop_pictures:  # a working folder inside the staging folder: discarded with it on failure
-                from .outputs.loop_pictures import KeyframeAlbum
+                from ..outputs.loop_pictures import KeyframeAlbum
 
                 album = KeyframeAlbum(outputs.staging / ".loop_keyframes", cfg.lcd.descriptor_dtype)
             if copy_topics:  # the topics corrected.mcap copies, kept undecoded from the one pass over the log
@@ -189,7 +189,7 @@ def run_log(
         except KeyboardInterrupt:  # Ctrl-C (maybe a second one): skip the back end's final re-check
             log.warning("%s%s: the back end's final re-check is skipped", interrupted_word(),
                         " again" if result.interrupted else "")
-            from .runtime.interrupts import signal_name
+            from ..runtime.interrupts import signal_name
 
             notes.append(f"The back end's final re-check (GNC) was interrupted ({signal_name()}) and skipped.")
             result.interrupted = True
@@ -201,7 +201,7 @@ def run_log(
             result.gt_source = None  # a ground-truth topic without a message
         result.ground_truth = gt_traj
         if map is not None and map_mode == "localize":
-            from .map.summary import localisation_report
+            from ..map.summary import localisation_report
 
             result.localization = localisation_report(map, map.localise(pipe), gt_traj)
         elif map is not None:
@@ -276,8 +276,8 @@ class _ReadAheadJudge:
 
 def _append_to_map(map, pipe, result: RunResult, log_path: Path, name: str | None, gt, notes: list[str]) -> dict:
     """Add the finished session to ``map`` and commit it; an interrupted run adds nothing (said in the notes)."""
-    from .map.session_graph import BUILTIN_VO
-    from .map.summary import map_summary
+    from ..map.session_graph import BUILTIN_VO
+    from ..map.summary import map_summary
 
     if result.interrupted:
         notes.append(f"The map {map.root} was left as it was: an interrupted session is not added to a map.")
