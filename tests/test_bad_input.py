@@ -72,10 +72,11 @@ def demo_jpeg(tmp_path_factory):
 def earlier_run(demo, tmp_path_factory):
     """The output folder of a good earlier run (copied by the tests that must not damage it)."""
     from slam_lcd.config import load_config
-    from slam_lcd.run.runner import run_log
+    from slam_lcd.run import OutputOptions, run_log
 
     out = tmp_path_factory.mktemp("bad_input_earlier") / "run"
-    run_log(demo, out, load_config("default", ["features.kind=orb", "features.feature_cache=false"]), progress=False)
+    run_log(demo, out, load_config("default", ["features.kind=orb", "features.feature_cache=false"]),
+            output=OutputOptions(progress=False))
     return out
 
 

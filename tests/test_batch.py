@@ -54,11 +54,11 @@ def log_path(logs: Path, name: str) -> Path:
 @pytest.fixture(scope="session")
 def reference(batch_inputs, tmp_path_factory):
     """What `slam-lcd run` gives on each good log with the same configuration: {name: RunResult}."""
-    from slam_lcd.run.runner import run_log
+    from slam_lcd.run import OutputOptions, run_log
 
     logs, cfg = batch_inputs
     out = tmp_path_factory.mktemp("batch_reference")
-    return {n: run_log(log_path(logs, n), out / n, cfg, progress=False) for n in GOOD}
+    return {n: run_log(log_path(logs, n), out / n, cfg, output=OutputOptions(progress=False)) for n in GOOD}
 
 
 def file_states(folder: Path) -> dict:

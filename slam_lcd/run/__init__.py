@@ -20,6 +20,7 @@ from ..runtime.lazy_names import lazy_getattr
 
 if TYPE_CHECKING:
     from ..outputs.result import RunResult
+    from .options import MapUse, Models, OutputOptions, Sources
     from .pipeline import Pipeline
     from .runner import run_log
 
@@ -27,8 +28,12 @@ _EXPORTS = {
     "Pipeline": ".pipeline",
     "run_log": ".runner",
     "RunResult": ".runner",
+    "Sources": ".options",
+    "Models": ".options",
+    "MapUse": ".options",
+    "OutputOptions": ".options",
 }
 
-__all__ = ["Pipeline", "RunResult", "run_log"]
+__all__ = ["MapUse", "Models", "OutputOptions", "Pipeline", "RunResult", "Sources", "run_log"]
 
 __getattr__ = lazy_getattr(__name__, _EXPORTS, globals())

@@ -19,6 +19,7 @@ from ..sensors.ground_truth import ground_truth_from_tf
 from ..sensors.mounting import calibrated_mounting
 from ..sensors.topics import Topics, choose_right_topic, static_tf_topics
 from ..types import Trajectory
+from .options import MapUse, Models
 
 log = logging.getLogger(__name__)
 
@@ -207,15 +208,15 @@ def no_keyframe_reason(pipe, topics: Topics, n_frames: int) -> str:
             f"of {source} ({span}); nothing to correct")
 
 
-def make_pipeline(cfg, extractor, vocab, log_path, topics: Topics, keyframe_sink=None, rectified: bool = False,
-                   map=None, map_mode: str = "append", map_cloud=None):
+def make_pipeline(cfg, models: Models, log_path, topics: Topics, keyframe_sink=None, rectified: bool = False,
+                  map_use: MapUse | None = None, map_cloud=None):
     """The pipeline with its collaborators: the extractor, the vocabulary (None: online), the feature
     cache of this log (``rectified``: the images are the rectified pair's, cached apart from the raw
-    ones), whether frames wait for depth, the loop pictures' keyframe album."""
+    ones), whether frames wait for depth, the loop pictures' keyframe album, the map it uses."""
     from ..features import load_extractor
     from .pipeline import Pipeline  # imported late: topic errors need no model
 
-    extractor = extractor if extractor is not None else load_extractor(cfg.features)
+    extractor = models.extractor if models.extractor is not None else load_extractor(cfg.features)
     feature_source = None
     if cfg.features.feature_cache:
         from ..features import FeatureCache
@@ -227,7 +228,8 @@ def make_pipeline(cfg, extractor, vocab, log_path, topics: Topics, keyframe_sink
         def feature_source(stamp, img):
             return cache.extract(log_path, cache_topic, stamp, img)
 
-    return Pipeline(cfg, extractor=extractor, vocab=vocab, feature_source=feature_source,
+    return Pipeline(cfg, extractor=extractor, vocab=models.vocab, feature_source=feature_source,
                     expect_depth=topics.depth is not None, keyframe_sink=keyframe_sink,
-                    loop_sink=getattr(keyframe_sink, "keep_loop", None), map=map, map_mode=map_mode,
-                    map_cloud=map_cloud)
+                    loop_sink=getattr(keyframe_sink, "keep_loop", None),
+                    map=map_use.session_map if map_use is not None else None,
+                    map_mode=map_use.mode if map_use is not None else "append", map_cloud=map_cloud)
