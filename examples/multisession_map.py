@@ -1,7 +1,7 @@
 """Example: a multi-session map from Python — build it, query it, and hand it to your own iSAM2.
 
 1. Two sessions of the demo world (laps of one block from two start points, each odometry in its own frame)
-   are fed through :class:`~slam_lcd.pipeline.Pipeline` with a :class:`~slam_lcd.map.Map`
+   are fed through :class:`~slam_lcd.Pipeline` with a :class:`~slam_lcd.map.Map`
    given at construction: the map's keyframes are loop candidates, ``add_session`` joins the
    finished session into the map's joint graph, ``save`` commits it (one atomic step).
 2. A camera frame is queried against the saved map with the map's own loop detector
@@ -24,15 +24,12 @@ from gtsam.symbol_shorthand import X
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from slam_lcd.config import load_config
+from slam_lcd import Keyframe, Map, Pipeline, load_config, open_log
 from slam_lcd.features import load_extractor
-from slam_lcd.io import open_log
 from slam_lcd.io.decode import decode_camera_info, decode_image, decode_pose
 from slam_lcd.io.tf import TfBuffer
-from slam_lcd.map import Map, extractor_meta
-from slam_lcd.pipeline import Pipeline
+from slam_lcd.map import extractor_meta
 from slam_lcd.sim import make_demo_log
-from slam_lcd.types import Keyframe
 
 
 def feed(pipe: Pipeline, log_path: Path) -> None:

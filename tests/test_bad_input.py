@@ -72,10 +72,11 @@ def demo_jpeg(tmp_path_factory):
 def earlier_run(demo, tmp_path_factory):
     """The output folder of a good earlier run (copied by the tests that must not damage it)."""
     from slam_lcd.config import load_config
-    from slam_lcd.runner import run_log
+    from slam_lcd.run import OutputOptions, run_log
 
     out = tmp_path_factory.mktemp("bad_input_earlier") / "run"
-    run_log(demo, out, load_config("default", ["features.kind=orb", "features.feature_cache=false"]), progress=False)
+    run_log(demo, out, load_config("default", ["features.kind=orb", "features.feature_cache=false"]),
+            output=OutputOptions(progress=False))
     return out
 
 
@@ -298,7 +299,7 @@ def test_interrupt_in_every_stage_leaves_a_consistent_partial_set(demo, tmp_path
 def test_second_interrupt_while_writing_still_leaves_a_partial_set(demo, earlier, capfd, monkeypatch):
     """Item 3: Ctrl-C mid-log, then again while the outputs are written: the set says it is partial."""
     import slam_lcd.io.trajectory_files as trajectory_files
-    from slam_lcd.pipeline import Pipeline
+    from slam_lcd.run.pipeline import Pipeline
 
     _inject(monkeypatch, Pipeline, "add_image", 15, "before")
     _inject(monkeypatch, trajectory_files, "write_tum", 2, "before")
@@ -320,7 +321,7 @@ def test_pipeline_stays_consistent_when_interrupted_inside_the_back_end(demo, mo
     from slam_lcd.config import load_config
     from slam_lcd.io import open_log
     from slam_lcd.io.decode import decode_camera_info
-    from slam_lcd.pipeline import Pipeline
+    from slam_lcd.run.pipeline import Pipeline
     from slam_lcd.sensors.messages import decode_depth as _decode_depth
     from slam_lcd.sensors.messages import decode_gray as _decode_gray
     from slam_lcd.sensors.messages import decode_pose_of
@@ -488,7 +489,7 @@ def test_T_body_camera_from_config_one_rule_for_vo_and_main_pass(demo, tmp_path,
     """Item 4: frontend.T_body_camera runs (no ImportError) and the VO pass and the main pass
     mount the camera by the same rule (config, else /tf_static, else identity)."""
     from slam_lcd.geometry import pose_from_list
-    from slam_lcd.pipeline import Pipeline
+    from slam_lcd.run.pipeline import Pipeline
 
     seen = []
     real = Pipeline.set_camera

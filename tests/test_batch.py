@@ -54,11 +54,11 @@ def log_path(logs: Path, name: str) -> Path:
 @pytest.fixture(scope="session")
 def reference(batch_inputs, tmp_path_factory):
     """What `slam-lcd run` gives on each good log with the same configuration: {name: RunResult}."""
-    from slam_lcd.runner import run_log
+    from slam_lcd.run import OutputOptions, run_log
 
     logs, cfg = batch_inputs
     out = tmp_path_factory.mktemp("batch_reference")
-    return {n: run_log(log_path(logs, n), out / n, cfg, progress=False) for n in GOOD}
+    return {n: run_log(log_path(logs, n), out / n, cfg, output=OutputOptions(progress=False)) for n in GOOD}
 
 
 def file_states(folder: Path) -> dict:
@@ -351,7 +351,7 @@ def test_ray_missing_is_a_one_line_error(monkeypatch, tmp_path, batch_inputs):
 def test_ctrl_c_around_publish_is_reported_by_what_the_folder_holds(batch_inputs, tmp_path, monkeypatch, when):
     """A Ctrl-C that lands after run_log published its complete set (the race CI met on Ray) is an
     ``ok`` row from that set's report; one that lands before any output is ``interrupted``, nothing written."""
-    import slam_lcd.runner as runner
+    import slam_lcd.run.runner as runner
     from slam_lcd.batch.done import completed_report
     from slam_lcd.batch.worker import LogTask, SharedWork, run_task
 

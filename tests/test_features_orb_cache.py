@@ -129,9 +129,10 @@ def test_an_orb_run_does_not_import_torch(tmp_path):
     log = tmp_path / "d.mcap"
     make_demo_log(log, "mcap", frames=20, width=160, height=120)
     code = ("import sys; from pathlib import Path; from slam_lcd.config import load_config; "
-            "from slam_lcd.runner import run_log; "
+            "from slam_lcd.run import OutputOptions, run_log; "
             "cfg = load_config('default', ['features.kind=orb', 'features.feature_cache=false', 'run.plots=false']); "
-            f"r = run_log(Path({str(log)!r}), Path({str(tmp_path / 'out')!r}), cfg, progress=False); "
+            f"r = run_log(Path({str(log)!r}), Path({str(tmp_path / 'out')!r}), "
+            "cfg, output=OutputOptions(progress=False)); "
             "print(r.n_keyframes, 'torch' in sys.modules)")
     repo = Path(__file__).resolve().parent.parent
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,

@@ -144,7 +144,7 @@ def test_a_corner_lands_on_the_same_full_resolution_pixel(superpoint_weights):
 def test_unset_gives_the_same_pipeline_result(tmp_path, superpoint_weights):
     """A short run (a little more than a lap at 160x120, so loops close) with the knob unset and with a
     resize_max the images already fit: the same keyframes, loops and corrected trajectory, bit for bit."""
-    from slam_lcd.runner import run_log
+    from slam_lcd.run import OutputOptions, run_log
     from slam_lcd.sim import make_demo_log
 
     log = tmp_path / "tiny.mcap"
@@ -153,7 +153,7 @@ def test_unset_gives_the_same_pipeline_result(tmp_path, superpoint_weights):
     for label, sets in (("unset", []), ("fits", ["features.resize_max=160"])):
         cfg = load_config("default", ["features.feature_cache=false", f"features.weights={superpoint_weights}",
                                       "run.plots=false", "run.write_mcap=false", "run.loop_pictures=false", *sets])
-        res = run_log(log, tmp_path / label, cfg, progress=False)
+        res = run_log(log, tmp_path / label, cfg, output=OutputOptions(progress=False))
         outs[label] = res
     a, b = outs["unset"], outs["fits"]
     assert a.n_keyframes > 50 and a.loops_accepted > 0

@@ -117,7 +117,7 @@ def test_close_of_an_inline_reader_closes_its_source():
 def test_reading_ahead_starts_only_once_loop_detection_hardly_waits_for_features(monkeypatch):
     from types import SimpleNamespace
 
-    import slam_lcd.runner as runner
+    import slam_lcd.run.runner as runner
     from slam_lcd.runtime.stage_timer import StageTimer
 
     clock = {"t": 0.0}

@@ -18,7 +18,7 @@ import pytest
 
 from slam_lcd.config import load_config
 from slam_lcd.io import open_log
-from slam_lcd.runner import run_log
+from slam_lcd.run import OutputOptions, Sources, run_log
 from slam_lcd.sim import make_demo_log
 
 FRAMES, W, H = 60, 320, 240
@@ -57,7 +57,8 @@ def test_layout_is_read_by_its_preset(layout, layout_logs, tmp_path, monkeypatch
                                "run.loop_pictures=false"])
     calib = [info.calibration_path] if layout == "euroc" else None
     with caplog.at_level(logging.WARNING, logger="slam_lcd"):
-        res = run_log(info.path, tmp_path / "out", cfg, calib=calib, progress=False, write_mcap=False)
+        res = run_log(info.path, tmp_path / "out", cfg, sources=Sources(calib=calib),
+                      output=OutputOptions(progress=False, write_mcap=False))
     assert res.topics["image"] == image and res.topics.get("gt") == gt
     assert res.topics.get("right") == right and res.topics.get("depth") == depth and not res.topics.get("odom")
     assert res.n_frames == FRAMES and res.n_keyframes >= 3

@@ -122,7 +122,7 @@ def test_a_forced_false_loop_makes_the_ground_truth_free_figures_worse(cloud_run
     in: the query keyframe claimed to stand where a keyframe on the other side of the block stood."""
     from slam_lcd.config import load_config
     from slam_lcd.lcd.detector import LoopDetector
-    from slam_lcd.runner import run_log
+    from slam_lcd.run import OutputOptions, run_log
     from slam_lcd.types import LoopClosure
 
     out, log, rep = cloud_run
@@ -142,7 +142,7 @@ def test_a_forced_false_loop_makes_the_ground_truth_free_figures_worse(cloud_run
     cfg = load_config("orb", ["features.feature_cache=false", "run.plots=false", "run.loop_pictures=false",
                               "backend.outlier_rejection=none", "backend.loop_kernel=none"])
     bad_out = tmp_path_factory.mktemp("false_loop") / "out"
-    res = run_log(log, bad_out, cfg, progress=False, write_mcap=False)
+    res = run_log(log, bad_out, cfg, output=OutputOptions(progress=False, write_mcap=False))
     assert added and res.map_cloud["built"]
     good, bad = rep["map_cloud"]["sharpness"]["corrected"], res.map_cloud["sharpness"]["corrected"]
     assert bad["mme"] > good["mme"] and bad["plane_variance_m2"] > good["plane_variance_m2"], (good, bad)

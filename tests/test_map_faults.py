@@ -315,7 +315,7 @@ def test_run_signalled_inside_the_commit(world, tmp_path, point, sig):
 
 # ---------------------------------------------------------------------------- disk full
 def test_disk_full_at_every_write_of_the_commit_leaves_the_map_as_it_was(world, mapdir, tmp_path, monkeypatch):
-    """The library append (`Map.open(write=True)`, `run_log(map=...)`) with the disk full at the Nth
+    """The library append (`Map.open(write=True)`, `run_log(map_use=MapUse(m))`) with the disk full at the Nth
     write of the commit, for every N: a MapError naming the map, every file as before and no stray
     one; the session stays pending, and the save that finally finds room commits the complete map."""
     from slam_lcd.config import load_config
@@ -323,7 +323,7 @@ def test_disk_full_at_every_write_of_the_commit_leaves_the_map_as_it_was(world, 
     from slam_lcd.map import store
     from slam_lcd.map.session_map import Map, extractor_meta
     from slam_lcd.map.store import MapError
-    from slam_lcd.runner import run_log
+    from slam_lcd.run import MapUse, Models, OutputOptions, run_log
 
     root = os.path.realpath(mapdir)
     events, fail_at = [], [1]
@@ -389,7 +389,8 @@ def test_disk_full_at_every_write_of_the_commit_leaves_the_map_as_it_was(world, 
         monkeypatch.setattr(store, "open", open_, raising=False)
         out = tmp_path / "out"
         with pytest.raises(MapError) as e:
-            run_log(world.logs[2], out, cfg, extractor=extractor, map=m, progress=False, write_mcap=False)
+            run_log(world.logs[2], out, cfg, models=Models(extractor=extractor), map_use=MapUse(m),
+                    output=OutputOptions(progress=False, write_mcap=False))
         assert "No space left on device" in str(e.value) and str(mapdir) in str(e.value), e.value
         assert files(mapdir) == before and not out.exists()
         while True:

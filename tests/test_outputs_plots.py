@@ -110,7 +110,7 @@ def test_the_plot_module_loads_in_the_background_and_a_failure_is_silent():
     import sys
 
     code = ("import sys, time\n"
-            "from slam_lcd.runner import _import_in_background\n"
+            "from slam_lcd.run.runner import _import_in_background\n"
             "assert 'matplotlib' not in sys.modules\n"
             "_import_in_background('slam_lcd.eval.plots')\n"
             "_import_in_background('slam_lcd.no_such_module')\n"

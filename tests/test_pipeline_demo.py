@@ -47,7 +47,7 @@ class MemoExtractor:
 @pytest.fixture(scope="module")
 def runs(demo_logs, superpoint_weights, tmp_path_factory):
     from slam_lcd.features import load_extractor
-    from slam_lcd.runner import run_log
+    from slam_lcd.run import Models, OutputOptions, run_log
 
     cfg = load_config("default", [f"features.weights={superpoint_weights}", "features.feature_cache=false",
                                   "features.device=cpu"])
@@ -55,7 +55,7 @@ def runs(demo_logs, superpoint_weights, tmp_path_factory):
     out = {}
     for fmt, log in demo_logs.items():
         d = tmp_path_factory.mktemp(f"run_{fmt}")
-        out[fmt] = (run_log(log, d, cfg, extractor=extractor, progress=False), d)
+        out[fmt] = (run_log(log, d, cfg, models=Models(extractor=extractor), output=OutputOptions(progress=False)), d)
     return out
 
 

@@ -15,7 +15,7 @@ def runs(demo_log_mcap, report_run, tmp_path_factory):
     corrected.mcap, the RPE delta) change what is written beside, not the loops or the trajectory."""
     import json
 
-    from slam_lcd.runner import run_log
+    from slam_lcd.run import OutputOptions, run_log
 
     rc, report_dir, log = report_run
     assert rc == 0 and log == demo_log_mcap
@@ -24,7 +24,7 @@ def runs(demo_log_mcap, report_run, tmp_path_factory):
     cfg = load_config("default", ["features.kind=orb", "features.feature_cache=false", "run.extract_ahead=0",
                                   "run.plots=false", "run.write_mcap=false"])
     d = tmp_path_factory.mktemp("ahead0")
-    res = run_log(demo_log_mcap, d, cfg, progress=False)
+    res = run_log(demo_log_mcap, d, cfg, output=OutputOptions(progress=False))
     return {0: (res.n_keyframes, res.loops_accepted, d),
             2: (rep["keyframes"], rep["loops"]["accepted"], report_dir)}
 
@@ -45,7 +45,7 @@ def test_plugin_reports_every_loop_once_with_lookahead():
     """add_keyframe may return a keyframe's loops on a later call; flush() returns the rest."""
     sim = pytest.importorskip("slam_lcd.sim")
     from slam_lcd.features import load_extractor
-    from slam_lcd.pipeline import Pipeline
+    from slam_lcd.run.pipeline import Pipeline
     from slam_lcd.types import Keyframe
 
     world = sim.build_world(0)
@@ -79,7 +79,7 @@ def test_parallel_extraction_workers_give_the_same_run(demo_log_mcap, tmp_path, 
     same keyframes, loops and trajectory as one worker, and torch's thread count is restored."""
     import torch
 
-    from slam_lcd.runner import run_log
+    from slam_lcd.run import OutputOptions, run_log
 
     before = torch.get_num_threads()
     out = {}
@@ -88,7 +88,7 @@ def test_parallel_extraction_workers_give_the_same_run(demo_log_mcap, tmp_path, 
                                       "features.device=cpu", "run.extract_ahead=2", f"run.extract_workers={workers}",
                                       "run.plots=false", "run.write_mcap=false", "run.loop_pictures=false"])
         d = tmp_path / f"w{workers}"
-        out[workers] = (run_log(demo_log_mcap, d, cfg, progress=False), d)
+        out[workers] = (run_log(demo_log_mcap, d, cfg, output=OutputOptions(progress=False)), d)
         assert torch.get_num_threads() == before
     (r1, d1), (r2, d2) = out[1], out[2]
     assert r2.n_keyframes == r1.n_keyframes and r2.loops_accepted == r1.loops_accepted

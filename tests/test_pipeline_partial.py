@@ -27,7 +27,7 @@ def _orb_config(*extra):
 @pytest.fixture
 def read_ahead_from_the_start(monkeypatch):
     """The log read in a thread from its first message on (the runner's judgement bypassed)."""
-    import slam_lcd.runner as runner
+    import slam_lcd.run.runner as runner
 
     monkeypatch.setattr(runner._ReadAheadJudge, "pays", lambda self: True)
 
@@ -38,8 +38,8 @@ def test_interrupt_writes_consistent_partial_result(small_log, tmp_path, monkeyp
     interrupt also stops the reading thread (not left running)."""
     import threading
 
-    from slam_lcd.pipeline import Pipeline
-    from slam_lcd.runner import run_log
+    from slam_lcd.run import OutputOptions, run_log
+    from slam_lcd.run.pipeline import Pipeline
 
     if reading == "thread":
         request.getfixturevalue("read_ahead_from_the_start")
@@ -54,7 +54,7 @@ def test_interrupt_writes_consistent_partial_result(small_log, tmp_path, monkeyp
         return real(self, *a, **k)
 
     monkeypatch.setattr(Pipeline, "add_image", interrupted)
-    res = run_log(small_log, tmp_path, _orb_config(), progress=False)
+    res = run_log(small_log, tmp_path, _orb_config(), output=OutputOptions(progress=False))
     assert res.interrupted and res.n_frames == 39
     rep = json.loads((tmp_path / "report.json").read_text())
     assert rep["interrupted"] is True
@@ -67,12 +67,12 @@ def test_interrupt_writes_consistent_partial_result(small_log, tmp_path, monkeyp
 def test_log_without_odometry_uses_visual_odometry(small_log, tmp_path):
     from slam_lcd.io import open_log
     from slam_lcd.io.writers import copy_topics, open_writer
-    from slam_lcd.runner import run_log
+    from slam_lcd.run import OutputOptions, run_log
 
     no_odom = tmp_path / "no_odom.mcap"
     with open_log(small_log) as r, open_writer(no_odom, "mcap") as w:
         copy_topics(r, w, [t for t in r.topics if t != "/odom"])
-    res = run_log(no_odom, tmp_path / "out", _orb_config(), progress=False)
+    res = run_log(no_odom, tmp_path / "out", _orb_config(), output=OutputOptions(progress=False))
     odo = read_tum(tmp_path / "out" / "odometry.tum")
     assert len(odo) >= 70  # one VO pose per tracked frame
     # VO on the rendered RGB-D frames is accurate: a few cm over ~9 m
@@ -82,7 +82,7 @@ def test_log_without_odometry_uses_visual_odometry(small_log, tmp_path):
 def test_odometry_break_becomes_large_noise_link_not_a_jump():
     """A flagged odometry break (tracking lost) gives the next keyframe a large-noise link."""
     from slam_lcd.geometry import make_T
-    from slam_lcd.pipeline import Pipeline
+    from slam_lcd.run.pipeline import Pipeline
 
     rng = np.random.default_rng(0)
     cfg = _orb_config()
@@ -108,7 +108,7 @@ def test_reading_ahead_in_a_thread_changes_nothing_in_the_outputs(small_log, tmp
     """run.read_ahead (the log read in a thread of its own, here from the first message on) against
     reading in the main thread."""
     from slam_lcd.io.prefetch import Prefetched
-    from slam_lcd.runner import run_log
+    from slam_lcd.run import OutputOptions, run_log
 
     started = []
     real_start = Prefetched.start
@@ -116,7 +116,7 @@ def test_reading_ahead_in_a_thread_changes_nothing_in_the_outputs(small_log, tmp
     outs = {}
     for ahead in (0, 3):
         out = tmp_path / f"ahead{ahead}"
-        res = run_log(small_log, out, _orb_config(f"run.read_ahead={ahead}"), progress=False)
+        res = run_log(small_log, out, _orb_config(f"run.read_ahead={ahead}"), output=OutputOptions(progress=False))
         outs[ahead] = (res.n_frames, res.n_keyframes, (out / "corrected.tum").read_text(),
                        (out / "loops.csv").read_text(), (out / "keyframes_corrected.tum").read_text())
     assert len(started) == 1  # only the run with read_ahead > 0 read in a thread
@@ -128,9 +128,9 @@ def test_damage_found_by_the_reading_thread_is_the_same_typed_error(small_log, t
     from bad_input_files import damage_zstd_chunk
 
     from slam_lcd.errors import CorruptLogError
-    from slam_lcd.runner import run_log
+    from slam_lcd.run import OutputOptions, run_log
 
     bad = damage_zstd_chunk(small_log, tmp_path / "late_damage.mcap", which=-1)  # found mid-run, by the thread
     with pytest.raises(CorruptLogError, match="damaged data") as e:
-        run_log(bad, tmp_path / "out", _orb_config(), progress=False)
+        run_log(bad, tmp_path / "out", _orb_config(), output=OutputOptions(progress=False))
     assert "late_damage.mcap" in str(e.value)

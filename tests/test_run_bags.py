@@ -14,7 +14,9 @@ import pytest
 from slam_lcd.config import load_config
 from slam_lcd.io import open_log
 from slam_lcd.io.writers import copy_topics, open_writer
-from slam_lcd.runner import run_log
+from slam_lcd.run import OutputOptions, Sources, run_log
+
+QUIET = OutputOptions(progress=False, write_mcap=False)  # no progress bar, no corrected.mcap
 
 
 @pytest.fixture(scope="module")
@@ -74,7 +76,7 @@ distortion_coefficients: [0.0, 0.0, 0.0, 0.0]
 
 @pytest.fixture
 def camera_spy(monkeypatch):
-    from slam_lcd.pipeline import Pipeline
+    from slam_lcd.run.pipeline import Pipeline
 
     seen = []
     real = Pipeline.set_camera
@@ -91,7 +93,7 @@ def test_calib_wins_over_camera_info(tiny_log, tmp_path, camera_spy, caplog):
     cam, T_bc = _log_camera_and_mounting(tiny_log)
     calib = euroc_sensor_yaml(tmp_path / "cam0" / "sensor.yaml", cam, T_bc, cx_shift=0.5)
     with caplog.at_level(logging.WARNING, logger="slam_lcd"):
-        res = run_log(tiny_log, tmp_path / "out", _orb_config(), calib=[calib], progress=False, write_mcap=False)
+        res = run_log(tiny_log, tmp_path / "out", _orb_config(), sources=Sources(calib=[calib]), output=QUIET)
     assert res.n_keyframes > 0
     assert len(camera_spy) == 1  # the calibration's camera only: the CameraInfo is not read
     used, T_used = camera_spy[0]
@@ -106,8 +108,8 @@ def test_calib_gives_the_camera_of_a_log_without_camera_info(tiny_log, tmp_path,
     log = _variant(tiny_log, tmp_path / "bare.mcap",
                    drop=("/odom", "/camera/camera_info", "/camera/right/camera_info", "/tf_static"))
     calib = euroc_sensor_yaml(tmp_path / "cam0" / "sensor.yaml", cam, T_bc)
-    res = run_log(log, tmp_path / "out", _orb_config(), calib=[calib], progress=False, write_mcap=False,
-                  gt_topic="/ground_truth/pose")
+    res = run_log(log, tmp_path / "out", _orb_config(), sources=Sources(gt_topic="/ground_truth/pose", calib=[calib]),
+                  output=QUIET)
     used, T_used = camera_spy[0]
     assert used.fx == pytest.approx(cam.fx) and np.allclose(T_used, T_bc, atol=1e-9)
     # the VO is metric and mounted right: ATE of a few cm over the 2 m of this log
@@ -155,7 +157,7 @@ GT_KINDS = {"PoseWithCovarianceStamped": "/gt", "Odometry": "/gt", "TransformSta
 @pytest.fixture(scope="module")
 def baseline_run(tiny_log, tmp_path_factory):
     out = tmp_path_factory.mktemp("baseline") / "out"
-    return run_log(tiny_log, out, _orb_config(), gt_topic="/ground_truth/pose", progress=False, write_mcap=False)
+    return run_log(tiny_log, out, _orb_config(), sources=Sources(gt_topic="/ground_truth/pose"), output=QUIET)
 
 
 @pytest.mark.parametrize("kind", sorted(GT_KINDS))
@@ -165,7 +167,7 @@ def test_ground_truth_of_every_message_type(kind, tiny_log, baseline_run, tmp_pa
     assert baseline_run.ate_before is not None
     log = _variant(tiny_log, tmp_path / f"{kind}.mcap", drop=("/ground_truth/pose",),
                    write=_writer_of(kind, _gt_of(tiny_log)))
-    res = run_log(log, tmp_path / "out", _orb_config(), gt_topic=GT_KINDS[kind], progress=False, write_mcap=False)
+    res = run_log(log, tmp_path / "out", _orb_config(), sources=Sources(gt_topic=GT_KINDS[kind]), output=QUIET)
     # the same positions over the same stamps: the same ATE (translation; the alignment takes the world offset)
     assert res.ate_before == pytest.approx(baseline_run.ate_before, rel=1e-6, abs=1e-9)
     assert res.ate_after == pytest.approx(baseline_run.ate_after, rel=1e-6, abs=1e-9)
@@ -202,8 +204,8 @@ def test_tf_chain_ground_truth_goes_through_static_transforms(tiny_log, tmp_path
 def test_stereo_log_without_odometry_or_depth_uses_stereo_vo(tiny_log, tmp_path, caplog):
     log = _variant(tiny_log, tmp_path / "stereo.mcap", drop=("/odom", "/camera/depth"))
     with caplog.at_level(logging.WARNING, logger="slam_lcd"):
-        res = run_log(log, tmp_path / "out", _orb_config(), gt_topic="/ground_truth/pose", progress=False,
-                      write_mcap=False)
+        res = run_log(log, tmp_path / "out", _orb_config(), sources=Sources(gt_topic="/ground_truth/pose"),
+                      output=QUIET)
     assert any("stereo visual odometry on /camera/image_raw + /camera/right/image_raw" in r.getMessage()
                for r in caplog.records)
     assert res.n_keyframes > 0
@@ -287,8 +289,8 @@ def _raw_stereo(tiny_log, tmp_path):
 def test_raw_calibrated_stereo_pair_is_rectified_for_the_vo(tiny_log, tmp_path, camera_spy, caplog):
     log, calib, T_b_raw0 = _raw_stereo(tiny_log, tmp_path)
     with caplog.at_level(logging.WARNING, logger="slam_lcd"):
-        res = run_log(log, tmp_path / "out", _orb_config(), calib=[calib], gt_topic="/ground_truth/pose",
-                      progress=False, write_mcap=False)
+        res = run_log(log, tmp_path / "out", _orb_config(),
+                      sources=Sources(gt_topic="/ground_truth/pose", calib=[calib]), output=QUIET)
     assert any("not a rectified pair: the stereo VO rectifies them" in r.getMessage() for r in caplog.records)
     # the main pass sees the pair rectified (its loop poses take stereo points): the rectified cam0, mounted
     # as the file says turned by the rectification
@@ -336,6 +338,6 @@ def test_stereo_log_with_odometry_gives_the_loop_detector_the_pair(tiny_log, tmp
     real = lcd_geometry.dense_disparity
     monkeypatch.setattr(lcd_geometry, "dense_disparity",
                         lambda left, right: calls.append(right.shape) or real(left, right))
-    res = run_log(log, tmp_path / "out", _orb_config(), progress=False, write_mcap=False)
+    res = run_log(log, tmp_path / "out", _orb_config(), output=QUIET)
     assert res.topics["odom"] == "/odom" and res.topics["right"] == "/camera/right/image_raw"
     assert len(calls) == res.n_keyframes >= 2

@@ -134,7 +134,7 @@ def test_a_later_run_removes_stale_staging_folders_of_ours_only(small_log, tmp_p
     folders whose process is gone on this host, and leaves a live process's, another host's and the user's."""
     from slam_lcd.config import load_config
     from slam_lcd.outputs.output_set import STAGING_PREFIX, _host
-    from slam_lcd.runner import run_log
+    from slam_lcd.run import OutputOptions, run_log
 
     gone = subprocess.Popen([sys.executable, "-c", "pass"])
     gone.wait()
@@ -148,7 +148,7 @@ def test_a_later_run_removes_stale_staging_folders_of_ours_only(small_log, tmp_p
         d.mkdir()
         (d / "corrected.tum").write_text("1 0 0 0 0 0 0 1\n")
     run_log(small_log, out, load_config("default", ["features.kind=orb", "features.feature_cache=false",
-                                                    "run.plots=false"]), progress=False)
+                                                    "run.plots=false"]), output=OutputOptions(progress=False))
     assert not any(d.exists() for d in stale)
     assert all(d.exists() for d in kept)
     assert (out / "report.json").exists()

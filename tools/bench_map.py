@@ -84,10 +84,11 @@ def judge(m, true_max: float) -> dict:
 
 
 def run_session(log, out, cfg, extractor, m=None, name=None, mode="append"):
-    from slam_lcd.runner import run_log
+    from slam_lcd.run import MapUse, Models, OutputOptions, run_log
 
     t0 = time.perf_counter()
-    res = run_log(log, out, cfg, extractor=extractor, progress=False, map=m, session_name=name, map_mode=mode)
+    res = run_log(log, out, cfg, models=Models(extractor=extractor), map_use=MapUse(m, mode=mode, session_name=name),
+                  output=OutputOptions(progress=False))
     return res, time.perf_counter() - t0
 
 

@@ -97,11 +97,11 @@ def render_logs(work: Path, days: list[Day], size: tuple[int, int], rate: float)
 
 def run_one(log: Path, out: Path, cfg, extractor, m=None, name=None, mode="append") -> tuple[object, float]:
     """One run of ``log`` (appended to or localised in ``m``), and its wall time."""
-    from slam_lcd.runner import run_log
+    from slam_lcd.run import MapUse, Models, OutputOptions, run_log
 
     t0 = time.perf_counter()
-    res = run_log(log, out, cfg, extractor=extractor, progress=False, write_mcap=False, map=m, session_name=name,
-                  map_mode=mode)
+    res = run_log(log, out, cfg, models=Models(extractor=extractor), map_use=MapUse(m, mode=mode, session_name=name),
+                  output=OutputOptions(progress=False, write_mcap=False))
     return res, time.perf_counter() - t0
 
 

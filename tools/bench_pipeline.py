@@ -26,7 +26,7 @@ def main() -> None:
     print(machine_line(), flush=True)  # figures are only comparable with the machine named
 
     from slam_lcd.config import load_config
-    from slam_lcd.runner import run_log
+    from slam_lcd.run import OutputOptions, run_log
     from slam_lcd.sim.demo_cache import ensure_demo_log
 
     overrides = [f"features.kind={args.features}", *args.overrides]
@@ -39,7 +39,7 @@ def main() -> None:
     log = ensure_demo_log(frames=args.frames, progress=False)
     t_log = time.perf_counter() - t0
     with tempfile.TemporaryDirectory() as out:
-        res = run_log(log, out, cfg, progress=False)
+        res = run_log(log, out, cfg, output=OutputOptions(progress=False))
     print(f"demo log: {log} (ready in {t_log:.1f} s)")
     print(f"{'stage':<20} {'seconds':>9} {'calls':>7} {'ms/call':>9}")
     for k, v in sorted(res.stages.items(), key=lambda kv: -kv[1]["seconds"]):

@@ -535,10 +535,10 @@ def _keyframe_stamps(out_dir: Path) -> np.ndarray:
 
 
 def _run(log: Path, out_dir: Path, cfg, gt_topic: str | None):
-    from slam_lcd.runner import run_log
+    from slam_lcd.run import OutputOptions, Sources, run_log
 
     t0 = time.perf_counter()
-    res = run_log(log, out_dir, cfg, gt_topic=gt_topic, progress=False)
+    res = run_log(log, out_dir, cfg, sources=Sources(gt_topic=gt_topic), output=OutputOptions(progress=False))
     return res, time.perf_counter() - t0
 
 

@@ -30,7 +30,8 @@ OnRow = Callable[[dict], None]
 # seconds the driver waits, after a Ctrl-C, for running Ray tasks to write their partial sets
 RAY_STOP_WAIT_S = 60.0
 # modules the local pool's fork server imports once for all its workers
-PRELOAD = ["slam_lcd.batch.worker", "slam_lcd.runner", "slam_lcd.pipeline", "slam_lcd.features.superpoint_extractor"]
+PRELOAD = ["slam_lcd.batch.worker", "slam_lcd.run.runner", "slam_lcd.run.pipeline",
+           "slam_lcd.features.superpoint_extractor"]
 
 
 class Engine:

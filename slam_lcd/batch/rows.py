@@ -56,7 +56,7 @@ def _figures(row: dict, *, frames, keyframes, proposed, verified, accepted, fals
 
 
 def row_from_result(name: str, log, result) -> dict:
-    """The row of a run that just finished (a :class:`slam_lcd.runner.RunResult`)."""
+    """The row of a run that just finished (a :class:`slam_lcd.run.runner.RunResult`)."""
     status = "interrupted" if result.interrupted else "ok"
     message = "interrupted (Ctrl-C): a partial result, see PARTIAL.txt" if result.interrupted else ""
     row = _base(name, log, result.out_dir, status, message)

@@ -1,4 +1,4 @@
-"""What runs in a worker for one log: ``slam_lcd.runner.run_log``, turned into a summary row.
+"""What runs in a worker for one log: ``slam_lcd.run.runner.run_log``, turned into a summary row.
 
 Why this is its own module: it is the code a worker process (local pool) or a Ray node
 imports and calls, so it depends on nothing of the batch's driver side and everything it
@@ -197,7 +197,8 @@ def run_task(task: LogTask, shared: SharedWork) -> dict:
 
 
 def _run(task: LogTask, shared: SharedWork) -> dict:
-    from ..runner import run_log
+    from ..run.options import Models, OutputOptions, Sources
+    from ..run.runner import run_log
 
     if task.problem:
         return error_row(task.name, task.log, task.out_dir, task.problem)
@@ -210,10 +211,12 @@ def _run(task: LogTask, shared: SharedWork) -> dict:
         cfg = shared.config
         extractor = shared_extractor(cfg.features)
         vocab = shared_vocabulary(shared.vocab_path)
-        result = run_log(task.log, Path(task.out_dir), cfg, image_topic=shared.image_topic,
-                         odom_topic=shared.odom_topic, gt_topic=shared.gt_topic, gt_file=task.gt_file,
-                         depth_topic=shared.depth_topic, extractor=extractor, vocab=vocab, progress=False,
-                         write_mcap=shared.write_mcap, input_paths=shared.input_paths)
+        sources = Sources(image_topic=shared.image_topic, odom_topic=shared.odom_topic, gt_topic=shared.gt_topic,
+                          depth_topic=shared.depth_topic, gt_file=task.gt_file)
+        result = run_log(task.log, Path(task.out_dir), cfg, sources=sources,
+                         models=Models(extractor=extractor, vocab=vocab),
+                         output=OutputOptions(progress=False, write_mcap=shared.write_mcap,
+                                              input_paths=shared.input_paths))
     except KeyboardInterrupt:
         return stopped_row(task, shared.config, started_ns)
     except SlamLcdError as e:

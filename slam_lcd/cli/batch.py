@@ -85,7 +85,7 @@ def run(args) -> int:
 
 def _check_map(args) -> None:
     from ..batch.discovery import discover_logs
-    from ..run_checks import check_map_paths
+    from ..run.checks import check_map_paths
 
     inputs = {f"log {e.name}": e.path for e in discover_logs(args.logs)}
     inputs.update({"--gt-dir": args.gt_dir, "--vocab": args.vocab, **config_inputs(args)})
@@ -98,7 +98,8 @@ def _append_to_map(args, cfg, res) -> int:
     from ..features import load_extractor
     from ..map.session_map import Map, extractor_meta
     from ..map.summary import summary_lines
-    from ..runner import run_log
+    from ..run.options import MapUse, Models, OutputOptions, Sources
+    from ..run.runner import run_log
     from ..runtime.interrupts import exit_status
 
     rows = sorted((r for r in res.rows if r["status"] in ("ok", "skipped")), key=lambda r: r["name"])
@@ -116,10 +117,12 @@ def _append_to_map(args, cfg, res) -> int:
                 print(held)
                 continue
             gt = ground_truth_in(Path(args.gt_dir), LogEntry(Path(r["log"]), r["name"])) if args.gt_dir else None
-            last = run_log(r["log"], out / r["name"], cfg, extractor=extractor, progress=not args.no_progress,
-                           gt_topic=args.gt_topic, gt_file=gt, image_topic=args.image_topic,
-                           odom_topic=args.odom_topic, depth_topic=args.depth_topic, write_mcap=not args.no_mcap,
-                           input_paths=config_inputs(args), map=m, session_name=r["name"])
+            sources = Sources(image_topic=args.image_topic, odom_topic=args.odom_topic, gt_topic=args.gt_topic,
+                              depth_topic=args.depth_topic, gt_file=gt)
+            last = run_log(r["log"], out / r["name"], cfg, sources=sources, models=Models(extractor=extractor),
+                           map_use=MapUse(m, session_name=r["name"]),
+                           output=OutputOptions(progress=not args.no_progress, write_mcap=not args.no_mcap,
+                                                input_paths=config_inputs(args)))
             print(f"appended {r['name']} to {args.map}" + (" (interrupted: not added)" if last.interrupted else ""))
             if last.interrupted:
                 return exit_status()

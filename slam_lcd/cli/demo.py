@@ -86,7 +86,8 @@ def load_demo_extractor(args):
 
 def run(args) -> int:
     from ..files.atomic import check_no_clash
-    from ..runner import run_log
+    from ..run.options import Models, OutputOptions
+    from ..run.runner import run_log
     from ..sim.demo_cache import demo_log_path, ensure_demo_log
 
     width, height = args.size
@@ -104,10 +105,10 @@ def run(args) -> int:
     print(f"demo log: {log_path}", flush=True)
     from ..sim import demo_surfaces
 
-    res = run_log(log_path, Path(args.out), cfg, extractor=extractor, progress=not args.no_progress,
-                  input_paths=config_inputs(args),
-                  command_line=getattr(args, "command_line", None), overrides=list(args.overrides),
-                  surfaces=demo_surfaces(args.seed))
+    res = run_log(log_path, Path(args.out), cfg, models=Models(extractor=extractor),
+                  output=OutputOptions(progress=not args.no_progress, input_paths=config_inputs(args),
+                                       command_line=getattr(args, "command_line", None),
+                                       overrides=list(args.overrides), surfaces=demo_surfaces(args.seed)))
     print("slam-lcd demo summary")
     print(f"  features: {cfg.features.kind}" + (f" ({notice})" if notice else ""))
     for line in res.summary_lines():
@@ -122,7 +123,8 @@ def _run_sessions(args, cfg, extractor, notice) -> int:
     """``demo --sessions N``: the first N session logs of the demo world, appended one by one to OUT/map."""
     from ..map.session_map import Map, extractor_meta
     from ..map.summary import summary_lines
-    from ..runner import run_log
+    from ..run.options import MapUse, Models, OutputOptions
+    from ..run.runner import run_log
     from ..runtime.interrupts import exit_status
     from ..sim.demo_cache import ensure_demo_log
 
@@ -143,9 +145,11 @@ def _run_sessions(args, cfg, extractor, notice) -> int:
             if held is not None:  # one rule for every way into a map (Map.session_of_log)
                 print(held)
                 continue
-            res = run_log(path, out / f"session{k}", cfg, extractor=extractor, progress=not args.no_progress,
-                          input_paths=config_inputs(args), command_line=getattr(args, "command_line", None),
-                          overrides=list(args.overrides), map=m, session_name=f"session{k}")
+            res = run_log(path, out / f"session{k}", cfg, models=Models(extractor=extractor),
+                          map_use=MapUse(m, session_name=f"session{k}"),
+                          output=OutputOptions(progress=not args.no_progress, input_paths=config_inputs(args),
+                                               command_line=getattr(args, "command_line", None),
+                                               overrides=list(args.overrides)))
             if res.interrupted:
                 return exit_status()
     finally:

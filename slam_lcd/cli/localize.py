@@ -32,9 +32,10 @@ def run(args) -> int:
     from ..features import load_extractor
     from ..map.session_map import Map, extractor_meta
     from ..map.summary import localisation_lines
-    from ..run_checks import check_run_paths
-    from ..runner import run_log
-    from .run import run_input_paths
+    from ..run.checks import check_run_paths
+    from ..run.options import MapUse, Models, OutputOptions
+    from ..run.runner import run_log
+    from .run import run_input_paths, sources_of
 
     cfg = config_from_args(args)
     inputs = config_inputs(args)
@@ -43,12 +44,11 @@ def run(args) -> int:
     with m:
         extractor = load_extractor(cfg.features)
         m.check_features(extractor_meta(extractor, cfg.map.descriptor_form))
-        res = run_log(args.log, Path(args.out), cfg, image_topic=args.image_topic, odom_topic=args.odom_topic,
-                      depth_topic=args.depth_topic, gt_topic=args.gt_topic, gt_file=args.gt,
-                      progress=not args.no_progress, write_mcap=not args.no_mcap, input_paths=inputs,
-                      command_line=getattr(args, "command_line", None), overrides=list(args.overrides),
-                      calib=args.calib, right_topic=args.right_topic, map=m, map_mode="localize",
-                      extractor=extractor)
+        res = run_log(args.log, Path(args.out), cfg, sources=sources_of(args), models=Models(extractor=extractor),
+                      map_use=MapUse(m, mode="localize"),
+                      output=OutputOptions(progress=not args.no_progress, write_mcap=not args.no_mcap,
+                                           input_paths=inputs, command_line=getattr(args, "command_line", None),
+                                           overrides=list(args.overrides)))
     if res.localization is not None:
         for line in localisation_lines(res.localization):
             print(line)

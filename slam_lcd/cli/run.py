@@ -145,7 +145,7 @@ def run(args) -> int:
         return _print_result(_run_one(args, cfg, logs[0], Path(args.out), None))
     from ..features import load_extractor
     from ..map.session_map import Map, extractor_meta
-    from ..run_checks import check_run_paths
+    from ..run.checks import check_run_paths
 
     names = [x.stem for x in logs]
     if len(set(names)) != len(names):
@@ -181,7 +181,7 @@ def run_input_paths(args) -> dict:
 
 
 def _run_one(args, cfg, log_path: Path, out: Path, m, extractor=None):
-    from ..runner import run_log
+    from ..run.runner import run_log
 
     inputs = config_inputs(args)
     live = _live(args, log_path, out)
@@ -215,12 +215,21 @@ def _live(args, log_path: Path, out: Path):
 
 
 def _run_log(run_log, args, cfg, log_path, out, m, extractor, inputs, live):
-    return run_log(log_path, out, cfg, image_topic=args.image_topic, odom_topic=args.odom_topic,
-                   depth_topic=args.depth_topic, gt_topic=args.gt_topic, gt_file=args.gt,
-                   progress=not args.no_progress, write_mcap=not args.no_mcap, input_paths=inputs,
-                   command_line=getattr(args, "command_line", None), overrides=list(args.overrides),
-                   calib=args.calib, right_topic=args.right_topic, map=m, extractor=extractor,
-                   session_name=args.session_name, surfaces=_truth(args), live=live)
+    from ..run.options import MapUse, Models, OutputOptions
+
+    return run_log(log_path, out, cfg, sources=sources_of(args), models=Models(extractor=extractor),
+                   map_use=MapUse(m, session_name=args.session_name) if m is not None else None,
+                   output=OutputOptions(progress=not args.no_progress, write_mcap=not args.no_mcap,
+                                        input_paths=inputs, command_line=getattr(args, "command_line", None),
+                                        overrides=list(args.overrides), surfaces=_truth(args), live=live))
+
+
+def sources_of(args):
+    """The :class:`~slam_lcd.run.options.Sources` of the source flags (``run`` and ``localize`` share them)."""
+    from ..run.options import Sources
+
+    return Sources(image_topic=args.image_topic, odom_topic=args.odom_topic, gt_topic=args.gt_topic,
+                   depth_topic=args.depth_topic, right_topic=args.right_topic, gt_file=args.gt, calib=args.calib)
 
 
 def _truth(args):

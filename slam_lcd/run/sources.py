@@ -1,6 +1,6 @@
 """The sources of one ``slam-lcd run``: calibration, camera, odometry, stereo pair, the map cloud's input.
 
-Why a module of its own: :func:`slam_lcd.runner.run_log` sequences a run (checks, the one pass
+Why a module of its own: :func:`slam_lcd.run.runner.run_log` sequences a run (checks, the one pass
 over the log, the outputs); which sensor feeds which part of the pipeline is a separate
 question with its own rules, answered here once for every log: a calibration file's camera wins
 over the log's CameraInfo, a log without odometry gets the built-in visual odometry (RGB-D on its
@@ -12,13 +12,14 @@ from __future__ import annotations
 import dataclasses
 import logging
 
-from .errors import PipelineError, stamp_text
-from .outputs.output_set import OutputSet
-from .outputs.result import RunResult
-from .sensors.ground_truth import ground_truth_from_tf
-from .sensors.mounting import calibrated_mounting
-from .sensors.topics import Topics, choose_right_topic, static_tf_topics
-from .types import Trajectory
+from ..errors import PipelineError, stamp_text
+from ..outputs.output_set import OutputSet
+from ..outputs.result import RunResult
+from ..sensors.ground_truth import ground_truth_from_tf
+from ..sensors.mounting import calibrated_mounting
+from ..sensors.topics import Topics, choose_right_topic, static_tf_topics
+from ..types import Trajectory
+from .options import MapUse, Models
 
 log = logging.getLogger(__name__)
 
@@ -74,7 +75,7 @@ def set_calibrated_camera(pipe, cfg, calibrated, vo_odometry, stereo, tf, body_f
 
 def calibration_of(calib):
     """None, or the :class:`~slam_lcd.sensors.calibration.Calibration` of ``calib`` (paths or loaded)."""
-    from .sensors.calibration import Calibration, load_calibration
+    from ..sensors.calibration import Calibration, load_calibration
 
     if calib is None or isinstance(calib, Calibration):
         return calib
@@ -119,7 +120,7 @@ def no_odometry_reason(image_topic: str) -> str:
 def stereo_rectifier_for(calibration, calibrated, log_path):
     """None for a rectified pair (or one described by CameraInfo); else the rectification of the
     calibrated pair (:mod:`slam_lcd.sensors.rectify`): the stereo VO matches along image rows."""
-    from .sensors.rectify import is_rectified, stereo_rectifier
+    from ..sensors.rectify import is_rectified, stereo_rectifier
 
     if calibration is None or calibrated is None:
         return None  # CameraInfo pairs: the right camera's projection gives the baseline of a rectified pair
@@ -138,7 +139,7 @@ def visual_odometry(log_path, topics: Topics, cfg, calibrated=None, right_topic:
                      rectifier=None):
     """Built-in RGB-D (or, with ``right_topic``, stereo) visual odometry over the whole log (a first
     pass; see slam_lcd.sensors.log_vo)."""
-    from .sensors.log_vo import visual_odometry_from_log
+    from ..sensors.log_vo import visual_odometry_from_log
 
     kind = f"stereo visual odometry on {topics.image} + {right_topic}" if right_topic else \
         f"RGB-D visual odometry on {topics.image} + {topics.depth}"
@@ -153,7 +154,7 @@ def visual_odometry(log_path, topics: Topics, cfg, calibrated=None, right_topic:
 def stereo_frames(reader, right: str, calibrated, rectifier, vo_odometry):
     """The pairing of left and right images that gives the loop poses stereo points, or None (said)
     when the baseline of the pair is unknown."""
-    from .sensors.stereo_pairs import StereoFrames, right_camera_info_baseline
+    from ..sensors.stereo_pairs import StereoFrames, right_camera_info_baseline
 
     if rectifier is not None:
         baseline = rectifier.camera.baseline
@@ -180,7 +181,7 @@ def map_cloud_builder(cfg, topics: Topics, stereo, outputs: OutputSet, result: R
         log.info("%s: no map cloud (map.ply): %s", log_path, reason)
         result.map_cloud = {"built": False, "reason": reason}
         return None
-    from .cloud import MapCloudBuilder
+    from ..cloud import MapCloudBuilder
 
     source = topics.depth if topics.depth is not None else f"{topics.image} + {topics.right}"
     return MapCloudBuilder(cfg.map_cloud, source=f"{log_path}: {source}", folder=outputs.staging)
@@ -188,7 +189,7 @@ def map_cloud_builder(cfg, topics: Topics, stereo, outputs: OutputSet, result: R
 
 def cloud_sensor(pipe, topics: Topics, stereo, calibration) -> dict:
     """Where the cloud's points came from: ``export-map`` reads the same topics with the same camera."""
-    from .outputs.map_cloud import camera_facts
+    from ..outputs.map_cloud import camera_facts
 
     return {"kind": "depth" if topics.depth is not None else "stereo", "image_topic": topics.image,
             "depth_topic": topics.depth, "right_topic": topics.right if topics.depth is None else None,
@@ -207,18 +208,18 @@ def no_keyframe_reason(pipe, topics: Topics, n_frames: int) -> str:
             f"of {source} ({span}); nothing to correct")
 
 
-def make_pipeline(cfg, extractor, vocab, log_path, topics: Topics, keyframe_sink=None, rectified: bool = False,
-                   map=None, map_mode: str = "append", map_cloud=None):
+def make_pipeline(cfg, models: Models, log_path, topics: Topics, keyframe_sink=None, rectified: bool = False,
+                  map_use: MapUse | None = None, map_cloud=None):
     """The pipeline with its collaborators: the extractor, the vocabulary (None: online), the feature
     cache of this log (``rectified``: the images are the rectified pair's, cached apart from the raw
-    ones), whether frames wait for depth, the loop pictures' keyframe album."""
-    from .features import load_extractor
+    ones), whether frames wait for depth, the loop pictures' keyframe album, the map it uses."""
+    from ..features import load_extractor
     from .pipeline import Pipeline  # imported late: topic errors need no model
 
-    extractor = extractor if extractor is not None else load_extractor(cfg.features)
+    extractor = models.extractor if models.extractor is not None else load_extractor(cfg.features)
     feature_source = None
     if cfg.features.feature_cache:
-        from .features import FeatureCache
+        from ..features import FeatureCache
 
         cache = FeatureCache(extractor)
 
@@ -227,7 +228,8 @@ def make_pipeline(cfg, extractor, vocab, log_path, topics: Topics, keyframe_sink
         def feature_source(stamp, img):
             return cache.extract(log_path, cache_topic, stamp, img)
 
-    return Pipeline(cfg, extractor=extractor, vocab=vocab, feature_source=feature_source,
+    return Pipeline(cfg, extractor=extractor, vocab=models.vocab, feature_source=feature_source,
                     expect_depth=topics.depth is not None, keyframe_sink=keyframe_sink,
-                    loop_sink=getattr(keyframe_sink, "keep_loop", None), map=map, map_mode=map_mode,
-                    map_cloud=map_cloud)
+                    loop_sink=getattr(keyframe_sink, "keep_loop", None),
+                    map=map_use.session_map if map_use is not None else None,
+                    map_mode=map_use.mode if map_use is not None else "append", map_cloud=map_cloud)

@@ -1,6 +1,6 @@
 """The checks a run makes on its paths before any work: inputs exist, outputs land on no input, the map apart.
 
-Shared by :func:`slam_lcd.runner.run_log` and the command line, which makes them before it loads a
+Shared by :func:`slam_lcd.run.runner.run_log` and the command line, which makes them before it loads a
 model or takes a map's writer lock, so that a refused command waits for nothing and changes
 nothing (docs/robustness.md, "Outputs never land on inputs").
 """
@@ -9,11 +9,11 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from .config import Config
-from .errors import FileMissingError
-from .files.atomic import check_apart, check_no_clash
-from .outputs.output_set import OutputSet
-from .outputs.write import RUN_OUTPUTS
+from ..config import Config
+from ..errors import FileMissingError
+from ..files.atomic import check_apart, check_no_clash
+from ..outputs.output_set import OutputSet
+from ..outputs.write import RUN_OUTPUTS
 
 
 def run_inputs(log_path, gt_file, cfg: Config, extra=None) -> dict:
@@ -57,7 +57,7 @@ def check_map_paths(map_dir, outputs: dict, inputs: dict, appended: bool) -> Non
     an input, and a folder a map can be written to (:func:`slam_lcd.map.store.check_map_target`)."""
     check_apart("--map", map_dir, outputs)
     if appended:
-        from .map.store import check_map_target
+        from ..map.store import check_map_target
 
         check_no_clash({"--map": map_dir}, inputs, merged=[map_dir])
         check_map_target(map_dir, create=True)

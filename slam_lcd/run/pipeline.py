@@ -2,7 +2,7 @@
 
 :class:`Pipeline` is the plugin API: a user's own front end feeds it odometry samples and
 camera frames (or ready-made keyframes) and gets loop closures through a callback and the
-corrected trajectory at any time. :func:`slam_lcd.runner.run_log` drives it from a recorded
+corrected trajectory at any time. :func:`slam_lcd.run.runner.run_log` drives it from a recorded
 log and writes every output file.
 
 Stages: keyframe selection (:mod:`slam_lcd.frontend`) → features (:mod:`slam_lcd.features`)
@@ -31,17 +31,17 @@ from concurrent.futures import Future
 
 import numpy as np
 
-from .backend import PoseGraph, correct_full_rate
-from .backend.pose_graph import ACCEPTED
-from .config import Config
+from ..backend import PoseGraph, correct_full_rate
+from ..backend.pose_graph import ACCEPTED
+from ..config import Config
+from ..frontend import KeyframeSelector
+from ..frontend.odometry_buffer import OdometryBuffer
+from ..lcd import LoopDetector
+from ..runtime.stage_timer import StageTimer, resident_kb
+from ..runtime.thread_limits import limited_threads
+from ..types import CameraModel, Keyframe, LoopClosure, Trajectory
 from .extract_ahead import ExtractionPool
-from .frontend import KeyframeSelector
-from .frontend.frame_queue import Frame, FrameQueue
-from .frontend.odometry_buffer import OdometryBuffer
-from .lcd import LoopDetector
-from .runtime.stage_timer import StageTimer, resident_kb
-from .runtime.thread_limits import limited_threads
-from .types import CameraModel, Keyframe, LoopClosure, Trajectory
+from .frame_queue import Frame, FrameQueue
 
 log = logging.getLogger(__name__)
 
@@ -83,7 +83,7 @@ class Pipeline:
         self.camera = camera
         self.T_body_camera = np.eye(4) if T_body_camera is None else np.asarray(T_body_camera, float)
         if extractor is None:
-            from .features import load_extractor
+            from ..features import load_extractor
 
             extractor = load_extractor(self.config.features)
         self.extractor = extractor
@@ -101,7 +101,7 @@ class Pipeline:
         self.keyframes: list[Keyframe] = []
         self.closures: list[LoopClosure] = []
         self._odom = OdometryBuffer()
-        self._frames = FrameQueue()  # frames waiting for odometry (slam_lcd.frontend.frame_queue)
+        self._frames = FrameQueue()  # frames waiting for odometry (run.frame_queue)
         # when the log carries depth, a frame waits for its depth image (or for the next frame):
         # message order at equal stamps differs between log formats, the result must not
         self.expect_depth = bool(expect_depth)
@@ -111,7 +111,7 @@ class Pipeline:
         # keyframes handed in, made by the selector but not handed in, waiting for features / loops
         self._n_submitted = 0
         self._unsubmitted: list[tuple[int, Keyframe]] = []
-        self._extraction = ExtractionPool(self.config.run, extractor)  # background extraction (slam_lcd.extract_ahead)
+        self._extraction = ExtractionPool(self.config.run, extractor)  # background extraction (run.extract_ahead)
         self._ahead = self._extraction.ahead
         self._inflight: deque[tuple[Keyframe, Future | None]] = deque()
         # per keyframe: seconds of loop detection (and its parts), of the back end, resident kB after it

@@ -3,7 +3,7 @@
 Why its own module: a frame can only become a keyframe once the odometry covers its stamp
 (its pose is interpolated there), and on an RGB-D log its depth image may come before or
 after it: message order at equal stamps differs between log formats, and the result must
-not. The :class:`~slam_lcd.pipeline.Pipeline` asks this queue which frames are ready and
+not. The :class:`~slam_lcd.run.pipeline.Pipeline` asks this queue which frames are ready and
 processes them; a frame it could not finish (an interrupt) goes back to the front.
 """
 from __future__ import annotations

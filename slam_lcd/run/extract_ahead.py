@@ -1,6 +1,6 @@
 """Keyframe features extracted ahead, in worker threads (``run.extract_ahead``), for the pipeline.
 
-Why a module of its own: :class:`~slam_lcd.pipeline.Pipeline` keeps keyframes in order through
+Why a module of its own: :class:`~slam_lcd.run.pipeline.Pipeline` keeps keyframes in order through
 the graph and loop detection; how many threads extract meanwhile, and what that does to
 torch's own thread count, is separate bookkeeping with a life of its own: the threads start
 with the first keyframe that needs them (a run that hands in ready features never starts

@@ -1,10 +1,10 @@
-"""``slam-lcd run``: choose the sources of a log, drive them into the :class:`~slam_lcd.pipeline.Pipeline`,
+"""``slam-lcd run``: choose the sources of a log, drive them into the :class:`~slam_lcd.run.pipeline.Pipeline`,
 write the outputs.
 
 Sources (:mod:`slam_lcd.sensors`): the topics (explicit flags win, else the log's only
 camera image, its CameraInfo and depth, the only ``nav_msgs/Odometry``, a ground-truth
 pose topic whose name says so), their decoding, the camera mounting and, for a log without
-odometry, the built-in visual odometry as the odometry source (chosen in :mod:`slam_lcd.run_sources`). Outputs
+odometry, the built-in visual odometry as the odometry source (chosen in :mod:`slam_lcd.run.sources`). Outputs
 (:mod:`slam_lcd.outputs`): :data:`RUN_OUTPUTS`, written as one set into ``out_dir``.
 
 Bad input fails before any work, in one line that names the log (and the flag, topic and
@@ -19,17 +19,35 @@ import time
 from collections import deque
 from pathlib import Path
 
-from .config import Config, validate_config
-from .errors import DamagedImageError, PipelineError
-from .io import open_log
-from .io.prefetch import prefetched
-from .io.raw_spool import RawSpool
-from .io.trajectory_files import read_trajectory
-from .outputs.corrected_log import copied_topics
-from .outputs.result import RunResult
-from .outputs.write import write_set
-from .run_checks import check_run_paths, run_inputs
-from .run_sources import (
+from ..config import Config, validate_config
+from ..errors import DamagedImageError, PipelineError
+from ..io import open_log
+from ..io.prefetch import prefetched
+from ..io.raw_spool import RawSpool
+from ..io.trajectory_files import read_trajectory
+from ..outputs.corrected_log import copied_topics
+from ..outputs.result import RunResult
+from ..outputs.write import write_set
+from ..runtime.interrupts import interrupted_word
+from ..runtime.progress import progress_bar
+from ..sensors.ground_truth import POSITION_ONLY_NOTE, decode_ground_truth, ground_truth_from_messages
+from ..sensors.messages import (
+    at_message,
+    check_first_messages,
+    check_image_sizes,
+    decode_any_image,
+    decode_camera_of,
+    decode_depth,
+    decode_gray,
+    decode_pose_of,
+)
+from ..sensors.mounting import body_frame_of, mounting_from_camera_info, static_transforms
+from ..sensors.topics import Topics, choose_topics, configured_topics, copyable_topics
+from ..types import Trajectory
+from ..vision.gray import image_to_gray
+from .checks import check_run_paths, run_inputs
+from .options import MapUse, Models, OutputOptions, Sources
+from .sources import (
     calibrated_camera,
     calibration_of,
     cloud_sensor,
@@ -41,27 +59,10 @@ from .run_sources import (
     odometry_and_stereo,
     set_calibrated_camera,
 )
-from .runtime.interrupts import interrupted_word
-from .runtime.progress import progress_bar
-from .sensors.ground_truth import POSITION_ONLY_NOTE, decode_ground_truth, ground_truth_from_messages
-from .sensors.messages import (
-    at_message,
-    check_first_messages,
-    check_image_sizes,
-    decode_any_image,
-    decode_camera_of,
-    decode_depth,
-    decode_gray,
-    decode_pose_of,
-)
-from .sensors.mounting import body_frame_of, mounting_from_camera_info, static_transforms
-from .sensors.topics import Topics, choose_topics, configured_topics, copyable_topics
-from .types import Trajectory
-from .vision.gray import image_to_gray
 
 log = logging.getLogger(__name__)
 
-__all__ = ["RunResult", "run_inputs", "run_log"]
+__all__ = ["MapUse", "Models", "OutputOptions", "RunResult", "Sources", "run_inputs", "run_log"]
 
 
 # --------------------------------------------------------------------------- main entry
@@ -70,62 +71,44 @@ def run_log(
     out_dir: str | Path,
     config: Config | None = None,
     *,
-    image_topic: str | None = None,
-    odom_topic: str | None = None,
-    gt_topic: str | None = None,
-    gt_file: str | Path | None = None,
-    depth_topic: str | None = None,
-    extractor=None,
-    vocab=None,
-    progress: bool = True,
-    write_mcap: bool = True,
-    input_paths: dict | None = None,
-    command_line: list[str] | None = None,
-    overrides: list[str] | None = None,
-    calib=None,
-    right_topic: str | None = None,
-    map=None,
-    session_name: str | None = None,
-    map_mode: str = "append",
-    surfaces=None,
-    live=None,
+    sources: Sources | None = None,
+    models: Models | None = None,
+    map_use: MapUse | None = None,
+    output: OutputOptions | None = None,
 ) -> RunResult:
     """Correct the trajectory of ``log_path`` with loop closures; write outputs into ``out_dir``.
 
-    Before any work: outputs are checked against every input (``input_paths`` adds the
-    caller's, e.g. ``{"--config": path}``), the target folder must be writable, the chosen
-    topics must have the right types and their first messages must decode. Outputs are
-    written as one set (:class:`slam_lcd.outputs.output_set.OutputSet`). A Ctrl-C stops the stream
-    and writes the result so far, marked partial (``PARTIAL.txt``); ``result.interrupted``.
-    ``extractor`` and ``vocab`` (a :class:`slam_lcd.vocab.Vocabulary`; None: the online
-    vocabulary) are used as given, so a caller running many logs loads each once.
-    ``command_line`` and ``overrides`` (the ``--set`` assignments) are only reported.
-    ``calib``: calibration file(s) (Kalibr camchain.yaml or EuRoC sensor.yaml, see
-    :mod:`slam_lcd.sensors.calibration`) or a loaded ``Calibration``; its camera and mounting
-    win over the log's CameraInfo and ``/tf_static``. A log without odometry gets the built-in
-    visual odometry: RGB-D on its depth topic, else stereo on ``right_topic`` (default: the
-    second camera found by :func:`slam_lcd.sensors.topics.choose_right_topic`).
-    ``map``: a :class:`slam_lcd.map.Map` opened for writing: its keyframes are loop candidates and
-    the log is appended to it as session ``session_name`` (committed before the outputs are
-    written; an interrupted run leaves the map as it was). ``map_mode='localize'``: the map (opened
-    read-only) is not changed; each keyframe is localised against it (``result.localization``).
-    ``surfaces``: ``(name, {ground-truth frame: Rectangles})``, the true surfaces of the world the log was
-    rendered in (the demo world: :func:`slam_lcd.sim.demo_surfaces`): the map cloud's points are measured
-    against those in the ground truth's frame. ``live`` (a :class:`slam_lcd.viewer.live.LiveRecorder`) sees
-    each keyframe and verified loop as the run goes, beside the loop pictures' album.
+    Before any work: outputs are checked against every input (``output.input_paths`` adds the
+    caller's), the target folder must be writable, the chosen topics must have the right types
+    and their first messages must decode. Outputs are written as one set
+    (:class:`slam_lcd.outputs.output_set.OutputSet`). A Ctrl-C stops the stream and writes the
+    result so far, marked partial (``PARTIAL.txt``); ``result.interrupted``. A log without
+    odometry gets the built-in visual odometry: RGB-D on its depth topic, else stereo on
+    ``sources.right_topic`` (default: the second camera found by
+    :func:`slam_lcd.sensors.topics.choose_right_topic`). Each group of inputs has the defaults
+    of a plain ``slam-lcd run`` (:mod:`slam_lcd.run.options`): ``sources`` (topics, ground-truth
+    file, calibration), ``models`` (extractor, vocabulary, used as given), ``map_use`` (append
+    to a map, or localise against it) and ``output`` (progress, corrected.mcap, what is reported).
     """
+    sources = sources if sources is not None else Sources()
+    models = models if models is not None else Models()
+    output = output if output is not None else OutputOptions()
+    session_map = map_use.session_map if map_use is not None else None
+    map_mode = map_use.mode if map_use is not None else "append"
+    gt_file, live = sources.gt_file, output.live
     cfg = validate_config(config or Config())
     log_path = Path(log_path)
     out_dir = Path(out_dir)
-    calibration = calibration_of(calib)
-    extra_inputs = dict(input_paths or {})
+    calibration = calibration_of(sources.calib)
+    extra_inputs = dict(output.input_paths)
     if calibration is not None:
         extra_inputs.update({f"--calib {i}": p for i, p in enumerate(calibration.sources)})
     outputs = check_run_paths(log_path, out_dir, cfg, gt_file, extra_inputs,
-                              map_dir=map.root if map is not None else None, appended=map_mode == "append")
+                              map_dir=session_map.root if session_map is not None else None,
+                              appended=map_mode == "append")
     t_start = time.perf_counter()
-    result = RunResult(out_dir=out_dir, log_path=str(log_path), command_line=command_line,
-                       overrides=list(overrides or []))
+    result = RunResult(out_dir=out_dir, log_path=str(log_path), command_line=output.command_line,
+                       overrides=list(output.overrides))
     gt_traj = read_trajectory(gt_file) if gt_file is not None else None
 
     album = spool = map_cloud = None
@@ -133,11 +116,12 @@ def run_log(
         with open_log(log_path, conf=cfg.io) as reader:
             if reader.message_count == 0:
                 raise PipelineError("log holds no messages", log_path)
-            flags = configured_topics(reader, cfg.sensors, image_topic, odom_topic, gt_topic, depth_topic, right_topic)
+            flags = configured_topics(reader, cfg.sensors, sources.image_topic, sources.odom_topic, sources.gt_topic,
+                                      sources.depth_topic, sources.right_topic)
             right_topic = flags.pop("right_topic")
             topics = choose_topics(reader, **flags)
-            if map is not None and map_mode == "append":
-                map.refuse_held(log_path, topics.image)  # not run again (Map.session_of_log)
+            if session_map is not None and map_mode == "append":
+                session_map.refuse_held(log_path, topics.image)  # not run again (Map.session_of_log)
             calibrated = calibrated_camera(calibration, topics, log_path)
             first = check_first_messages(reader, topics)
             check_image_sizes(reader, topics, first, calibrated, calibration)
@@ -149,7 +133,7 @@ def run_log(
             if topics.gt_position_only:
                 result.alignment = f"{cfg.eval.align}; {POSITION_ONLY_NOTE}"
                 log.warning("%s: %s", log_path, POSITION_ONLY_NOTE)
-            mcap_wanted = write_mcap and cfg.run.write_mcap
+            mcap_wanted = output.write_mcap and cfg.run.write_mcap
             copy_topics = copyable_topics(reader, cfg.run.copy_images, log_path) if mcap_wanted else []
             vo_odometry, stereo, right = odometry_and_stereo(reader, topics, right_topic, cfg, calibration,
                                                              calibrated, log_path)
@@ -157,15 +141,15 @@ def run_log(
                 result.topics["right"] = right
             tf = static_transforms(reader, log_path)
             if cfg.run.loop_pictures:  # a working folder inside the staging folder: discarded with it on failure
-                from .outputs.loop_pictures import KeyframeAlbum
+                from ..outputs.loop_pictures import KeyframeAlbum
 
                 album = KeyframeAlbum(outputs.staging / ".loop_keyframes", cfg.lcd.descriptor_dtype)
             if copy_topics:  # the topics corrected.mcap copies, kept undecoded from the one pass over the log
                 spool = RawSpool(outputs.staging / ".corrected_mcap_spool", copied_topics(copy_topics))
             map_cloud = map_cloud_builder(cfg, topics, stereo, outputs, result, log_path)
-            pipe = make_pipeline(cfg, extractor, vocab, log_path, topics, album if live is None else live.sink(album),
-                                  rectified=stereo is not None and stereo.rectifier is not None, map=map,
-                                  map_mode=map_mode, map_cloud=map_cloud)
+            pipe = make_pipeline(cfg, models, log_path, topics, album if live is None else live.sink(album),
+                                 rectified=stereo is not None and stereo.rectifier is not None, map_use=map_use,
+                                 map_cloud=map_cloud)
             if calibrated is not None:  # the calibration file's camera (CameraInfo is not read then)
                 set_calibrated_camera(pipe, cfg, calibrated, vo_odometry, stereo, tf,
                                       body_frame_of(first.get(topics.odom)))
@@ -175,7 +159,7 @@ def run_log(
             if cfg.run.plots:
                 _import_in_background("slam_lcd.eval.plots")
             gt_traj_from_log = _drive(reader, topics, pipe, result, cfg, tf, body_frame_of(first.get(topics.odom)),
-                                      vo_odometry, log_path, progress, stereo, spool)
+                                      vo_odometry, log_path, output.progress, stereo, spool)
             result.log_duration_s = reader.duration_ns * 1e-9
             if map_cloud is not None:
                 result.map_cloud_sensor = cloud_sensor(pipe, topics, stereo, calibration)
@@ -189,7 +173,7 @@ def run_log(
         except KeyboardInterrupt:  # Ctrl-C (maybe a second one): skip the back end's final re-check
             log.warning("%s%s: the back end's final re-check is skipped", interrupted_word(),
                         " again" if result.interrupted else "")
-            from .runtime.interrupts import signal_name
+            from ..runtime.interrupts import signal_name
 
             notes.append(f"The back end's final re-check (GNC) was interrupted ({signal_name()}) and skipped.")
             result.interrupted = True
@@ -200,12 +184,12 @@ def run_log(
         if gt_traj is None:
             result.gt_source = None  # a ground-truth topic without a message
         result.ground_truth = gt_traj
-        if map is not None and map_mode == "localize":
-            from .map.summary import localisation_report
+        if session_map is not None and map_mode == "localize":
+            from ..map.summary import localisation_report
 
-            result.localization = localisation_report(map, map.localise(pipe), gt_traj)
-        elif map is not None:
-            result.map = _append_to_map(map, pipe, result, log_path, session_name, gt_traj, notes)
+            result.localization = localisation_report(session_map, session_map.localise(pipe), gt_traj)
+        elif map_use is not None:
+            result.map = _append_to_map(map_use, pipe, result, log_path, gt_traj, notes)
         result.wall_s = time.perf_counter() - t_start
     except BaseException:
         if spool is not None:
@@ -216,7 +200,7 @@ def run_log(
         raise
     try:
         write_set(outputs, pipe, result, gt_traj, log_path if mcap_wanted else None, copy_topics, notes, read_to_end,
-                  album=album, spool=spool, surfaces=surfaces)
+                  album=album, spool=spool, surfaces=output.surfaces)
     finally:  # also when writing failed (a full disk) before the map cloud was written
         if map_cloud is not None:
             map_cloud.close()
@@ -274,20 +258,21 @@ class _ReadAheadJudge:
         return w1 - w0 < _READ_AHEAD_MAX_WAIT * (t1 - t0)
 
 
-def _append_to_map(map, pipe, result: RunResult, log_path: Path, name: str | None, gt, notes: list[str]) -> dict:
-    """Add the finished session to ``map`` and commit it; an interrupted run adds nothing (said in the notes)."""
-    from .map.session_graph import BUILTIN_VO
-    from .map.summary import map_summary
+def _append_to_map(map_use: MapUse, pipe, result: RunResult, log_path: Path, gt, notes: list[str]) -> dict:
+    """Add the finished session to the map and commit it; an interrupted run adds nothing (said in the notes)."""
+    from ..map.session_graph import BUILTIN_VO
+    from ..map.summary import map_summary
 
+    m = map_use.session_map
     if result.interrupted:
-        notes.append(f"The map {map.root} was left as it was: an interrupted session is not added to a map.")
-        log.warning("interrupted: %s was not changed", map.root)
-        return {"root": str(map.root), "appended": False, "reason": "interrupted"}
-    joined = map.add_session(pipe, name=name or log_path.stem, log_path=log_path, ground_truth=gt,
-                             extra={"image_topic": result.topics.get("image"),
-                                    "odometry_source": result.topics.get("odom") or BUILTIN_VO})
-    map.save()
-    return map_summary(map, joined, current=map.session_names[-1], pipe=pipe)
+        notes.append(f"The map {m.root} was left as it was: an interrupted session is not added to a map.")
+        log.warning("interrupted: %s was not changed", m.root)
+        return {"root": str(m.root), "appended": False, "reason": "interrupted"}
+    joined = m.add_session(pipe, name=map_use.session_name or log_path.stem, log_path=log_path, ground_truth=gt,
+                           extra={"image_topic": result.topics.get("image"),
+                                  "odometry_source": result.topics.get("odom") or BUILTIN_VO})
+    m.save()
+    return map_summary(m, joined, current=m.session_names[-1], pipe=pipe)
 
 
 def _drive(reader, topics: Topics, pipe, result: RunResult, cfg, tf, body_frame, vo_odometry, log_path,
