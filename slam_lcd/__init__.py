@@ -9,7 +9,10 @@ pay for) stays cheap: torch, GTSAM and numpy load only with the name that needs 
 """
 from __future__ import annotations
 
+from .runtime import moved_modules
 from .runtime.lazy_names import lazy_getattr
+
+moved_modules.install()  # the old paths of moved modules (slam_lcd.pipeline, slam_lcd.runner, ...)
 
 # typing.TYPE_CHECKING without importing typing (as long again as the rest of this import);
 # type checkers take a name TYPE_CHECKING as true
