@@ -179,7 +179,7 @@ def judge(new: list[New], component: int, kept: list[Kept], conf, now: int, next
         out.status[kf_id], out.place[kf_id] = VARIANT, place
         variants = [k for k in kept if k.place == place]
         if len(variants) > conf.max_variants:
-            old = _evicted(variants, kf_id, appearance)
+            old = _evicted(variants, kf_id, appearance, now)
             kept.remove(old)
             out.evicted.append(old.kf_id)
             out.place.pop(old.kf_id, None)
@@ -188,18 +188,20 @@ def judge(new: list[New], component: int, kept: list[Kept], conf, now: int, next
     return out
 
 
-def _evicted(variants: list[Kept], new_id: int, appearance: int) -> Kept:
-    """The variant a full place gives up for ``new_id``: the one matched longest ago among those of the
-    new one's appearance, else among appearances the place holds twice or more, else among all.
+def _evicted(variants: list[Kept], new_id: int, appearance: int, now: int) -> Kept:
+    """The variant a full place gives up for ``new_id``: the one matched longest ago among the earlier
+    views of the new one's appearance, else among appearances the place holds twice or more, else
+    among all.
 
     Why by appearance first: a place's variants serve different appearances, and the one matched
     longest ago is often the only view of an appearance recorded less often (the nights of a map of
     mostly days); losing it loses the place for that appearance, losing an older view of the same one
-    loses little."""
+    loses little. Why earlier views only: two views a session adds to one place (from poses a metre
+    apart) both serve its appearance, which may have no other session yet."""
     others = [k for k in variants if k.kf_id != new_id]
     count = Counter(k.appearance for k in others)
-    pool = [k for k in others if k.appearance == appearance] or [k for k in others if count[k.appearance] > 1] \
-        or others
+    pool = [k for k in others if k.appearance == appearance and k.last_used < now] \
+        or [k for k in others if count[k.appearance] > 1] or others
     return min(pool, key=lambda k: (k.last_used, k.kf_id))
 
 
