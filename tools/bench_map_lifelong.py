@@ -100,7 +100,8 @@ def run_one(log: Path, out: Path, cfg, extractor, m=None, name=None, mode="appen
     from slam_lcd.run import MapUse, Models, OutputOptions, run_log
 
     t0 = time.perf_counter()
-    res = run_log(log, out, cfg, models=Models(extractor=extractor), map_use=MapUse(m, mode=mode, session_name=name),
+    use = MapUse(m, mode=mode, session_name=name) if m is not None else None
+    res = run_log(log, out, cfg, models=Models(extractor=extractor), map_use=use,
                   output=OutputOptions(progress=False, write_mcap=False))
     return res, time.perf_counter() - t0
 

@@ -188,7 +188,7 @@ def run_log(
             from ..map.summary import localisation_report
 
             result.localization = localisation_report(session_map, session_map.localise(pipe), gt_traj)
-        elif map_use is not None:
+        elif map_use is not None and session_map is not None:
             result.map = _append_to_map(map_use, pipe, result, log_path, gt_traj, notes)
         result.wall_s = time.perf_counter() - t_start
     except BaseException:
