@@ -26,7 +26,7 @@ if TYPE_CHECKING:
 
 def write_demo_log(out, fmt, sc: _Scenario, frames_iter, *, depth, stereo, compressed, color, io_conf):
     """The demo topics as a ``fmt`` log at ``out``, in time order (camera first at equal stamps)."""
-    from ..io import messages as M
+    from ..io import message_builders as M
     from ..io.writers import open_writer
 
     conf = demo_io_conf(io_conf)
