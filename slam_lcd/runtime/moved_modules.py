@@ -21,6 +21,8 @@ MOVED = {
     "slam_lcd.extract_ahead": "slam_lcd.run.extract_ahead",
     "slam_lcd.frontend.frame_queue": "slam_lcd.run.frame_queue",
     "slam_lcd.io.messages": "slam_lcd.io.message_builders",
+    "slam_lcd.lcd.evaluation": "slam_lcd.eval.loop_detection",
+    "slam_lcd.lcd.nees": "slam_lcd.eval.nees",
 }
 
 
