@@ -74,10 +74,11 @@ def run(args) -> int:
         retrieval_recall,
         revisit_places,
     )
+    from ..io.image_folder import folder_frames
     from ..lcd import LoopDetector
     from ..outputs.output_set import OutputSet
     from ..runtime.progress import progress_bar
-    from ..sensors.frames import folder_frames, frame_to_keyframe, log_frames
+    from ..sensors.frames import frame_to_keyframe, log_frames
 
     cfg = config_from_args(args)
     lcd = cfg.lcd
