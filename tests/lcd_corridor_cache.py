@@ -18,7 +18,7 @@ def corridor_features(folder: str, kind: str, weights: str | None) -> tuple:
     from filelock import FileLock
 
     from slam_lcd.features import FeatureCache, FeaturesConfig, load_extractor
-    from slam_lcd.sensors.frames import folder_frames
+    from slam_lcd.io.image_folder import folder_frames
 
     ex = load_extractor(FeaturesConfig(kind=kind), weights=weights, device="cpu")
     cache = FeatureCache(ex)

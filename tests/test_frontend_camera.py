@@ -14,7 +14,7 @@ from slam_lcd.vision.camera import undistort_points
 
 
 def _info(model: str, D):
-    from slam_lcd.io.messages import camera_info_msg
+    from slam_lcd.io.message_builders import camera_info_msg
 
     cam = CameraModel(640, 480, 520.9, 521.0, 325.1, 249.7, model, np.asarray(D, float))
     return camera_info_msg(cam, 1_000_000_000, "camera_optical_frame")

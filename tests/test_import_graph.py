@@ -1,9 +1,10 @@
 """The package's import graph has no circle: every module can be read after the ones it imports.
 
 Walks every module of ``slam_lcd`` with :mod:`ast` (no import is executed), takes each import of
-another ``slam_lcd`` module, at the top of a module or inside a function (an import deferred into
-a function is still a dependency, only a later one), and fails naming the modules of each circle.
-``if TYPE_CHECKING:`` blocks are left out: they exist only for the type checker.
+another ``slam_lcd`` module, at the top of a module, inside a function (an import deferred into
+a function is still a dependency, only a later one) or under ``if TYPE_CHECKING:`` (the type
+checker reads the modules in that order too, and a reader follows the same names), and fails
+naming the modules of each circle.
 """
 from __future__ import annotations
 
@@ -22,18 +23,11 @@ def _modules() -> dict[str, Path]:
     return out
 
 
-def _type_checking_only(node: ast.AST) -> bool:
-    return isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test)
-
-
 def _imports(name: str, path: Path, mods: dict[str, Path]) -> set[str]:
     tree = ast.parse(path.read_text())
-    skip = {id(n) for top in ast.walk(tree) if _type_checking_only(top) for n in ast.walk(top)}
     here = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
     out = set()
     for n in ast.walk(tree):
-        if id(n) in skip:
-            continue
         if isinstance(n, ast.ImportFrom):
             base = ".".join(here[:len(here) - (n.level - 1)] + ([n.module] if n.module else [])) if n.level \
                 else (n.module or "")
@@ -103,3 +97,10 @@ def test_the_package_has_no_import_circle():
 def test_the_walk_finds_a_circle_when_there_is_one():
     assert _circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
     assert _circles({"a": {"b"}, "b": set()}) == []
+
+
+def test_an_import_for_the_type_checker_counts(tmp_path):
+    src = tmp_path / "a.py"
+    src.write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from .b import B\n")
+    mods = {"pkg.a": src, "pkg.b": tmp_path / "b.py"}
+    assert _imports("pkg.a", src, mods) == {"pkg.b"}

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from slam_lcd.io import messages as M
+from slam_lcd.io import message_builders as M
 from slam_lcd.io.decode import (
     decode_camera_info,
     decode_compressed_image,

@@ -17,7 +17,7 @@ from slam_lcd.errors import (
     TruncatedLogError,
     UnsupportedFormatError,
 )
-from slam_lcd.io import messages as M
+from slam_lcd.io import message_builders as M
 from slam_lcd.io import open_log, read_trajectory_from_log
 from slam_lcd.io.config import IOConfig
 from slam_lcd.io.decode import decode_camera_info, decode_image, decode_pose

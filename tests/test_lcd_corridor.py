@@ -10,8 +10,14 @@ import numpy as np
 import pytest
 from lcd_corridor_cache import corridor_features  # tests/ is on sys.path (pytest rootdir import)
 
+from slam_lcd.eval.loop_detection import (
+    format_retrieval,
+    format_table,
+    load_loop_matrix,
+    precision_recall,
+    retrieval_recall,
+)
 from slam_lcd.lcd import LcdConfig, LoopDetector
-from slam_lcd.lcd.evaluation import format_retrieval, format_table, load_loop_matrix, precision_recall, retrieval_recall
 from slam_lcd.types import Keyframe
 
 MODES = ("none", "ransac", "graph", "graph+ransac")

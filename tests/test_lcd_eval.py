@@ -10,8 +10,7 @@ import pytest
 
 from slam_lcd.cli.main import main
 from slam_lcd.errors import InputError
-from slam_lcd.lcd import CandidateRecord, TemporalConsistency
-from slam_lcd.lcd.evaluation import (
+from slam_lcd.eval.loop_detection import (
     average_precision,
     load_loop_matrix,
     loops_from_poses,
@@ -20,6 +19,7 @@ from slam_lcd.lcd.evaluation import (
     retrieval_recall,
     revisit_places,
 )
+from slam_lcd.lcd import CandidateRecord, TemporalConsistency
 
 
 def test_gt_formats_agree(tmp_path, shared_data):

@@ -52,7 +52,7 @@ def test_corridor_islands_verify_neighbours_within_the_budget(shared_data, super
     """Islands on the corridor: at most top_k x island_tries verifications per query, neighbours beyond
     the top-K verified. (Measured: 40 loops, 1 false, 78->26, against 41 / 0 without islands, so
     islands stay off by default: docs/lcd_pose.md.)"""
-    from slam_lcd.lcd.evaluation import load_loop_matrix
+    from slam_lcd.eval.loop_detection import load_loop_matrix
 
     folder = shared_data / "rtabmap_corridor"
     feats = corridor_features(str(folder), "superpoint", str(superpoint_weights))

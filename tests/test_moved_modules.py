@@ -1,4 +1,5 @@
-"""Old import paths of the modules that moved into ``slam_lcd.run`` still import, as aliases, with a warning."""
+"""Old import paths of modules that moved (into ``slam_lcd.run``, or to a name that says their job) still
+import, as aliases, with a warning."""
 import subprocess
 import sys
 from pathlib import Path

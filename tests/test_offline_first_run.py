@@ -65,7 +65,7 @@ def test_weights_command_shows_the_search(offline_demo, superpoint_weights):
     proc = subprocess.run([sys.executable, "-m", "slam_lcd", "weights", "--weights", str(superpoint_weights)],
                           env=env, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
-    from slam_lcd.features.weights import sha256_of
+    from slam_lcd.files.hashing import sha256_of
 
     assert f"used:     {superpoint_weights}" in proc.stdout
     assert f"sha256:   {sha256_of(superpoint_weights)}" in proc.stdout

@@ -80,7 +80,7 @@ def test_example_loops_to_g2o(user_run, tmp_path):
 
 @pytest.fixture(scope="module")
 def rgbd_detector(demo_keyframes_rgbd, superpoint_cpu):
-    from slam_lcd.lcd.nees import run_detector
+    from slam_lcd.eval.nees import run_detector
 
     return run_detector(demo_keyframes_rgbd, superpoint_cpu)
 
@@ -92,7 +92,7 @@ def test_loop_information_nees_on_the_demo_world(sensor, rgbd_detector, demo_key
     Stereo: the same left images (cached features) with a rendered right image, 3-D points
     from SGBM disparity instead of the depth image.
     """
-    from slam_lcd.lcd.nees import CHI2_6_99, demo_loop_nees, detector_nees
+    from slam_lcd.eval.nees import CHI2_6_99, demo_loop_nees, detector_nees
     from slam_lcd.sim.keyframes import demo_keyframes
 
     if sensor == "rgbd":

@@ -129,7 +129,7 @@ T_WORLD_MOCAP = np.array([[0.0, -1.0, 0.0, 2.0], [1.0, 0.0, 0.0, -1.0], [0.0, 0.
 def _writer_of(kind, gt):
     """``write(reader, writer)`` putting the ground truth ``gt`` as message type ``kind``."""
     from slam_lcd.geometry import inv
-    from slam_lcd.io import messages as M
+    from slam_lcd.io import message_builders as M
 
     def write(_r, w):
         if kind == "tf":
@@ -238,7 +238,7 @@ def _raw_stereo(tiny_log, tmp_path):
     import cv2
 
     from slam_lcd.geometry import inv, make_T
-    from slam_lcd.io import messages as M
+    from slam_lcd.io import message_builders as M
     from slam_lcd.sensors.messages import decode_gray
 
     cam, T_b_rect0 = _log_camera_and_mounting(tiny_log)

@@ -160,7 +160,7 @@ from pathlib import Path
 from slam_lcd.runtime.interrupts import install_stop_signals
 from slam_lcd.files.atomic import atomic_write
 from slam_lcd.io.writers import open_writer
-from slam_lcd.io import messages as M
+from slam_lcd.io import message_builders as M
 
 signal.signal(signal.SIGINT, signal.default_int_handler)
 install_stop_signals()

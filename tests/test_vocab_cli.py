@@ -38,7 +38,7 @@ def test_train_from_folder_then_info(corridor_dir, tmp_path, capsys):
 
 
 def test_train_from_mcap_log(corridor_dir, tmp_path):
-    from slam_lcd.io.messages import image_msg
+    from slam_lcd.io.message_builders import image_msg
     from slam_lcd.io.writers import open_writer
 
     log = tmp_path / "frames.mcap"

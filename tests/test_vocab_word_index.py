@@ -30,7 +30,7 @@ def unit(x):
 def frame_descriptors(folder: str, weights: str) -> tuple:
     """SuperPoint descriptors (default settings, at most 1000 per frame) of an image folder, via the feature cache."""
     from slam_lcd.features import FeatureCache, FeaturesConfig, load_extractor
-    from slam_lcd.sensors.frames import folder_frames
+    from slam_lcd.io.image_folder import folder_frames
 
     ex = load_extractor(FeaturesConfig(), weights=weights, device="cpu")
     cache = FeatureCache(ex)

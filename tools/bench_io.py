@@ -27,7 +27,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from slam_lcd.io import messages as M  # noqa: E402
+from slam_lcd.io import message_builders as M  # noqa: E402
 from slam_lcd.io import open_log  # noqa: E402
 from slam_lcd.io.decode import decode_compressed_image, decode_image  # noqa: E402
 from slam_lcd.io.writers import open_writer  # noqa: E402

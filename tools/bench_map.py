@@ -194,7 +194,7 @@ def _source_vocab(src: Path) -> dict:
     """The source map's vocabulary snapshot: its own, or made by replaying it once (not timed)."""
     from slam_lcd.lcd import LoopDetector
     from slam_lcd.map.session_map import Map
-    from slam_lcd.vocab.database import snapshot
+    from slam_lcd.vocab.snapshot import snapshot
 
     m = Map.open(src)
     det = LoopDetector()

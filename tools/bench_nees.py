@@ -42,8 +42,8 @@ def main(argv=None) -> int:
         for line in rep.detail_lines():
             print("   " + line)
         return 0
+    from slam_lcd.eval.nees import demo_loop_nees
     from slam_lcd.features import FeaturesConfig, load_extractor
-    from slam_lcd.lcd.nees import demo_loop_nees
 
     w, h = (int(x) for x in args.size.split("x"))
     ex = load_extractor(FeaturesConfig(kind="superpoint"), weights=args.weights, device="cpu")
@@ -63,10 +63,10 @@ def run_dir_nees(run_dir: Path, log: Path):
     import numpy as np
 
     from slam_lcd.backend.g2o import read_g2o
+    from slam_lcd.eval.nees import report
     from slam_lcd.geometry import interpolate_poses
     from slam_lcd.io import open_log
     from slam_lcd.io.decode import decode_pose
-    from slam_lcd.lcd.nees import report
     from slam_lcd.types import LoopClosure
 
     stamp, pairs = {}, set()

@@ -65,8 +65,7 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from ..config import validate_config
-    from ..lcd import LoopDetector
-    from ..lcd.evaluation import (
+    from ..eval.loop_detection import (
         format_retrieval,
         format_table,
         load_loop_matrix,
@@ -75,9 +74,11 @@ def run(args) -> int:
         retrieval_recall,
         revisit_places,
     )
+    from ..io.image_folder import folder_frames
+    from ..lcd import LoopDetector
     from ..outputs.output_set import OutputSet
     from ..runtime.progress import progress_bar
-    from ..sensors.frames import folder_frames, frame_to_keyframe, log_frames
+    from ..sensors.frames import frame_to_keyframe, log_frames
 
     cfg = config_from_args(args)
     lcd = cfg.lcd
@@ -165,8 +166,8 @@ def run(args) -> int:
 
 def _write_set(outputs, cfg, det, gt, names, results, src, args, kind, elapsed, recall_at, places) -> None:
     from ..config import save_config
+    from ..eval.loop_detection import plot_pr, write_candidates_csv, write_pr_csv
     from ..files.atomic import write_text
-    from ..lcd.evaluation import plot_pr, write_candidates_csv, write_pr_csv
 
     out = outputs.staging
     write_candidates_csv(out / "candidates.csv", det.records, gt, names)
@@ -190,8 +191,8 @@ def _gt_from_trajectory(path, stamps, args) -> tuple[np.ndarray, np.ndarray]:
 
     Poses are associated to the frames by nearest stamp (within 50 ms).
     """
+    from ..eval.loop_detection import loops_from_poses
     from ..io.trajectory_files import read_trajectory
-    from ..lcd.evaluation import loops_from_poses
 
     traj = read_trajectory(path)
     stamps = np.asarray(stamps, dtype=np.int64)

@@ -123,7 +123,7 @@ def _export(args, m, out: Path, names: list[str]) -> int:
     from ..outputs.map_outputs import session_file_stem
 
     if args.to == "mcap":
-        from ..io.messages import pose_stamped_msg
+        from ..io.message_builders import pose_stamped_msg
         from ..io.writers import open_writer
 
         with open_writer(out, "mcap") as w:

@@ -75,8 +75,7 @@ def iter_source_images(source: Path, topic: str | None, every: int = 1, max_imag
     every = max(1, every)
     count = 0
     if source.is_dir() and not (source / "metadata.yaml").exists():
-        from ..io.image_folder import read_frame
-        from ..sensors.frames import folder_frames
+        from ..io.image_folder import folder_frames, read_frame
 
         names, stamps, _ = folder_frames(source)  # the listing and stamps eval-lcd uses (images read below)
         for n in range(0, len(names), every):

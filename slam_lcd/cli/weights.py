@@ -78,7 +78,8 @@ def _show(args, fc) -> int:
 
 
 def _fetch(args, fc) -> int:
-    from ..features.weights import WEIGHTS_NAME, cache_dir, download_url, download_weights, sha256_of
+    from ..features.weights import WEIGHTS_NAME, cache_dir, download_url, download_weights
+    from ..files.hashing import sha256_of
 
     target = cache_dir(fc.cache_dir) / WEIGHTS_NAME
     if target.is_file() and not args.force:

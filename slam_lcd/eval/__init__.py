@@ -1,9 +1,12 @@
-"""slam_lcd.eval: trajectory evaluation: association, alignment (the one Umeyama), ATE, RPE, plots.
-May import: numpy, matplotlib (plots, on demand) and the base modules; never io (files are read by io and sensors).
+"""slam_lcd.eval: trajectory evaluation (association, alignment: the one Umeyama, ATE, RPE, plots) and loop
+evaluation (precision-recall and recall measures: :mod:`.loop_detection`; NEES of loop information: :mod:`.nees`).
+May import: numpy, matplotlib (plots, on demand), the base modules and files; lcd for its loop records, sim (on
+demand) for the NEES demo; never io (files are read by io and sensors).
 
-A pure library: functions take :class:`slam_lcd.types.Trajectory` objects and return
-result dataclasses; reading files lives in :mod:`slam_lcd.io.trajectory_files`, figures in
-:mod:`slam_lcd.eval.plots` (imported on demand, so matplotlib is not loaded here).
+A pure library: functions take :class:`slam_lcd.types.Trajectory` objects (or a detector's records) and
+return result dataclasses; reading trajectory files lives in :mod:`slam_lcd.io.trajectory_files`, figures in
+:mod:`slam_lcd.eval.plots` (imported on demand, so matplotlib is not loaded here). The loop modules are not
+imported here: they bring the loop detector's modules, which trajectory evaluation does not need.
 """
 from .align import ALIGN_MODES, Alignment, align_mode_from_flags, fit_alignment, umeyama
 from .associate import associate, associate_indices

@@ -15,6 +15,7 @@ import numpy as np
 import torch
 
 from ..errors import ConfigError
+from ..files.hashing import sha256_of
 from ..types import Features
 from ..vision.gray import to_gray_float
 from .allocator import retain_freed_memory, trim_when_fragmented
@@ -22,7 +23,7 @@ from .config import FeaturesConfig
 from .extract import Extractor
 from .resize import downscale, to_full_resolution
 from .superpoint import SuperPoint
-from .weights import load_state_dict_checked, resolve_weights, sha256_of
+from .weights import load_state_dict_checked, resolve_weights
 
 log = logging.getLogger(__name__)
 

@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING
 
 from ..errors import DownloadError, WeightsError
 from ..files.atomic import atomic_path
+from ..files.hashing import sha256_of
 from .config import SUPERPOINT_SHA256, SUPERPOINT_URL
 
 if TYPE_CHECKING:
@@ -65,14 +66,6 @@ def cache_dir(override: str | Path | None = None) -> Path:
     if env:
         return Path(env).expanduser()
     return Path.home() / ".cache" / "slam-lcd"
-
-
-def sha256_of(path: str | Path, chunk: int = 1 << 20) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        while block := fh.read(chunk):
-            h.update(block)
-    return h.hexdigest()
 
 
 def download_weights(url: str, target: Path, sha256: str | None, timeout: float = 30.0) -> Path:

@@ -1,4 +1,7 @@
-"""Reading image files with one-line errors: unreadable and damaged files are told apart.
+"""Reading one image file with one-line errors: unreadable and damaged files are told apart.
+
+Why apart from :mod:`slam_lcd.io.image_folder` (which frames a folder holds, their order and
+stamps): a ground-truth loop image is read the same way by modules that never read logs or folders.
 
 ``cv2.imread`` returns None for an unreadable file and decodes a truncated JPEG with a
 grey bottom (libjpeg only prints a warning). :func:`read_image` reports both as typed

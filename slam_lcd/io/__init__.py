@@ -2,7 +2,7 @@
 May import: rosbags, mcap and the base modules (types, errors, geometry, atomic); never a stage, sensors or outputs.
 
 See docs/io.md. Public API: :func:`open_log`, :class:`LogMessage`, :class:`TopicInfo`,
-:func:`read_trajectory_from_log`, :mod:`.decode`, :mod:`.tf`, :mod:`.messages`, :mod:`.writers`,
+:func:`read_trajectory_from_log`, :mod:`.decode`, :mod:`.tf`, :mod:`.message_builders`, :mod:`.writers`,
 and the trajectory-file functions of :mod:`.trajectory_files`.
 """
 from . import trajectory_files as _tf_files

@@ -6,7 +6,7 @@ temporary name, then renamed), and never replaces an input log. The same message
 the same order give byte-identical files: no wall-clock time is written anywhere
 (rosbag2's metadata.yaml holds only message times; MCAP headers name the library).
 
-Messages come from :mod:`slam_lcd.io.messages` (ROS2 objects); the ROS1 writer converts
+Messages come from :mod:`slam_lcd.io.message_builders` (ROS2 objects); the ROS1 writer converts
 them to ROS1 wire format. ``write_raw`` takes already-serialised bytes (used by
 :func:`copy_topics`, so copied messages are passed through, not re-encoded).
 """
@@ -27,7 +27,7 @@ from ..errors import InputError, InvalidPoseError, UnsupportedFormatError
 from ..files.atomic import guard_not_input
 from ..runtime.interrupts import defer_sigint, finish
 from ..types import Trajectory
-from . import messages as M
+from . import message_builders as M
 from .config import IOConfig
 from .typestores import ros1_store, ros2_store
 
@@ -64,7 +64,7 @@ class LogWriter:
 
     # -- public -------------------------------------------------------------------------
     def write(self, topic: str, msg, log_time_ns: int) -> None:
-        """Serialise and write one message object (from :mod:`slam_lcd.io.messages`)."""
+        """Serialise and write one message object (from :mod:`slam_lcd.io.message_builders`)."""
         msgtype = msg.__msgtype__
         raw = ros2_store().serialize_cdr(msg, msgtype, little_endian=True)
         self.write_raw(topic, msgtype, raw, log_time_ns, ros1=False)

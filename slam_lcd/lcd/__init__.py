@@ -1,5 +1,5 @@
-"""slam_lcd.lcd: loop-closure detection and verification (BoW candidates, graph verification, RANSAC, metric pose)
-and its evaluation.
+"""slam_lcd.lcd: loop-closure detection and verification (BoW candidates, graph verification, RANSAC, metric pose).
+Its evaluation (precision-recall, NEES) lives beside trajectory evaluation in :mod:`slam_lcd.eval`.
 May import: vision, vocab, features and the base modules; never io or sensors (frames come in as arrays).
 
 Public API (docs/CONTRACTS.md): :func:`verify_graph` -> :class:`GraphVerdict`,

@@ -6,19 +6,18 @@ all sessions and localisation against a fixed map. May import ``vocab``, ``lcd``
 """
 from __future__ import annotations
 
+from ..runtime.lazy_names import lazy_getattr
 from .config import MapConfig
 
-
-def __getattr__(name):  # the heavy parts (gtsam, the loop detector) load on first use
-    if name in ("Map", "extractor_meta"):
-        from . import session_map
-
-        return getattr(session_map, name)
-    if name in ("MapError", "MapLockedError", "LogAlreadyInMapError"):
-        from . import store
-
-        return getattr(store, name)
-    raise AttributeError(name)
-
+# the heavy parts (gtsam, the loop detector) load on first use
+_LAZY = {
+    "Map": ".session_map",
+    "extractor_meta": ".session_map",
+    "MapError": ".store",
+    "MapLockedError": ".store",
+    "LogAlreadyInMapError": ".store",
+}
 
 __all__ = ["LogAlreadyInMapError", "Map", "MapConfig", "MapError", "MapLockedError", "extractor_meta"]
+
+__getattr__ = lazy_getattr(__name__, _LAZY, globals())

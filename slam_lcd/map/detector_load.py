@@ -59,7 +59,7 @@ def map_keyframes(manifest: MapManifest, sessions: list[SessionKeyframes]):
 
 def restore_vocab(detector, root: Path, manifest: MapManifest, sessions: list[SessionKeyframes], vocab_fh=None):
     """Bags of words of the snapshot restored into ``detector.db``, or None (replay instead)."""
-    from ..vocab.database import restore_into
+    from ..vocab.snapshot import restore_into
 
     db = detector.db
     if manifest.vocab_file is None or not db.online or len(db) or db.words is not None:

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..files.hashing import sha256_of
 from ..types import CameraModel, Keyframe, Trajectory
 from .contents import SessionKeyframes
 from .joint_types import LINK, JointLoop
@@ -158,8 +159,6 @@ def session_holding(table: list[dict], sha: str | None, image_topic: str | None 
 
 def log_sha256(path) -> str | None:
     """sha256 of a log file; of a rosbag2 folder, the sha256 of its files' relative names and sha256s."""
-    from ..features.weights import sha256_of
-
     p = Path(path)
     try:
         if not p.is_dir():

@@ -6,7 +6,6 @@ The folder's layout and how it is written: :mod:`slam_lcd.map.store`.
 """
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 from pathlib import Path
@@ -14,7 +13,7 @@ from typing import BinaryIO
 
 import numpy as np
 
-from ..features.weights import sha256_of
+from ..files.hashing import sha256_of, sha256_of_file
 from .contents import FORMAT_NAME, MANIFEST, MISSING, SCHEMA, MapError, MapGraph, MapManifest, SessionKeyframes
 
 
@@ -68,18 +67,9 @@ def _checked(root: Path, manifest: MapManifest, name: str, fh: BinaryIO | None =
     if size != int(meta.get("bytes", -1)):
         raise MapError(f"map file is {size} bytes, the manifest says {meta.get('bytes')} (truncated or replaced)",
                        path)
-    if (_sha256_of_file(fh) if fh is not None else sha256_of(path)) != meta.get("sha256"):
+    if (sha256_of_file(fh) if fh is not None else sha256_of(path)) != meta.get("sha256"):
         raise MapError("map file's sha256 differs from the manifest's (modified after it was written)", path)
     return path
-
-
-def _sha256_of_file(fh: BinaryIO, chunk: int = 1 << 20) -> str:
-    h = hashlib.sha256()
-    fh.seek(0)
-    while block := fh.read(chunk):
-        h.update(block)
-    fh.seek(0)
-    return h.hexdigest()
 
 
 def open_listed(root: str | Path, manifest: MapManifest, name: str) -> BinaryIO:

@@ -316,8 +316,7 @@ class Map:
         """The detector's online vocabulary and bags of words when its keyframes are ``expected`` (default: the
         map's kept ones; after an append, those before it and the new session's), in order; pruned to the
         keyframes the map keeps now."""
-        from ..vocab.database import snapshot
-        from ..vocab.snapshot import keep_only
+        from ..vocab.snapshot import keep_only, snapshot
 
         kept = kept_ids(self.sessions)
         expected = kept if expected is None else expected

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..features.weights import sha256_of
+from ..files.hashing import sha256_of
 from ..files.npz import write_npz
 from ..runtime.interrupts import defer_sigint
 from .contents import (  # noqa: F401 - the folder's names, read and written here

@@ -168,7 +168,7 @@ def plan_frames(run_conf, log_frames: dict, parents: dict[str, str]) -> TfPlan:
 
 def _keyframe_paths(kf: Trajectory, frame: str):
     """(stamp, Path) once per keyframe (at most MAX_PATH_MESSAGES), each with the keyframes so far."""
-    from ..io import messages as M
+    from ..io import message_builders as M
 
     n = len(kf)
     if n == 0:
@@ -179,7 +179,7 @@ def _keyframe_paths(kf: Trajectory, frame: str):
 
 def _add_sessions(add, layer: SessionLayer, plan: TfPlan, s0: int) -> None:
     """Every session's frame (static, under the map frame), its keyframe path and the loops between sessions."""
-    from ..io import messages as M
+    from ..io import message_builders as M
 
     statics = []
     for name, path, joined in zip(layer.names, layer.paths, layer.joined, strict=True):
@@ -212,7 +212,7 @@ def write_corrected_log(path: Path, *, odom: Trajectory, corrected: Trajectory, 
     (``corrected`` and ``kf_corrected`` are then in the map frame, ``gt_alignment`` the map's).
     ``cloud``: the map's :class:`~slam_lcd.cloud.Cloud` in the corrected trajectory's frame,
     written on ``cloud_topic``."""
-    from ..io import messages as M
+    from ..io import message_builders as M
     from ..io.reader import open_log
     from ..io.writers import open_writer
 

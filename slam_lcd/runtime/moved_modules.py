@@ -1,9 +1,10 @@
 """Modules that moved keep their old import paths: ``import slam_lcd.pipeline`` still works.
 
 Why a finder and not a file per old path: the top of ``slam_lcd/`` holds only the base modules and
-the packages, so a newcomer finds the run layer in ``slam_lcd/run/``; scripts written against the
-old paths still run, with a :class:`DeprecationWarning` naming the new one. The old name is an
-alias: ``slam_lcd.pipeline.Pipeline is slam_lcd.run.pipeline.Pipeline``.
+the packages, so a newcomer finds the run layer in ``slam_lcd/run/``, and a module's name says its
+one job (``slam_lcd.io.message_builders`` builds messages, :mod:`slam_lcd.sensors.messages` decodes
+them); scripts written against the old paths still run, with a :class:`DeprecationWarning` naming
+the new one. The old name is an alias: ``slam_lcd.pipeline.Pipeline is slam_lcd.run.pipeline.Pipeline``.
 """
 from __future__ import annotations
 
@@ -19,6 +20,9 @@ MOVED = {
     "slam_lcd.run_checks": "slam_lcd.run.checks",
     "slam_lcd.extract_ahead": "slam_lcd.run.extract_ahead",
     "slam_lcd.frontend.frame_queue": "slam_lcd.run.frame_queue",
+    "slam_lcd.io.messages": "slam_lcd.io.message_builders",
+    "slam_lcd.lcd.evaluation": "slam_lcd.eval.loop_detection",
+    "slam_lcd.lcd.nees": "slam_lcd.eval.nees",
 }
 
 
@@ -33,7 +37,8 @@ class _Alias:
 
     def create_module(self, spec):
         new = MOVED[spec.name]
-        warnings.warn(f"{spec.name} moved to {new}; import it from there (or the name from slam_lcd)",
+        warnings.warn(f"{spec.name} moved to {new}; import it from there"
+                      + (" (or the name from slam_lcd)" if new.startswith("slam_lcd.run.") else ""),
                       DeprecationWarning, stacklevel=2)
         module = importlib.import_module(new)
         self._spec = module.__spec__  # importlib stamps the alias's spec on the module: put it back

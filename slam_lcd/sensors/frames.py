@@ -1,51 +1,20 @@
-"""Image sources for loop-detection evaluation: an image folder or an image topic of a log.
+"""Image sources for loop-detection evaluation from a log: the frames of an image topic, and any frame as a keyframe.
 
 Frames become :class:`Keyframe` records numbered 0..N-1 in order (those positions index the
-ground-truth loop matrix). Stamps: a folder whose file stems are all numbers larger than
-1e6 (TUM style seconds) uses them; otherwise frames are spaced 1 s apart.
+ground-truth loop matrix). An image folder is read by :func:`slam_lcd.io.image_folder.folder_frames`
+(the one home of image-folder reading); its frames are the same :class:`~slam_lcd.io.image_folder.Frame`.
 """
 from __future__ import annotations
 
-from collections.abc import Iterator
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError, PipelineError
+from ..errors import PipelineError
 from ..io import open_log
-from ..io.image_folder import list_image_files, read_frame
+from ..io.image_folder import Frame
 from ..types import CameraModel, Keyframe
 from .messages import at_message, decode_any_image, decode_camera_of
-
-
-@dataclass
-class Frame:
-    name: str
-    stamp: int
-    image: np.ndarray
-    camera: CameraModel | None = None
-
-
-def folder_frames(folder: str | Path, exclude=()) -> tuple[list[str], list[int], Iterator[Frame]]:
-    """Names, stamps and a lazy iterator of the frames of an image folder (``exclude``: files to skip)."""
-    files = list_image_files(folder, exclude)
-    if not files:
-        raise InputError("no images (.png/.jpg/...) in folder", folder)
-    try:
-        secs = [float(p.stem) for p in files]
-        use_stems = all(s > 1e6 for s in secs)
-    except ValueError:
-        use_stems = False
-
-    stamps = [int(round(float(p.stem) * 1e9)) if use_stems else k * 1_000_000_000 for k, p in enumerate(files)]
-
-    def gen():
-        for k, p in enumerate(files):
-            # damaged or unreadable: a one-line error naming it
-            yield Frame(p.name, stamps[k], read_frame(p))
-
-    return [p.name for p in files], stamps, gen()
 
 
 def log_frames(

@@ -31,49 +31,26 @@ import logging
 import math
 import os
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError
-from ..types import CameraModel, Trajectory
 from . import rig
 from .appearance import check_appearance
 from .demo_info import DemoLogInfo
+from .demo_scenario import DemoScenario
 from .demo_writers import demo_io_conf, write_demo_folder, write_demo_log
 from .image_noise import NOISE_BANK, add_noise, noise_bank
 from .loops import gt_loop_pairs, write_loop_pairs
 from .odometry import end_drift, simulate_odometry
 from .render import render
 from .trajectory import START_AT, START_NS, make_path, path_trajectory, sample_stamps
-from .world import build_world
 
 log = logging.getLogger(__name__)
 
 FORMATS = ("mcap", "rosbag2", "rosbag1", "folder")
 DEPTH_STEP = 1.0 / 1024.0  # depth quantisation (m): like a sensor's millimetre steps, and compresses 40x
-
-
-@dataclass
-class _Scenario:
-    camera: CameraModel
-    T_bc: np.ndarray
-    cam_stamps: np.ndarray
-    odo_stamps: np.ndarray
-    gt_cam: Trajectory
-    gt_odo: Trajectory
-    odom: Trajectory
-    laps: np.ndarray  # lighting epoch per camera frame
-    world_seed: int
-    exposure: float = 1.0  # global exposure factor of the renderer
-    world_frame: str = rig.WORLD_FRAME  # frame of the ground truth
-    odom_at_start: bool = False  # the odometry starts at the identity (its own frame), not at the world pose
-    appearance: str = "day"  # the world's appearance state (slam_lcd.sim.appearance)
-
-    @property
-    def world(self):
-        return build_world(self.world_seed, self.appearance)  # cached; built only when rendering
 
 
 MAX_CAMERA_RATE_HZ = 1000.0  # a camera period of 1 ms; more is no camera, and the frames would never end
@@ -83,7 +60,7 @@ MAX_ODOM_RATE_HZ = 10000.0
 def _scenario(frames, seed, kind, laps, width, height, camera_rate, odom_rate, stereo, hfov_deg=70.0, *,
               world_seed: int | None = None, start_at: float | None = None, lighting: float = 0.0,
               exposure: float = 1.0, start_ns: int = START_NS, odom_at_start: bool = False,
-              world_frame: str = rig.WORLD_FRAME, appearance: str = "day") -> _Scenario:
+              world_frame: str = rig.WORLD_FRAME, appearance: str = "day") -> DemoScenario:
     """Everything of a log but its images: stamps, ground truth, odometry, lighting epochs.
 
     Cheap (no world is built until ``.world`` is read), so the routes and odometry of
@@ -127,7 +104,7 @@ def _scenario(frames, seed, kind, laps, width, height, camera_rate, odom_rate, s
     odom = simulate_odometry(gt_odo, seed=seed, frame_id=rig.ODOM_FRAME, child_frame_id=rig.BODY_FRAME,
                              start_at_identity=odom_at_start)
     laps_at = path.laps_at((cam_stamps - start_ns) * 1e-9) + float(lighting)
-    return _Scenario(camera, rig.T_body_camera(), cam_stamps, odo_stamps, gt_cam, gt_odo, odom, laps_at,
+    return DemoScenario(camera, rig.T_body_camera(), cam_stamps, odo_stamps, gt_cam, gt_odo, odom, laps_at,
                      seed if world_seed is None else int(world_seed), exposure=float(exposure),
                      world_frame=world_frame, odom_at_start=odom_at_start, appearance=appearance)
 
@@ -157,7 +134,7 @@ def _resolve(session: int | None, **given) -> dict:
 
 
 def session_scenario(session: int | None, *, frames: int | None = None, camera_rate: float = 10.0,
-                     odom_rate: float = 50.0, width: int = 640, height: int = 480, **given) -> _Scenario:
+                     odom_rate: float = 50.0, width: int = 640, height: int = 480, **given) -> DemoScenario:
     """The scenario (stamps, ground truth, odometry, lighting) a log of ``session`` would hold,
     without rendering anything: for studying routes and shared places. ``given``: ``kind``,
     ``laps``, ``seed``, ``world_seed``, ``start_at``, ``lighting``, ``exposure``, ``appearance``
@@ -174,7 +151,7 @@ def make_path_start(kind: str, start_at: float | None) -> float:
     return START_AT["laps" if kind == "laps-wide" else kind] if start_at is None else float(start_at)
 
 
-def _render_one(sc: _Scenario, i: int, bank: np.ndarray, *, color: bool, depth: bool, stereo: bool):
+def _render_one(sc: DemoScenario, i: int, bank: np.ndarray, *, color: bool, depth: bool, stereo: bool):
     T_wc = sc.gt_cam.poses[i] @ sc.T_bc
     img, dep = render(sc.world, sc.camera, T_wc, epoch=float(sc.laps[i]), color=color, with_depth=depth,
                       gain=sc.exposure)
@@ -190,7 +167,7 @@ def _render_one(sc: _Scenario, i: int, bank: np.ndarray, *, color: bool, depth: 
     return i, img, dep, right
 
 
-def render_frames(sc: _Scenario, *, color: bool, depth: bool, stereo: bool, seed: int, workers: int = 1,
+def render_frames(sc: DemoScenario, *, color: bool, depth: bool, stereo: bool, seed: int, workers: int = 1,
                   render_one=None):
     """Yield ``(index, image, depth | None, right | None)`` for every camera frame, in order.
 

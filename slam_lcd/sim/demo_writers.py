@@ -11,7 +11,6 @@ rendered frames ``(index, image, depth | None, right | None)`` in camera order, 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -19,14 +18,12 @@ import numpy as np
 from ..files.atomic import atomic_path
 from ..types import CameraModel, Trajectory
 from . import rig
-
-if TYPE_CHECKING:
-    from .demo_log import _Scenario
+from .demo_scenario import DemoScenario
 
 
-def write_demo_log(out, fmt, sc: _Scenario, frames_iter, *, depth, stereo, compressed, color, io_conf):
+def write_demo_log(out, fmt, sc: DemoScenario, frames_iter, *, depth, stereo, compressed, color, io_conf):
     """The demo topics as a ``fmt`` log at ``out``, in time order (camera first at equal stamps)."""
-    from ..io import messages as M
+    from ..io import message_builders as M
     from ..io.writers import open_writer
 
     conf = demo_io_conf(io_conf)
@@ -104,7 +101,7 @@ def _write_tum(path: Path, traj: Trajectory) -> None:
     write_tum(path, traj)
 
 
-def write_demo_folder(out: Path, sc: _Scenario, frames_iter, *, color, depth, stereo):
+def write_demo_folder(out: Path, sc: DemoScenario, frames_iter, *, color, depth, stereo):
     """PNG images, image lists, TUM trajectories and ``camera.yaml``, written atomically (whole or absent)."""
     import yaml
 

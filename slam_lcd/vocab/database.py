@@ -19,9 +19,10 @@ keyframes that share no word with it; both are vectorised over the postings (one
 posting list). In online mode the nearest-word search is sub-linear in the word count above
 ``ann_min_words`` (:mod:`slam_lcd.vocab.word_index`).
 
-The bag of words (:mod:`slam_lcd.vocab.bow`), the inverted index (:mod:`slam_lcd.vocab.postings`)
-and the map snapshot (:mod:`slam_lcd.vocab.snapshot`) have their own modules; their names are
-importable from here too.
+The bag of words (:mod:`slam_lcd.vocab.bow`) and the inverted index (:mod:`slam_lcd.vocab.postings`)
+have their own modules; the bag of words' names are importable from here too. The map snapshot
+(:mod:`slam_lcd.vocab.snapshot`) reads and fills a database from outside, so this module does
+not import it.
 """
 from __future__ import annotations
 
@@ -33,12 +34,11 @@ from .bow import BowVector, bow_similarity
 from .config import VocabConfig
 from .descriptors import as_unit_vectors, descriptor_kind
 from .postings import _Growable, _Postings
-from .snapshot import restore_bows, restore_into, restore_words, snapshot
 from .vocabulary import Vocabulary
 from .word_index import WordIndex
 from .words import IncrementalWords
 
-__all__ = ["BowDatabase", "BowVector", "bow_similarity", "restore_bows", "restore_into", "restore_words", "snapshot"]
+__all__ = ["BowDatabase", "BowVector", "bow_similarity"]
 
 # keyframes before / after the previous query's best whose words form the next search's pool (_pool)
 _POOL_BEFORE = 1

@@ -2,23 +2,21 @@
 
 :func:`snapshot` turns an online :class:`~slam_lcd.vocab.database.BowDatabase` into arrays (no
 pickle): its words and every keyframe's bag of words; :func:`restore_words`,
-:func:`restore_bows` and :func:`restore_into` read them back.
+:func:`restore_bows` and :func:`restore_into` read them back. The dependency runs one way: this
+module reads and fills a database, the database never imports it.
 """
 from __future__ import annotations
 
 from itertools import pairwise
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import InputError
 from .bow import BowVector
 from .config import VocabConfig
+from .database import BowDatabase
 from .word_index import WordIndex
 from .words import IncrementalWords
-
-if TYPE_CHECKING:
-    from .database import BowDatabase
 
 
 def snapshot(db: BowDatabase, centres: str = "int8") -> dict[str, np.ndarray] | None:

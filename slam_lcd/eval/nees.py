@@ -92,8 +92,8 @@ def demo_loop_nees(extractor, *, sensor: str = "rgbd", laps: float = 2.0, width:
 
 def run_detector(frames, extractor, conf=None):
     """A :class:`~slam_lcd.lcd.LoopDetector` fed with every keyframe of ``frames`` (demo settings)."""
-    from .config import LcdConfig
-    from .detector import LoopDetector
+    from ..lcd.config import LcdConfig
+    from ..lcd.detector import LoopDetector
 
     det = LoopDetector(conf or LcdConfig(exclude_recent_s=20.0, exclude_recent_n=0), extractor=extractor)
     for kf in frames.keyframes:

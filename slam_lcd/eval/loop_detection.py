@@ -31,7 +31,7 @@ import numpy as np
 from ..errors import FileMissingError, InputError, UnsupportedFormatError
 from ..files.atomic import atomic_path, write_text
 from ..files.image_files import IMAGE_SUFFIXES
-from .detector import CandidateRecord
+from ..lcd.detector import CandidateRecord
 
 # ----------------------------------------------------------------------------- ground truth
 

@@ -4,7 +4,7 @@ import pytest
 
 from slam_lcd.errors import InvalidPoseError
 from slam_lcd.geometry import se3_exp
-from slam_lcd.io import messages as M
+from slam_lcd.io import message_builders as M
 from slam_lcd.io.transforms import tq_from_pose, tq_from_poses
 from slam_lcd.types import Trajectory
 
