@@ -81,6 +81,18 @@ def bench_live(a) -> None:
     print(f"recording: {size / 1e6:.2f} MB for {n} keyframes = {size / n / 1e3:.1f} kB per keyframe")
 
 
+def _read_back(rrd: Path) -> tuple[int, int]:
+    """Open the recording with Rerun's own reader: its entity paths and rows (the file is whole and readable)."""
+    from rerun.chunk import RrdReader
+
+    entities: set[str] = set()
+    rows = 0
+    for c in RrdReader(rrd).stream().to_chunks():
+        entities.add(c.entity_path)
+        rows += c.to_record_batch().num_rows
+    return len(entities), rows
+
+
 def bench_build(a) -> None:
     work = Path(a.work)
     log = _demo_log(work / f"demo_{a.laps:g}laps_{a.size}.mcap", a.laps, a.size)
@@ -93,6 +105,10 @@ def bench_build(a) -> None:
     walls = [_slam(["view", str(out), "--save", str(rrd)]) for _ in range(a.repeat)]
     n = _keyframes(out)
     loops = sum(1 for _ in (out / "loops.csv").open()) - 1
+    t0 = time.perf_counter()
+    entities, rows = _read_back(rrd)
+    print(f"recording read back with Rerun's reader in {time.perf_counter() - t0:.1f} s: {entities} entities, "
+          f"{rows} rows", flush=True)
     print(f"{a.laps:g}-lap demo ({a.size}, {a.features}): {n} keyframes, {loops} loop candidates; `view --save` "
           f"median {statistics.median(walls):.2f} s (process wall, imports included; {a.repeat} runs), recording "
           f"{rrd.stat().st_size / 1e6:.2f} MB = {rrd.stat().st_size / n / 1e3:.1f} kB per keyframe")
