@@ -7,20 +7,33 @@ A pure library: functions take :class:`slam_lcd.types.Trajectory` objects (or a 
 return result dataclasses; reading trajectory files lives in :mod:`slam_lcd.io.trajectory_files`, figures in
 :mod:`slam_lcd.eval.plots` (imported on demand, so matplotlib is not loaded here). The loop modules are not
 imported here: they bring the loop detector's modules, which trajectory evaluation does not need.
+
+Names are imported on first use (PEP 562): the configuration imports this package, and a
+command that needs none of these must not pay numpy, scipy or OpenCV for them.
 """
-from .align import ALIGN_MODES, Alignment, align_mode_from_flags, fit_alignment, umeyama
-from .associate import associate, associate_indices
-from .errors import AlignmentError, AssociationError
-from .metrics import (
-    AteResult,
-    ErrorStats,
-    RpeResult,
-    ate,
-    ate_before_after,
-    ate_with_config,
-    rotation_angle_deg,
-    rpe,
-)
+from __future__ import annotations
+
+from ..runtime.lazy_names import lazy_getattr
+
+_LAZY = {
+    "ALIGN_MODES": ".align",
+    "Alignment": ".align",
+    "align_mode_from_flags": ".align",
+    "fit_alignment": ".align",
+    "umeyama": ".align",
+    "associate": ".associate",
+    "associate_indices": ".associate",
+    "AlignmentError": ".errors",
+    "AssociationError": ".errors",
+    "AteResult": ".metrics",
+    "ErrorStats": ".metrics",
+    "RpeResult": ".metrics",
+    "ate": ".metrics",
+    "ate_before_after": ".metrics",
+    "ate_with_config": ".metrics",
+    "rotation_angle_deg": ".metrics",
+    "rpe": ".metrics",
+}
 
 __all__ = [
     "ALIGN_MODES",
@@ -41,3 +54,5 @@ __all__ = [
     "rpe",
     "umeyama",
 ]
+
+__getattr__ = lazy_getattr(__name__, _LAZY, globals())

@@ -8,13 +8,32 @@ May import: vision, features and the base modules; never io or sensors (frames c
 - :func:`two_view_geometry`: relative rotation/translation direction of two frames.
 - :func:`triangulate_landmarks`: metric 3-D points for a monocular keyframe;
   :func:`landmarks_from_sensor` for RGB-D / stereo keyframes.
+
+Names are imported on first use (PEP 562): the configuration imports this package, and a
+command that needs none of these must not pay numpy, scipy or OpenCV for them.
 """
+from __future__ import annotations
+
+from ..runtime.lazy_names import lazy_getattr
 from .config import FrontendConfig
-from .depth_points import landmarks_from_sensor, points_from_depth, points_from_stereo
-from .keyframes import KeyframeSelector, keyframes_from_trajectory, select_keyframes
-from .triangulation import triangulate_landmarks
-from .two_view import TwoViewResult, two_view_geometry
-from .vo import RgbdOdometry, StereoOdometry, VoFrame, VoResult, run_rgbd_odometry, run_stereo_odometry
+
+_LAZY = {
+    "landmarks_from_sensor": ".depth_points",
+    "points_from_depth": ".depth_points",
+    "points_from_stereo": ".depth_points",
+    "KeyframeSelector": ".keyframes",
+    "keyframes_from_trajectory": ".keyframes",
+    "select_keyframes": ".keyframes",
+    "triangulate_landmarks": ".triangulation",
+    "TwoViewResult": ".two_view",
+    "two_view_geometry": ".two_view",
+    "RgbdOdometry": ".vo",
+    "StereoOdometry": ".vo",
+    "VoFrame": ".vo",
+    "VoResult": ".vo",
+    "run_rgbd_odometry": ".vo",
+    "run_stereo_odometry": ".vo",
+}
 
 __all__ = [
     "FrontendConfig",
@@ -34,3 +53,5 @@ __all__ = [
     "triangulate_landmarks",
     "two_view_geometry",
 ]
+
+__getattr__ = lazy_getattr(__name__, _LAZY, globals())

@@ -4,11 +4,52 @@ May import: rosbags, mcap and the base modules (types, errors, geometry, atomic)
 See docs/io.md. Public API: :func:`open_log`, :class:`LogMessage`, :class:`TopicInfo`,
 :func:`read_trajectory_from_log`, :mod:`.decode`, :mod:`.tf`, :mod:`.message_builders`, :mod:`.writers`,
 and the trajectory-file functions of :mod:`.trajectory_files`.
-"""
-from . import trajectory_files as _tf_files
-from .log_trajectory import read_trajectory_from_log
-from .reader import LogMessage, LogReader, RawMessage, TopicInfo, open_log
-from .trajectory_files import *  # noqa: F403
 
-__all__ = ["open_log", "LogReader", "LogMessage", "RawMessage", "TopicInfo", "read_trajectory_from_log",
-           *_tf_files.__all__]
+Names are imported on first use (PEP 562): the configuration imports this package, and a
+command that needs none of these must not pay numpy, scipy or OpenCV for them.
+"""
+from __future__ import annotations
+
+from ..runtime.lazy_names import lazy_getattr
+
+_LAZY = {
+    "read_trajectory_from_log": ".log_trajectory",
+    "LogMessage": ".reader",
+    "LogReader": ".reader",
+    "RawMessage": ".reader",
+    "TopicInfo": ".reader",
+    "open_log": ".reader",
+    "FORMATS": ".trajectory_files",
+    "detect_format": ".trajectory_files",
+    "read_euroc": ".trajectory_files",
+    "read_kitti": ".trajectory_files",
+    "read_kitti_times": ".trajectory_files",
+    "read_trajectory": ".trajectory_files",
+    "read_tum": ".trajectory_files",
+    "write_euroc": ".trajectory_files",
+    "write_kitti": ".trajectory_files",
+    "write_trajectory": ".trajectory_files",
+    "write_tum": ".trajectory_files",
+}
+
+__all__ = [
+    "open_log",
+    "LogReader",
+    "LogMessage",
+    "RawMessage",
+    "TopicInfo",
+    "read_trajectory_from_log",
+    "FORMATS",
+    "detect_format",
+    "read_euroc",
+    "read_kitti",
+    "read_kitti_times",
+    "read_trajectory",
+    "read_tum",
+    "write_euroc",
+    "write_kitti",
+    "write_trajectory",
+    "write_tum",
+]
+
+__getattr__ = lazy_getattr(__name__, _LAZY, globals())

@@ -4,15 +4,36 @@ May import: numpy, scikit-learn, faiss and the base modules (types, errors, atom
 Public API (docs/CONTRACTS.md): :func:`train_vocabulary`, :func:`train_hkmeans`,
 :class:`Vocabulary` (``quantize``, ``save``, ``load``, ``len``), :class:`BowDatabase`
 (``add``, ``query``) and :class:`BowVector`.
+
+Names are imported on first use (PEP 562): the configuration imports this package, and a
+command that needs none of these must not pay numpy, scipy or OpenCV for them.
 """
-from .bow import BowVector, bow_similarity
+from __future__ import annotations
+
+from ..runtime.lazy_names import lazy_getattr
 from .config import VocabConfig
-from .database import BowDatabase
-from .descriptors import as_unit_vectors
-from .vocabulary import Vocabulary, train_hkmeans, train_vocabulary
-from .words import IncrementalWords
+
+_LAZY = {
+    "BowVector": ".bow",
+    "bow_similarity": ".bow",
+    "BowDatabase": ".database",
+    "as_unit_vectors": ".descriptors",
+    "Vocabulary": ".vocabulary",
+    "train_hkmeans": ".vocabulary",
+    "train_vocabulary": ".vocabulary",
+    "IncrementalWords": ".words",
+}
 
 __all__ = [
-    "VocabConfig", "BowDatabase", "BowVector", "bow_similarity", "as_unit_vectors",
-    "Vocabulary", "train_hkmeans", "train_vocabulary", "IncrementalWords",
+    "VocabConfig",
+    "BowDatabase",
+    "BowVector",
+    "bow_similarity",
+    "as_unit_vectors",
+    "Vocabulary",
+    "train_hkmeans",
+    "train_vocabulary",
+    "IncrementalWords",
 ]
+
+__getattr__ = lazy_getattr(__name__, _LAZY, globals())
