@@ -89,7 +89,7 @@ def judge_session(meta: dict, sess: SessionKeyframes, component: int, poses: dic
     known, own = familiarity(new, component, kept, conf, ratios)
     look, fresh = appearance_of(known, own, kept, conf)
     out = judge(new, component, kept, conf, now, next_place, look, ratios)
-    out.appearance, out.new_appearance = look, fresh
+    out.new_appearance = fresh
     log.info("session %s: median match ratio with the kept appearances %s, %s with itself: %s %d",
              meta.get("name"), {a: round(v, 2) for a, v in sorted(known.items())},
              "-" if own is None else f"{own:.2f}", "a new appearance" if fresh else "judged in appearance", look)

@@ -93,16 +93,25 @@ New = tuple[int, np.ndarray, Callable[[], np.ndarray]]  # kf id, camera pose in 
 
 
 class Ratios:
-    """:func:`match_ratio` of (new keyframe, kept keyframe) pairs, each computed once."""
+    """:func:`match_ratio` of keyframe pairs, each computed once, from descriptors each decoded once
+    (a map stores them quantised; :func:`familiarity` and :func:`judge` meet the same keyframes)."""
 
     def __init__(self) -> None:
         self._seen: dict[tuple[int, int], float] = {}
+        self._decoded: dict[int, np.ndarray] = {}
 
     def __call__(self, kf_id: int, desc: Callable[[], np.ndarray], k: Kept) -> float:
-        key = (kf_id, k.kf_id)
-        if key not in self._seen:
-            self._seen[key] = match_ratio(desc(), k.descriptors())
-        return self._seen[key]
+        return self.between(kf_id, desc, k.kf_id, k.descriptors)
+
+    def between(self, a: int, desc_a: Callable[[], np.ndarray], b: int, desc_b: Callable[[], np.ndarray]) -> float:
+        if (a, b) not in self._seen:
+            self._seen[a, b] = match_ratio(self._of(a, desc_a), self._of(b, desc_b))
+        return self._seen[a, b]
+
+    def _of(self, kf_id: int, desc: Callable[[], np.ndarray]) -> np.ndarray:
+        if kf_id not in self._decoded:
+            self._decoded[kf_id] = desc()
+        return self._decoded[kf_id]
 
 
 def familiarity(new: list[New], component: int, kept: list[Kept], conf,
@@ -130,7 +139,7 @@ def familiarity(new: list[New], component: int, kept: list[Kept], conf,
         if j:
             prev_id, P, prev_desc = new[j - 1]
             if np.linalg.norm(P[:3, 3] - T[:3, 3]) <= conf.place_radius_m and P[:3, 2] @ T[:3, 2] >= cos_max:
-                own.append(match_ratio(desc(), prev_desc()))
+                own.append(ratios.between(kf_id, desc, prev_id, prev_desc))
     return {a: float(np.median(v)) for a, v in best.items()}, (float(np.median(own)) if own else None)
 
 
@@ -138,8 +147,8 @@ def appearance_of(known: dict[int, float], own: float | None, kept: list[Kept], 
     """The appearance a session is judged in, and whether it is a new one: the kept appearance it
     matches best, unless even that one's median is under ``map.appearance_share`` of its own."""
     if not known:  # nothing kept near (another area): the appearance the map holds most of
-        looks = [k.appearance for k in kept]
-        return (max(set(looks), key=lambda a: (looks.count(a), -a)) if looks else 0), False
+        looks = Counter(k.appearance for k in kept)
+        return (max(looks, key=lambda a: (looks[a], -a)) if looks else 0), False
     a = max(known, key=lambda k: (known[k], -k))
     if own is None or known[a] >= conf.appearance_share * own:
         return a, False
@@ -155,7 +164,7 @@ def judge(new: list[New], component: int, kept: list[Kept], conf, now: int, next
     the first free place id; ``appearance``: the appearance the session is judged in
     (:func:`appearance_of`): its keyframes are redundant only against kept keyframes of it.
     """
-    out = Verdicts()
+    out = Verdicts(appearance=appearance)
     ratios = ratios or Ratios()
     cos_max = np.cos(np.radians(conf.place_angle_deg))
     compare = max(1, int(conf.place_compare))
