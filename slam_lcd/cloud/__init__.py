@@ -26,18 +26,6 @@ _LAZY = {
     "VoxelGrid": ".voxel_grid",
 }
 
-__all__ = [
-    "Cloud",
-    "MapCloudBuilder",
-    "MapCloudConfig",
-    "SensorPoints",
-    "VoxelGrid",
-    "depth_points",
-    "read_cloud",
-    "sharpness",
-    "stereo_points",
-    "surface_distances",
-    "write_cloud",
-]
+__all__ = ["MapCloudConfig", *_LAZY]
 
 __getattr__ = lazy_getattr(__name__, _LAZY, globals())

@@ -35,24 +35,6 @@ _LAZY = {
     "rpe": ".metrics",
 }
 
-__all__ = [
-    "ALIGN_MODES",
-    "Alignment",
-    "AlignmentError",
-    "AssociationError",
-    "AteResult",
-    "ErrorStats",
-    "RpeResult",
-    "align_mode_from_flags",
-    "associate",
-    "associate_indices",
-    "ate",
-    "ate_before_after",
-    "ate_with_config",
-    "fit_alignment",
-    "rotation_angle_deg",
-    "rpe",
-    "umeyama",
-]
+__all__ = [*_LAZY]
 
 __getattr__ = lazy_getattr(__name__, _LAZY, globals())

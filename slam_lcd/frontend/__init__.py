@@ -35,23 +35,6 @@ _LAZY = {
     "run_stereo_odometry": ".vo",
 }
 
-__all__ = [
-    "FrontendConfig",
-    "KeyframeSelector",
-    "RgbdOdometry",
-    "StereoOdometry",
-    "TwoViewResult",
-    "VoFrame",
-    "VoResult",
-    "keyframes_from_trajectory",
-    "landmarks_from_sensor",
-    "points_from_depth",
-    "points_from_stereo",
-    "run_rgbd_odometry",
-    "run_stereo_odometry",
-    "select_keyframes",
-    "triangulate_landmarks",
-    "two_view_geometry",
-]
+__all__ = ["FrontendConfig", *_LAZY]
 
 __getattr__ = lazy_getattr(__name__, _LAZY, globals())

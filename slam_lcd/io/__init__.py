@@ -32,24 +32,6 @@ _LAZY = {
     "write_tum": ".trajectory_files",
 }
 
-__all__ = [
-    "open_log",
-    "LogReader",
-    "LogMessage",
-    "RawMessage",
-    "TopicInfo",
-    "read_trajectory_from_log",
-    "FORMATS",
-    "detect_format",
-    "read_euroc",
-    "read_kitti",
-    "read_kitti_times",
-    "read_trajectory",
-    "read_tum",
-    "write_euroc",
-    "write_kitti",
-    "write_trajectory",
-    "write_tum",
-]
+__all__ = [*_LAZY]
 
 __getattr__ = lazy_getattr(__name__, _LAZY, globals())

@@ -29,20 +29,6 @@ _LAZY = {
     "TemporalConsistency": ".temporal",
 }
 
-__all__ = [
-    "LcdConfig",
-    "VERIFY_MODES",
-    "CandidateRecord",
-    "LoopDetector",
-    "EpipolarVerdict",
-    "PoseVerdict",
-    "estimate_loop_pose",
-    "keyframe_points3d",
-    "verify_epipolar",
-    "GraphVerdict",
-    "planar_graph",
-    "verify_graph",
-    "TemporalConsistency",
-]
+__all__ = ["LcdConfig", *_LAZY]
 
 __getattr__ = lazy_getattr(__name__, _LAZY, globals())

@@ -24,16 +24,6 @@ _LAZY = {
     "IncrementalWords": ".words",
 }
 
-__all__ = [
-    "VocabConfig",
-    "BowDatabase",
-    "BowVector",
-    "bow_similarity",
-    "as_unit_vectors",
-    "Vocabulary",
-    "train_hkmeans",
-    "train_vocabulary",
-    "IncrementalWords",
-]
+__all__ = ["VocabConfig", *_LAZY]
 
 __getattr__ = lazy_getattr(__name__, _LAZY, globals())
