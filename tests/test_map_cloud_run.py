@@ -60,7 +60,9 @@ def test_report_html_shows_both_top_views_in_headless_chromium(cloud_run, tmp_pa
     out, _, _ = cloud_run
     page = (out / "report.html").read_text()
     assert "id='map-top-odometry'" in page and "id='map-top-corrected'" in page
-    browser = next((b for b in ("chromium", "chromium-browser", "google-chrome") if shutil.which(b)), None)
+    from support.browser import find_browser
+
+    browser = find_browser()
     if browser is None:
         pytest.skip("no headless browser: install Debian's chromium package (apt-get install chromium) to run this")
     script = ("<script>addEventListener('load',()=>{const r=['map-top-odometry','map-top-corrected'].map(i=>"

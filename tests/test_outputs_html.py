@@ -6,16 +6,12 @@ from __future__ import annotations
 import csv
 import json
 import re
-import shutil
 import subprocess
 
 import pytest
+from support.browser import find_browser
 
 from slam_lcd.outputs.loop_pictures import LOOPS_DIR
-
-
-def _browser():
-    return next((b for b in ("chromium", "chromium-browser", "google-chrome") if shutil.which(b)), None)
 
 
 def test_report_html_is_self_contained_and_complete(report_run):
@@ -40,7 +36,7 @@ def test_report_html_is_self_contained_and_complete(report_run):
 
 
 def test_report_html_renders_in_headless_chromium(report_run, tmp_path):
-    browser = _browser()
+    browser = find_browser()
     if browser is None:
         pytest.skip("no headless browser: install Debian's chromium package (apt-get install chromium) to run this")
     _, out, _ = report_run

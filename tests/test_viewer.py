@@ -225,15 +225,14 @@ def test_no_module_outside_the_viewer_imports_rerun():
 def test_web_viewer_serves_on_loopback_and_draws_the_3d_view(three_session_map, tmp_path):
     """`view MAP --web`: the page answers on loopback and headless Chromium draws the sessions' colours."""
     import os
-    import shutil
     import subprocess
     import sys
     import urllib.request
 
     from conftest import REPO, free_port
-    from support.browser import screenshot_when
+    from support.browser import find_browser, screenshot_when
 
-    browser = next((b for b in ("chromium", "chromium-browser", "google-chrome") if shutil.which(b)), None)
+    browser = find_browser()
     if browser is None:
         pytest.skip("no headless browser: install Debian's chromium package to run this")
     port = free_port()

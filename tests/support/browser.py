@@ -11,6 +11,7 @@ from __future__ import annotations
 import base64
 import json
 import os
+import shutil
 import socket
 import subprocess
 import tempfile
@@ -18,6 +19,11 @@ import time
 import urllib.request
 from collections.abc import Callable
 from contextlib import suppress
+
+
+def find_browser() -> str | None:
+    """A headless-capable Chromium on PATH (Debian's ``chromium`` first), or None."""
+    return next((b for b in ("chromium", "chromium-browser", "google-chrome") if shutil.which(b)), None)
 
 
 class _WebSocket:
@@ -111,4 +117,4 @@ def screenshot_when(browser: str, url: str, port: int, ready: Callable[[bytes], 
         proc.terminate()
         with suppress(subprocess.TimeoutExpired):
             proc.wait(timeout=20)
-        subprocess.run(["rm", "-rf", profile], check=False)
+        shutil.rmtree(profile, ignore_errors=True)
