@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FileMissingError, InputError, SlamLcdError
+from ..io.trajectory_files import read_tum
 from ..types import Trajectory
 
 log = logging.getLogger(__name__)
@@ -99,12 +100,6 @@ def _report(root: Path) -> dict:
     return doc
 
 
-def _tum(path: Path) -> Trajectory:
-    from ..io.trajectory_files import read_tum
-
-    return read_tum(path)
-
-
 def read_loops_csv(path: Path) -> list[dict]:
     """``loops.csv`` rows as dicts (strings), its header checked against the runner's."""
     from ..outputs.loops import loop_columns
@@ -133,8 +128,8 @@ def read_run(root: str | Path, *, ground_truth: bool = True, gt: Trajectory | No
     if missing:
         raise InputError(f"not a complete slam-lcd run folder (no {', '.join(missing)})", root)
     report = _report(root)
-    run = RunFolder(root, report, _tum(root / "odometry.tum"), _tum(root / "corrected.tum"),
-                    _tum(root / "keyframes_corrected.tum"), read_loops_csv(root / "loops.csv"))
+    run = RunFolder(root, report, read_tum(root / "odometry.tum"), read_tum(root / "corrected.tum"),
+                    read_tum(root / "keyframes_corrected.tum"), read_loops_csv(root / "loops.csv"))
     listed = set(report.get("outputs") or [])
     for kind, name in CLOUDS.items():
         if (root / name).is_file():
@@ -223,5 +218,5 @@ def read_localization(root: str | Path) -> LocalizationFolder:
         raise InputError(f"not a slam-lcd localize output folder with localised keyframes (no {', '.join(missing)})",
                          root)
     full = root / "localized.tum"
-    return LocalizationFolder(root, root.name, _tum(root / "keyframes_localized.tum"),
-                              _tum(full) if full.is_file() else None)
+    return LocalizationFolder(root, root.name, read_tum(root / "keyframes_localized.tum"),
+                              read_tum(full) if full.is_file() else None)
