@@ -8,7 +8,9 @@ from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parent.parent
+from support.map_logs import visits
+from support.offline import offline_env
+from support.paths import REPO
 
 
 def pytest_configure(config):
@@ -84,25 +86,6 @@ def once_per_run(tmp_path_factory, name: str, build):
 OFFLINE_DEMO_ARGS = ["--frames", "470", "--size", "320x240"]  # a little more than one lap: loops close
 
 
-def free_port() -> int:
-    """A loopback port nothing listens on (bound, then released)."""
-    import socket
-
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def offline_env(cache: Path) -> dict:
-    """Environment of a machine with no SuperPoint weights anywhere and no network: an empty
-    cache, no $SLAM_LCD_SUPERPOINT_WEIGHTS, the download pointed at a closed loopback port."""
-    env = {k: v for k, v in os.environ.items() if k != "SLAM_LCD_SUPERPOINT_WEIGHTS"}
-    env["SLAM_LCD_CACHE_DIR"] = str(cache)
-    env["SLAM_LCD_SUPERPOINT_URL"] = f"http://127.0.0.1:{free_port()}/superpoint_v1.pth"
-    env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
-    return env
-
-
 @pytest.fixture(scope="session")
 def offline_demo(tmp_path_factory):
     """`slam-lcd demo` run once as a user's first run offline: (completed process, out dir, demo log, env).
@@ -127,23 +110,6 @@ def offline_demo(tmp_path_factory):
     r = once_per_run(tmp_path_factory, "offline", build)
     proc = subprocess.CompletedProcess(r["args"], r["returncode"], r["stdout"], r["stderr"])
     return proc, Path(r["out"]), (Path(r["log"]) if r["log"] else None), r["env"]
-
-
-# --------------------------------------------------------------------------- plugin
-@pytest.fixture(scope="session")
-def superpoint_cpu(superpoint_weights):
-    """One SuperPoint extractor on the CPU for the plugin tests (feature cache on)."""
-    from slam_lcd.features import FeaturesConfig, load_extractor
-
-    return load_extractor(FeaturesConfig(kind="superpoint"), weights=superpoint_weights, device="cpu")
-
-
-@pytest.fixture(scope="session")
-def demo_keyframes_rgbd(superpoint_cpu):
-    """2 laps of demo-world RGB-D keyframes at 1 Hz, 320x240, with features and exact ground truth."""
-    from slam_lcd.sim.keyframes import demo_keyframes
-
-    return demo_keyframes(superpoint_cpu, sensor="rgbd")
 
 
 # --------------------------------------------------------------------------- the short demo log
@@ -171,6 +137,19 @@ def demo_log_mcap(tmp_path_factory) -> Path:
     return Path(once_per_run(tmp_path_factory, "demo_log", build))
 
 
+@pytest.fixture(scope="session")
+def small_log(tmp_path_factory) -> Path:
+    """A 120-frame RGB-D demo log (320x240, seed 1) for tests that start, stop and kill runs on it
+    (signals, the live viewer), rendered once per test run. Read-only: tests that edit a log copy it."""
+    from slam_lcd.sim import make_demo_log
+
+    def build(folder: Path) -> str:
+        make_demo_log(folder / "small.mcap", "mcap", frames=120, seed=1, width=320, height=240)
+        return str(folder / "small.mcap")
+
+    return Path(once_per_run(tmp_path_factory, "small_log", build))
+
+
 # --------------------------------------------------------------------------- a run's outputs
 @pytest.fixture(scope="session")
 def report_run(tmp_path_factory, demo_log_mcap):
@@ -190,3 +169,15 @@ def report_run(tmp_path_factory, demo_log_mcap):
 
     rc, out = once_per_run(tmp_path_factory, "report_run", build)
     return rc, Path(out), log
+
+
+# --------------------------------------------------------------------------- the map tests' logs
+@pytest.fixture(scope="session")
+def visit_logs(tmp_path_factory) -> dict[int, Path]:
+    """Two visits of one route and a log of another world (:func:`support.map_logs.visits`), rendered
+    once per test run for the map, map-rule and viewer tests. Read-only: the runs on them write elsewhere."""
+
+    def build(folder: Path) -> dict:
+        return {str(k): str(v) for k, v in visits(folder).items()}
+
+    return {int(k): Path(v) for k, v in once_per_run(tmp_path_factory, "visit_logs", build).items()}

@@ -73,9 +73,9 @@ def bench_kitti(data: Path, false_fraction: float, stride: int, seed: int) -> No
 
 
 def bench_sphere(data: Path) -> None:
-    from support.solve import batch_graph, from_values, isam2_edge_by_edge, to_values, translation_rmse
-
     from slam_lcd.backend.g2o import chain_initial_estimate, read_g2o
+
+    from support.solve import batch_graph, from_values, isam2_edge_by_edge, to_values, translation_rmse
 
     d = data / "posegraphs"
     _, edges = read_g2o(d / "sphere2500.txt", edge3_matrix="sqrt_information")

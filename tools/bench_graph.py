@@ -7,7 +7,7 @@ a lap apart matched without ratio or distance bound (wrong matches, what pruning
 apart; only ~250 are mutual), each cut to exactly 100, 300 or 1000 matches with the
 detector's own budget rule. For every set both versions run
 in the same process; the script prints per size the median time of each, their ratio, and
-checks that the verdicts are identical (the reference is tests/lcd_graph_reference.py).
+checks that the verdicts are identical (the reference is tests/support/lcd_graph_reference.py).
 
     python tools/bench_graph.py [--features superpoint|orb] [--weights W] [--sizes 100 300 1000] [--repeat 3]
 """
@@ -25,13 +25,13 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "tests"))
 
-import lcd_graph_reference as ref  # noqa: E402
-
 from slam_lcd import sim  # noqa: E402
 from slam_lcd.features import FeaturesConfig, load_extractor  # noqa: E402
 from slam_lcd.features.matching import mutual_nn_match_bf  # noqa: E402
 from slam_lcd.lcd import LcdConfig, verify_graph  # noqa: E402
 from slam_lcd.lcd.budget import select_matches  # noqa: E402
+
+from support import lcd_graph_reference as ref  # noqa: E402
 
 
 def demo_features(kind: str, weights: str | None, n_pairs: int, width: int, height: int):

@@ -13,7 +13,7 @@ Per preset (a shipped name such as ``default``, ``fast``, ``accurate``, or a YAM
   shared data), recall at 100 % precision of the preset's verification chain;
 - ``wide``: the wide-baseline demo (every second lap 0.45 m aside, camera turned 30 deg;
   320x240 keyframes at 1 Hz, 2.3 laps): revisit keyframes with a loop / revisit keyframes,
-  false loops (cameras >= 2 m or >= 60 deg apart), as ``tests/test_lcd_demo_wide.py`` counts them;
+  false loops (cameras >= 2 m or >= 60 deg apart), as ``tests/lcd/test_lcd_demo_wide.py`` counts them;
 - ``euroc``: the demo world as an EuRoC bag (raw stereo pair, stereo VO, position-only ground
   truth; ``tools/bench_layouts.py``) run with ``--config euroc`` plus the preset's own keys:
   ATE after / the VO's ATE, false loops.

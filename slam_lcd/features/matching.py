@@ -127,7 +127,7 @@ def mutual_nn_match_bf(
     With ``return_distances`` also the (M,) distances of the kept matches (float64).
 
     The rule and the comparisons (float64, strict) are those of ``cv2.BFMatcher.knnMatch``/``match``
-    and a Python loop over their results (the reference in ``tests/test_matching_bf.py``).
+    and a Python loop over their results (the reference in ``tests/features/test_matching_bf.py``).
     """
     empty = np.zeros((0, 2), np.int64)
     n1, n2 = len(d1), len(d2)
