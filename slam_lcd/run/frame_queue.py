@@ -16,7 +16,11 @@ EARLY_DEPTH_KEPT = 8  # depth images kept for frames not seen yet (only the newe
 
 
 @dataclass
-class Frame:
+class WaitingFrame:
+    """A camera frame (and its depth, right or colour image) until the odometry reaches its stamp.
+
+    Not :class:`slam_lcd.io.image_folder.Frame`, which is a named image read from a folder or topic."""
+
     stamp: int
     image: np.ndarray
     depth: np.ndarray | None = None
@@ -28,14 +32,14 @@ class FrameQueue:
     """Frames in arrival order, and depth images that arrived before their frame."""
 
     def __init__(self):
-        self.pending: list[Frame] = []
+        self.pending: list[WaitingFrame] = []
         self._early_depth: dict[int, np.ndarray] = {}  # depth that arrived before its image
 
     def add(self, stamp_ns: int, image: np.ndarray, depth: np.ndarray | None = None,
             right_image: np.ndarray | None = None, colour: np.ndarray | None = None) -> None:
         if depth is None:
             depth = self._early_depth.pop(int(stamp_ns), None)
-        self.pending.append(Frame(int(stamp_ns), image, depth, right_image, colour))
+        self.pending.append(WaitingFrame(int(stamp_ns), image, depth, right_image, colour))
 
     def add_depth(self, stamp_ns: int, depth: np.ndarray) -> bool:
         """Give the waiting frame of ``stamp_ns`` its depth (True), or keep the depth for a frame to come (False)."""
@@ -49,7 +53,7 @@ class FrameQueue:
             self._early_depth.pop(min(self._early_depth))
         return False
 
-    def take_ready(self, first: int, last: int, *, final: bool, expect_depth: bool) -> list[Frame]:
+    def take_ready(self, first: int, last: int, *, final: bool, expect_depth: bool) -> list[WaitingFrame]:
         """Remove and return the frames the odometry from ``first`` to ``last`` covers (all with ``final``).
 
         With ``expect_depth`` the newest frame waits for its depth (or for the next frame). Frames
@@ -68,7 +72,7 @@ class FrameQueue:
         self.pending = keep
         return ready
 
-    def put_back(self, frames: list[Frame]) -> None:
+    def put_back(self, frames: list[WaitingFrame]) -> None:
         """Frames taken but not processed (an interrupt) go back to the front, in order."""
         self.pending = frames + self.pending
 

@@ -41,7 +41,7 @@ from ..runtime.stage_timer import StageTimer, resident_kb
 from ..runtime.thread_limits import limited_threads
 from ..types import CameraModel, Keyframe, LoopClosure, Trajectory
 from .extract_ahead import ExtractionPool
-from .frame_queue import Frame, FrameQueue
+from .frame_queue import FrameQueue, WaitingFrame
 
 log = logging.getLogger(__name__)
 
@@ -324,7 +324,7 @@ class Pipeline:
                 raise
         return out
 
-    def _process(self, f: Frame) -> list[LoopClosure]:
+    def _process(self, f: WaitingFrame) -> list[LoopClosure]:
         T, cov = self._odom.at(f.stamp)
         features = None
         if self.config.run.keyframe_on_overlap and self.config.frontend.kf_min_overlap > 0:

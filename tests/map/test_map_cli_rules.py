@@ -121,7 +121,7 @@ def _walk_cases(world, d: Path) -> list[tuple[str, list, Path]]:
     make_demo_log(d / "bag2", "rosbag2", frames=10, width=64, height=48)
     (d / "images").mkdir()
     for i in range(3):
-        shutil.copy(world.root / "s4.mcap", d / "images" / f"{i}.png")  # never read: refused first
+        shutil.copy(world.logs[4], d / "images" / f"{i}.png")  # never read: refused first
     (d / "gt").mkdir()
     shutil.copytree(world.m1, d / "map")
     shutil.copytree(world.r1, d / "run")
