@@ -9,18 +9,20 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ..value_range import ranged
+
 
 @dataclass
 class BatchConfig:
     # CPU cores one log's task takes: Ray's num_cpus per task; in every worker process also
     # the number of torch / OpenCV threads (so N workers do not oversubscribe N cores)
-    cpus_per_task: float = 1.0
+    cpus_per_task: float = ranged(1.0, "(0, inf)")
     # GPUs one task takes (Ray's num_gpus; fractions share a GPU, e.g. 0.25 = four logs per
     # GPU); None = 1 when features.kind is superpoint and features.device is cuda, else 0
-    gpus_per_task: float | None = None
+    gpus_per_task: float | None = ranged(None, "[0, inf)")
     # Ray only: times a task is re-run when its worker process dies (machine lost, killed
     # for memory); a log that fails with an error is not retried, it becomes an error row
-    max_retries: int = 2
+    max_retries: int = ranged(2, "[0, inf)")
 
 
 def gpus_per_task(conf: BatchConfig, features) -> float:

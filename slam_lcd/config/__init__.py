@@ -1,9 +1,9 @@
 """Run configuration: typed dataclasses, YAML presets, ``--set section.key=value`` overrides.
 
 Each stage owns its section (``slam_lcd/<stage>/config.py``); this module composes them.
-Unknown keys are errors, values are type-checked and range-checked
-(:mod:`slam_lcd.config.ranges`), and :func:`save_config` writes the resolved
-configuration next to a run's outputs.
+Unknown keys are errors, values are type-checked and range-checked (each key's range is
+declared beside its field: ``ranged(default, "[0, 100]")``, :mod:`slam_lcd.value_range`), and
+:func:`save_config` writes the resolved configuration next to a run's outputs.
 """
 from __future__ import annotations
 
@@ -30,6 +30,7 @@ from ..io.config import IOConfig
 from ..lcd.config import LcdConfig
 from ..map.config import MapConfig
 from ..sensors.config import SensorsConfig
+from ..value_range import describe, in_range, numeric_ranges, ordered_keys, ranged
 from ..vocab.config import VocabConfig
 
 # presets are package data (slam_lcd/data/configs/*.yaml): found through importlib.resources,
@@ -64,7 +65,7 @@ class RunConfig:
     """Section `run`: what ``slam-lcd run`` writes (how it evaluates against ground truth: section `eval`)."""
 
     # a loop is counted false when its keyframes' ground-truth positions are further apart than this (m)
-    loop_true_max_distance: float = 3.0
+    loop_true_max_distance: float = ranged(3.0, "(0, inf)")
     # write trajectory.png and ate_over_time.png
     plots: bool = True
     # trajectory.png: a plane (xy, xz, yz), 3-D (xyz) or auto (the plane the motion spans)
@@ -82,7 +83,7 @@ class RunConfig:
     # (slam_lcd.outputs.loop_pictures; keyframe images and features are kept on disk meanwhile)
     loop_pictures: bool = True
     # ... plus this many detector-rejected candidates that came closest
-    loop_pictures_rejected: int = 8
+    loop_pictures_rejected: int = ranged(8, "[0, inf)")
     # also take keyframes on image overlap (frontend.kf_min_overlap): needs features of EVERY
     # frame, not only of keyframes (about 5x the SuperPoint cost at 10 Hz); odometry
     # thresholds alone are the default
@@ -90,21 +91,21 @@ class RunConfig:
     # keyframes whose features are extracted in a background thread while earlier keyframes
     # go through loop detection and the back end (SuperPoint releases the GIL); 0 = one at a
     # time. Loops of a keyframe are then reported up to this many keyframes later.
-    extract_ahead: int = 2
+    extract_ahead: int = ranged(2, "[0, 64]")
     # with extract_ahead > 0: BLAS and faiss threads of the loop-detection thread while a
     # keyframe's features are being extracted in the background, so that the extraction keeps a
     # core (slam_lcd/runtime/thread_limits.py); 0 = the libraries' defaults
-    lcd_threads: int = 1
+    lcd_threads: int = ranged(1, "[0, 64]")
     # with extract_ahead > 0: keyframes extracted side by side (SuperPoint on the CPU; one on a GPU).
     # 1: one keyframe at a time on all of torch's threads. N > 1: N at once, torch's threads shared
     # out between them (on 2 cores: one each, no barrier between the cores after every operator;
     # the 2-lap demo 45.5 s -> 41.5 s, same results). At most extract_ahead; 0 = torch's thread count
-    extract_workers: int = 2
+    extract_workers: int = ranged(2, "[0, 64]")
     # messages of the log read (decompressed, checked, deserialised) this many ahead in a thread
     # of its own once loop detection hardly waits for features (features cached, a GPU, many
     # cores), so that the reading overlaps it (slam_lcd/io/prefetch.py, runner._ReadAheadJudge);
     # 0 = always read in the main thread
-    read_ahead: int = 64
+    read_ahead: int = ranged(64, "[0, 4096]")
 
 
 @dataclass
@@ -253,18 +254,16 @@ def _near_miss(data: dict, key: str) -> str:
 
 
 def validate_config(cfg: Config, path: str | Path | None = None) -> Config:
-    """Range-check every numeric key (:mod:`slam_lcd.config.ranges`); one-line ConfigError naming the key."""
-    from .ranges import ORDERED, RANGES, describe, in_range
-
+    """Range-check every numeric key (the ranges beside the fields); one-line ConfigError naming the key."""
     data = config_to_dict(cfg)
-    for key, spec in RANGES.items():
+    for key, spec in numeric_ranges(cfg).items():
         section, name = key.split(".", 1)
         value = data.get(section, {}).get(name)
         if value is None or isinstance(value, bool):
             continue
         if not in_range(value, spec):
             raise ConfigError(f"{key} = {value!r} is out of range: it must be {describe(spec)}", path)
-    for small, large in ORDERED:
+    for small, large in ordered_keys(cfg):
         (s1, k1), (s2, k2) = small.split(".", 1), large.split(".", 1)
         if data[s1][k1] >= data[s2][k2]:
             raise ConfigError(f"{small} = {data[s1][k1]!r} must be below {large} = {data[s2][k2]!r}", path)

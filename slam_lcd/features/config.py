@@ -4,6 +4,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
+from ..value_range import ranged
+
 # Official Magic Leap release of the SuperPoint weights (MIT-style research licence: the user
 # downloads them; the package never ships them).
 SUPERPOINT_URL = "https://github.com/magicleap/SuperPointPretrainedNetwork/raw/master/superpoint_v1.pth"
@@ -19,22 +21,23 @@ class FeaturesConfig:
     # where inference runs: 'auto' picks CUDA when available, else CPU
     device: Literal["auto", "cpu", "cuda"] = "auto"
     # non-maximum suppression radius in pixels (window of 2r+1)
-    nms_radius: int = 4
+    nms_radius: int = ranged(4, "[0, inf)")
     # minimum detector confidence (softmax probability) of a keypoint
-    keypoint_threshold: float = 0.015
+    keypoint_threshold: float = ranged(0.015, "[0, 1)")
     # keypoints closer than this many pixels to the image border are dropped
-    remove_borders: int = 4
+    remove_borders: int = ranged(4, "[0, inf)")
     # keep the highest-scoring keypoints only; -1 keeps all
-    max_keypoints: int = 1000
+    max_keypoints: int = ranged(1000, "-1 or [1, inf)")
     # extract on a copy whose longest side is at most this many pixels (aspect kept, area
     # interpolation; hloc's resize_max); keypoints are reported in the full image's pixels, so
     # geometry downstream is unchanged. SuperPoint's cost falls with the pixel count (a 640x480
-    # image at 320: about a quarter). None = the image as it is (docs/presets.md)
-    resize_max: int | None = None
+    # image at 320: about a quarter). None = the image as it is (docs/presets.md). At least 32: below
+    # that SuperPoint's 8-pixel cells and borders leave little image
+    resize_max: int | None = ranged(None, "[32, inf)")
     # interpolation of the 1/8-resolution descriptor map at keypoints
     descriptor_sampling: Literal["bilinear", "bicubic"] = "bilinear"
     # images per network forward in extract_batch
-    batch_size: int = 8
+    batch_size: int = ranged(8, "[1, inf)")
     # CPU inference: 'retain' tells glibc to keep freed memory for the next forward pass
     # (no page faults on SuperPoint's large activations, ~30% of CPU time otherwise);
     # 'system' leaves malloc as the environment set it
@@ -48,10 +51,10 @@ class FeaturesConfig:
     # (docs/features.md). Elsewhere bfloat16 is emulated and slower (said once in the log)
     precision: Literal["float32", "bfloat16"] = "float32"
     # ORB baseline: number of features, pyramid scale factor and levels, FAST threshold
-    orb_n_features: int = 1000
-    orb_scale_factor: float = 1.2
-    orb_n_levels: int = 8
-    orb_fast_threshold: int = 20
+    orb_n_features: int = ranged(1000, "[1, inf)")
+    orb_scale_factor: float = ranged(1.2, "(1, inf)")
+    orb_n_levels: int = ranged(8, "[1, inf)")
+    orb_fast_threshold: int = ranged(20, "[0, 255]")
     # user cache directory (weights, features); None = $SLAM_LCD_CACHE_DIR or ~/.cache/slam-lcd
     cache_dir: str | None = None
     # store extracted features on disk keyed by log, topic, stamp and extractor config

@@ -4,6 +4,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
+from ..value_range import ranged
+
 
 @dataclass
 class IOConfig:
@@ -18,8 +20,8 @@ class IOConfig:
     # chunk compression of ROS1 bags written by slam-lcd
     rosbag1_compression: Literal["none", "lz4", "bz2"] = "none"
     # JPEG quality (0-100) of sensor_msgs/CompressedImage messages built by slam-lcd
-    jpeg_quality: int = 90
+    jpeg_quality: int = ranged(90, "[0, 100]")
     # how far (seconds) a TF lookup may reach past the first/last sample of a dynamic transform
-    tf_extrapolation_s: float = 0.0
+    tf_extrapolation_s: float = ranged(0.0, "[0, inf)")
     # memory (MiB) for decompressed ROS1 bag chunks kept while streaming (bags whose chunks overlap in time)
-    rosbag1_chunk_cache_mb: int = 256
+    rosbag1_chunk_cache_mb: int = ranged(256, "[1, inf)")

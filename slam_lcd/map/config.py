@@ -4,6 +4,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
+from ..value_range import ranged
+
 
 @dataclass
 class MapConfig:
@@ -21,61 +23,61 @@ class MapConfig:
     vocab_centres: Literal["int8", "float16"] = "int8"
     # two sessions are joined only by this many pairwise-consistent loops between them (PCM):
     # one loop between two unconnected sessions cannot be checked against anything
-    min_join_loops: int = 3
+    min_join_loops: int = ranged(3, "[1, inf)")
     # pairwise consistency of two loops between the same two sessions: chi-square quantile of
     # the cycle (loop, odometry in one session, loop back, odometry in the other), 6 dof
-    pcm_probability: float = 0.99
+    pcm_probability: float = ranged(0.99, "(0, 1)")
     # odometry uncertainty per square-root metre travelled (variance grows with the distance), used
     # for the cycle's covariance and the link test only where the session's odometry gives no
     # covariance (m/sqrt(m) and rad/sqrt(m), 1 sigma)
-    pcm_sigma_trans_per_m: float = 0.05
-    pcm_sigma_rot_per_m: float = 0.02
+    pcm_sigma_trans_per_m: float = ranged(0.05, "[0, inf)")
+    pcm_sigma_rot_per_m: float = ranged(0.02, "[0, inf)")
     # the exact search for the largest consistent set stops after this many search nodes and takes
     # the largest set found so far (logged and recorded in the pair's decision)
-    pcm_clique_budget: int = 100000
+    pcm_clique_budget: int = ranged(100000, "[1, inf)")
     # the joining set's keyframes must lie at least this far apart in each of the two sessions (m):
     # a look-alike place seen from a few consecutive keyframes gives loops that agree with each other
-    min_join_span_m: float = 2.0
+    min_join_span_m: float = ranged(2.0, "[0, inf)")
     # not joined ("ambiguous") when a second consistent set, disjoint from the largest, could join
     # on its own and holds at least this share of the largest set's loops
-    join_ambiguity_ratio: float = 0.5
+    join_ambiguity_ratio: float = ranged(0.5, "(0, inf)")
     # a visual link must agree with the odometry step it spans: chi-square quantile, 6 dof
-    link_probability: float = 0.999
+    link_probability: float = ranged(0.999, "(0, 1)")
     # localise: a keyframe's pose from the map must agree with the poses of the localised
     # keyframes around it carried by odometry (translation m, rotation deg); the rest are outliers
-    localize_max_disagreement_m: float = 1.0
-    localize_max_disagreement_deg: float = 15.0
+    localize_max_disagreement_m: float = ranged(1.0, "(0, inf)")
+    localize_max_disagreement_deg: float = ranged(15.0, "(0, 180]")
     # localise: a fix is confirmed only by a fix to another place, their map keyframes this far apart
     # or the log this far along between them (m): neighbouring keyframes that see one look-alike
     # place agree with each other too, so a look-alike must span more than this to confirm itself.
     # 3 m: wider than the demo world's repeated door-and-posters groups (2.2 m); the share localised
     # was the same from 0 to 4 m on the measured demo runs and fell at 5-6 m (the confirming window
     # of 10 keyframes is about 5 m)
-    localize_min_place_separation_m: float = 3.0
+    localize_min_place_separation_m: float = ranged(3.0, "[0, inf)")
     # localise: fixes falling into groups that disagree (a look-alike place and the true one): a group
     # wins only with at least this many times its rival's fixes; otherwise both are ambiguous. 2: a
     # look-alike corridor seen by 7 fixes against its true place's 16 was decided right at 1.5 and 2,
     # refused at 3
-    localize_min_group_ratio: float = 2.0
+    localize_min_group_ratio: float = ranged(2.0, "[1, inf)")
     # wait for a writer's lock this long before refusing (seconds; 0: refuse at once)
-    lock_timeout_s: float = 60.0
+    lock_timeout_s: float = ranged(60.0, "[0, inf)")
     # keep places and appearance variants, not every keyframe (slam_lcd.map.places): a keyframe that
     # a kept one of its place matches well keeps only its pose; false: every keyframe keeps everything
     lifelong: bool = True
     # a kept keyframe is of the same place when its camera lies within this distance (m) and its
     # optical axis within this angle (deg)
-    place_radius_m: float = 1.0
-    place_angle_deg: float = 30.0
+    place_radius_m: float = ranged(1.0, "(0, inf)")
+    place_angle_deg: float = ranged(30.0, "(0, 180]")
     # the nearest kept keyframes of the place a new one is compared with
-    place_compare: int = 3
+    place_compare: int = ranged(3, "[1, inf)")
     # redundant when at least this share of the smaller keyframe's descriptors are mutual nearest
     # neighbours of a kept keyframe of its place; below it, a new appearance of the place
-    redundant_match_ratio: float = 0.3
+    redundant_match_ratio: float = ranged(0.3, "(0, 1]")
     # a session is judged in the kept appearance its keyframes match best (median best ratio); when
     # even that is under this share of how well they match each other (median of consecutive
     # keyframes) it founds a new appearance (night in a map of days); a keyframe is redundant only
     # against kept keyframes of its own appearance; 0: every session is judged in a known one
-    appearance_share: float = 0.8
+    appearance_share: float = ranged(0.8, "[0, 1]")
     # kept keyframes (appearance variants) of one place at most; a new one beyond that evicts the
     # variant matched longest ago, first of its own appearance, then of one the place holds twice
-    max_variants: int = 4
+    max_variants: int = ranged(4, "[1, inf)")

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from ..value_range import ranged
+
 
 @dataclass
 class SensorsConfig:
@@ -18,4 +20,5 @@ class SensorsConfig:
     odom_topic: str | None = None  # odometry; None: the log's only nav_msgs/Odometry (else the built-in VO)
     # ground truth, first one the log has: TOPIC (a pose or PointStamped) or TOPIC:PARENT:CHILD (a TF chain)
     gt_topics: list[str] = field(default_factory=list)
-    depth_unit_m: float = 0.001  # metres per unit of a 16-bit depth image (16UC1 / mono16; ROS: millimetres)
+    # metres per unit of a 16-bit depth image (16UC1 / mono16; ROS: millimetres)
+    depth_unit_m: float = ranged(0.001, "(0, inf)")

@@ -795,28 +795,90 @@ def test_ate_warns_on_repeated_stamp_and_non_unit_quaternion(tum_pair, tmp_path,
 # ---------------------------------------------------------------------------- 12: config ranges
 
 
-def test_every_numeric_config_key_has_a_range():
-    """Item 12: every int/float key of every section has an entry in slam_lcd.config.ranges."""
+def _numeric_keys(config) -> set[str]:
+    """``section.key`` of every int/float field of the sections of ``config`` (a dataclass instance)."""
     import dataclasses
     import typing
 
-    from slam_lcd.config import Config
-    from slam_lcd.config.ranges import RANGES
-
     numeric = set()
-    for section in dataclasses.fields(Config):
-        obj = getattr(Config(), section.name)
+    for section in dataclasses.fields(config):
+        obj = getattr(config, section.name)
         hints = typing.get_type_hints(type(obj))
         for f in dataclasses.fields(obj):
             args = typing.get_args(hints[f.name]) or (hints[f.name],)
             if any(a in (int, float) for a in args) and typing.get_origin(hints[f.name]) is not list:
                 numeric.add(f"{section.name}.{f.name}")
-    assert numeric == set(RANGES), (sorted(numeric - set(RANGES)), sorted(set(RANGES) - numeric))
+    return numeric
+
+
+def test_every_numeric_config_key_has_a_range():
+    """Item 12: every int/float key of every section declares its range beside its field (``ranged``)."""
+    from slam_lcd.config import Config
+    from slam_lcd.value_range import numeric_ranges
+
+    numeric, ranges = _numeric_keys(Config()), set(numeric_ranges(Config()))
+    assert numeric == ranges, (sorted(numeric - ranges), sorted(ranges - numeric))
+
+
+def test_a_numeric_field_without_a_range_is_found():
+    """Item 12: the check above fails on a section whose int or float field has no ``ranged``."""
+    from dataclasses import dataclass, field
+
+    from slam_lcd.value_range import numeric_ranges, ranged
+
+    @dataclass
+    class Section:
+        checked: int = ranged(3, "[1, inf)")
+        unchecked: float | None = 0.5
+        name: str = "x"
+
+    @dataclass
+    class Top:
+        sec: Section = field(default_factory=Section)
+
+    assert numeric_ranges(Top()) == {"sec.checked": "[1, inf)"}
+    assert _numeric_keys(Top()) - set(numeric_ranges(Top())) == {"sec.unchecked"}
+
+
+def test_every_ordered_pair_is_checked_naming_both_keys():
+    """Item 12: a key declared ``below=`` another is refused at or above it, in one line naming both."""
+    from slam_lcd.config import Config, load_config
+    from slam_lcd.errors import ConfigError
+    from slam_lcd.value_range import ordered_keys
+
+    pairs = ordered_keys(Config())
+    assert ("lcd.min_depth_m", "lcd.max_depth_m") in pairs
+    for small, large in pairs:
+        section, name = large.split(".")
+        value = getattr(getattr(Config(), section), name)
+        with pytest.raises(ConfigError) as e:
+            load_config("default", [f"{small}={value}"])
+        assert f"{small} = {value!r} must be below {large} = {value!r}" in str(e.value)
+        assert "\n" not in str(e.value)
+
+
+def test_below_naming_no_key_of_the_section_is_an_error():
+    """Item 12: a misspelt ``below=`` fails when the ranges are read, not silently unchecked."""
+    from dataclasses import dataclass, field
+
+    from slam_lcd.value_range import ordered_keys, ranged
+
+    @dataclass
+    class Section:
+        low: float = ranged(0.1, "[0, inf)", below="hihg")
+        high: float = ranged(1.0, "(0, inf)")
+
+    @dataclass
+    class Top:
+        sec: Section = field(default_factory=Section)
+
+    with pytest.raises(ValueError, match="sec.low: below='hihg' names no key of its section"):
+        ordered_keys(Top())
 
 
 def _outside(spec: str, is_int: bool):
     """A value outside ``spec`` (None when the whole number line is allowed)."""
-    from slam_lcd.config.ranges import _alternatives
+    from slam_lcd.value_range import _alternatives
 
     alts = _alternatives(spec)
     lo = min(a[0] for a in alts)
@@ -835,11 +897,11 @@ def test_every_numeric_config_key_is_range_checked_naming_the_key():
     import typing
 
     from slam_lcd.config import Config, load_config
-    from slam_lcd.config.ranges import RANGES
     from slam_lcd.errors import ConfigError
+    from slam_lcd.value_range import numeric_ranges
 
     load_config("default")  # the defaults are in range
-    for key, spec in RANGES.items():
+    for key, spec in numeric_ranges(Config()).items():
         section, name = key.split(".")
         hint = typing.get_type_hints(type(getattr(Config(), section)))[name]
         is_int = int in (typing.get_args(hint) or (hint,))
