@@ -14,6 +14,11 @@ Two locks, both ``flock`` (released by the kernel when the process ends, however
 After a first commit the writer takes the map's own lock too (the folder holds a map now) and lets
 the creation lock go: a second creator that waited on it finds the map and waits on ``DIR/.lock``.
 The creation lock works on one machine; the map's own lock works wherever ``flock`` does.
+
+The creation lock's file is removed by its holder when it lets the lock go, so the temporary folder
+does not collect one file per map ever made. A waiter may then hold a lock on a file that no longer
+has a name, so whoever takes the creation lock checks that the path still names the file it locked,
+and otherwise opens the path again: two creators never both hold it.
 """
 from __future__ import annotations
 
@@ -29,24 +34,45 @@ from pathlib import Path
 from .contents import LOCK, MANIFEST, MapLockedError
 
 
-def _flock(path: Path, deadline: float, root: Path, timeout_s: float) -> int:
-    """Open (creating) ``path`` and hold an exclusive ``flock`` on it; wait until ``deadline``."""
-    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
-    try:
-        while True:
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                return fd
-            except OSError as e:
-                if e.errno not in (errno.EAGAIN, errno.EACCES):
-                    raise
-                if time.monotonic() >= deadline:
-                    raise MapLockedError(f"another slam-lcd process is writing this map (waited {timeout_s:g} s); "
-                                         "try again when it has finished", root) from None
-                time.sleep(0.2)
-    except BaseException:
+def _flock(path: Path, deadline: float, root: Path, timeout_s: float, *, removable: bool = False) -> int:
+    """Open (creating) ``path`` and hold an exclusive ``flock`` on it; wait until ``deadline``.
+
+    ``removable``: the lock's holder may remove the file when it lets go (the creation lock), so a
+    lock taken on a file that has lost its name is dropped and the path opened again."""
+    while True:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            _wait_for(fd, deadline, root, timeout_s)
+        except BaseException:
+            os.close(fd)
+            raise
+        if not removable or _names(path, fd):
+            return fd
         os.close(fd)
-        raise
+
+
+def _wait_for(fd: int, deadline: float, root: Path, timeout_s: float) -> None:
+    while True:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return
+        except OSError as e:
+            if e.errno not in (errno.EAGAIN, errno.EACCES):
+                raise
+            if time.monotonic() >= deadline:
+                raise MapLockedError(f"another slam-lcd process is writing this map (waited {timeout_s:g} s); "
+                                     "try again when it has finished", root) from None
+            time.sleep(0.2)
+
+
+def _names(path: Path, fd: int) -> bool:
+    """Whether ``path`` still names the open file ``fd``."""
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        return False
+    own = os.fstat(fd)
+    return (st.st_dev, st.st_ino) == (own.st_dev, own.st_ino)
 
 
 def creation_lock_path(root: str | Path) -> Path:
@@ -71,7 +97,7 @@ class WriterLock:
             if (self.root / MANIFEST).is_file():
                 self._map_fd = _flock(self.root / LOCK, deadline, self.root, self.timeout_s)
                 return self
-            self._new_fd = _flock(creation_lock_path(self.root), deadline, self.root, self.timeout_s)
+            self._new_fd = _flock(creation_lock_path(self.root), deadline, self.root, self.timeout_s, removable=True)
             if not (self.root / MANIFEST).is_file():
                 return self
             self._close_new()  # a first commit landed while we waited: the map's own lock from now on
@@ -119,6 +145,11 @@ class WriterLock:
         self._close_new()
 
     def _close_new(self) -> None:
+        """Let the creation lock go, removing its file first (while still holding it: module docstring)."""
         if self._new_fd is not None:
+            path = creation_lock_path(self.root)
+            if _names(path, self._new_fd):
+                with contextlib.suppress(OSError):
+                    path.unlink()
             os.close(self._new_fd)
             self._new_fd = None

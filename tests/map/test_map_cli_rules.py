@@ -19,6 +19,8 @@ from types import SimpleNamespace
 
 import pytest
 
+from slam_lcd.map.locks import creation_lock_path
+
 from support.bad_input_files import assert_one_line, run_cli
 
 ORB = ["--features", "orb", "--no-mcap", "--no-progress", "--set", "run.plots=false",
@@ -179,6 +181,7 @@ def test_refused_or_failed_runs_leave_no_lock_and_no_new_folder(world, tmp_path,
             capfd, "/nope", watch=[tmp_path])
     assert not new.exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["user_folder"]
+    assert not creation_lock_path(new).exists(), "the creation lock's file stayed in the temporary folder"
 
 
 def test_a_new_maps_first_append_makes_the_folder_and_its_lock(world, tmp_path, capfd):
@@ -187,6 +190,7 @@ def test_a_new_maps_first_append_makes_the_folder_and_its_lock(world, tmp_path, 
     rc, _, err = run_cli(["run", world.logs[1], "--map", m, "--out", tmp_path / "o", *world.orb], capfd)
     assert rc == 0, err
     assert (m / "map.json").is_file() and (m / ".lock").is_file()
+    assert not creation_lock_path(m).exists(), "the creation lock's file stayed in the temporary folder"
     from slam_lcd.map.session_map import Map
 
     assert Map.open(m).session_names == ["s1"]
@@ -357,3 +361,37 @@ def test_two_first_appends_to_one_new_map_both_land(world, tmp_path):
     from slam_lcd.map.session_map import Map
 
     assert sorted(Map.open(new).session_names) == ["s1", "s2"]
+    assert not creation_lock_path(new).exists()
+
+
+def test_a_creation_lock_whose_file_was_removed_is_taken_again(tmp_path):
+    """A waiter that locked the creation lock's file after its holder removed it opens the path again: it
+    never holds a lock on a nameless file while another process locks a new file of that name."""
+    import fcntl
+    import os
+    import threading
+    import time
+
+    from slam_lcd.map.locks import WriterLock
+
+    new = tmp_path / "new"
+    path = creation_lock_path(new)
+    held = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    fcntl.flock(held, fcntl.LOCK_EX)  # another creator holds the lock
+    got = {}
+
+    def waiter():
+        lock = WriterLock(new, timeout_s=10).acquire()
+        got["ino"] = os.fstat(lock._new_fd).st_ino
+        got["named"] = os.stat(path).st_ino
+        lock.release()
+
+    t = threading.Thread(target=waiter)
+    t.start()
+    time.sleep(0.5)  # the waiter has opened the old file and waits on it
+    path.unlink()  # its holder removes the file, then lets go
+    os.close(held)
+    t.join(timeout=10)
+    assert got["ino"] == got["named"], "the waiter kept a lock on the removed file"
+    assert not path.exists(), "the waiter's own lock file stayed behind"
+
