@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import numpy.typing as npt
 from scipy.spatial.transform import Rotation, Slerp
 
 from .errors import ConfigError
@@ -168,7 +169,7 @@ def adjoint(T: np.ndarray) -> np.ndarray:
 # ----------------------------------------------------------------------------- quaternions (x, y, z, w)
 
 
-def quat_to_rot(q_xyzw: np.ndarray) -> np.ndarray:
+def quat_to_rot(q_xyzw: npt.ArrayLike) -> np.ndarray:
     """Quaternion(s) ``(x, y, z, w)``, shape (4,) or (..., 4), normalised first -> rotation matrix/matrices."""
     q = np.asarray(q_xyzw, dtype=np.float64)
     q = q / np.linalg.norm(q, axis=-1, keepdims=True)
