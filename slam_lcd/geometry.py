@@ -197,11 +197,11 @@ def rot_to_quat(R: np.ndarray, w_nonnegative: bool = False) -> np.ndarray:
     m = np.asarray(R, dtype=np.float64)
     single = m.ndim == 2
     if single and m.shape == (3, 3):
-        q = _rot_to_quat_one(m.tolist())
-        if q is not None:
-            if w_nonnegative and q[3] < 0:
-                q = [-v for v in q]
-            return np.array(q)
+        q1 = _rot_to_quat_one(m.tolist())
+        if q1 is not None:
+            if w_nonnegative and q1[3] < 0:
+                q1 = [-v for v in q1]
+            return np.array(q1)
     m = m.reshape(-1, 3, 3)
     d0, d1, d2 = m[:, 0, 0], m[:, 1, 1], m[:, 2, 2]
     tr = d0 + d1 + d2
