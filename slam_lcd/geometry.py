@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import numpy.typing as npt
 from scipy.spatial.transform import Rotation, Slerp
 
 from .errors import ConfigError
@@ -168,7 +169,7 @@ def adjoint(T: np.ndarray) -> np.ndarray:
 # ----------------------------------------------------------------------------- quaternions (x, y, z, w)
 
 
-def quat_to_rot(q_xyzw: np.ndarray) -> np.ndarray:
+def quat_to_rot(q_xyzw: npt.ArrayLike) -> np.ndarray:
     """Quaternion(s) ``(x, y, z, w)``, shape (4,) or (..., 4), normalised first -> rotation matrix/matrices."""
     q = np.asarray(q_xyzw, dtype=np.float64)
     q = q / np.linalg.norm(q, axis=-1, keepdims=True)
@@ -196,11 +197,11 @@ def rot_to_quat(R: np.ndarray, w_nonnegative: bool = False) -> np.ndarray:
     m = np.asarray(R, dtype=np.float64)
     single = m.ndim == 2
     if single and m.shape == (3, 3):
-        q = _rot_to_quat_one(m.tolist())
-        if q is not None:
-            if w_nonnegative and q[3] < 0:
-                q = [-v for v in q]
-            return np.array(q)
+        q1 = _rot_to_quat_one(m.tolist())
+        if q1 is not None:
+            if w_nonnegative and q1[3] < 0:
+                q1 = [-v for v in q1]
+            return np.array(q1)
     m = m.reshape(-1, 3, 3)
     d0, d1, d2 = m[:, 0, 0], m[:, 1, 1], m[:, 2, 2]
     tr = d0 + d1 + d2

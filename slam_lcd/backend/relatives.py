@@ -35,6 +35,7 @@ class MarginalRelatives:
     def _pose(self, k: int) -> np.ndarray:
         if self.isam is not None:
             return self.isam.calculateEstimatePose3(k).matrix()
+        assert self.values is not None  # marginals come with their values (__init__)
         return self.values.atPose3(k).matrix()
 
     def estimate(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
@@ -42,6 +43,7 @@ class MarginalRelatives:
         Xa, Xb = self._pose(ka), self._pose(kb)
         if self.isam is not None:
             return relative_from_marginals(Xa, Xb, self.isam.marginalCovariance(ka), self.isam.marginalCovariance(kb))
+        assert self.marginals is not None  # exactly one of isam and marginals (__init__)
         J = self.marginals.jointMarginalCovariance(gtsam.KeyVector([ka, kb])).fullMatrix()
         return relative_from_marginals(Xa, Xb, J[:6, :6], J[6:, 6:], J[:6, 6:])
 

@@ -25,6 +25,7 @@ import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from ..config import Config, validate_config
 from ..errors import FileMissingError, InputError
@@ -167,7 +168,7 @@ def run_batch(
     if vocab is not None and not Path(vocab).is_file():
         raise FileMissingError("vocabulary file not found (--vocab)", vocab)
     entries = discover_logs(logs)
-    inputs = {f"log {e.name}": e.path for e in entries}
+    inputs: dict[str, str | Path | None] = {f"log {e.name}": e.path for e in entries}
     inputs.update({"--gt-dir": gt_dir, "--vocab": vocab, **(input_paths or {})})
     # a log's own folder (DIR/<log name>) must not be a log, nor hold one it would replace
     folders = {f"the output folder of log {e.name}": out / e.name for e in entries}
@@ -186,7 +187,7 @@ def run_batch(
     stream = status_stream if status_stream is not None else sys.stdout
     from ..runtime.progress import progress_bar
 
-    bar = None
+    bar: Any = None  # progress_bar's tqdm, StageLine or silent bar, made before take() is first called
 
     def say(line: str) -> None:
         if hasattr(bar, "write"):  # a tqdm bar: print above it

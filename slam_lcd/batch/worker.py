@@ -30,10 +30,14 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from ..errors import SlamLcdError
 from ..runtime.interrupts import keep_lost_interrupts
 from .rows import cancelled_row, error_row, interrupted_row, row_from_report, row_from_result
+
+if TYPE_CHECKING:
+    from ..config import Config
 
 
 @dataclass(frozen=True)
@@ -52,7 +56,7 @@ class LogTask:
 class SharedWork:
     """What every task of a batch gets the same of (the run's flags, and the shared resources)."""
 
-    config: object  # slam_lcd.config.Config
+    config: Config
     image_topic: str | None = None
     odom_topic: str | None = None
     depth_topic: str | None = None
@@ -117,7 +121,8 @@ def limit_threads(n: int | None) -> None:
 
 
 # --------------------------------------------------------------------------- Ctrl-C in a local pool
-_POOL = {"stop": None, "orphaned": False}
+# stop: the pool's shared stop event (None: not a pool worker); orphaned: the driver is gone
+_POOL: dict[str, Any] = {"stop": None, "orphaned": False}
 _RUNNING = threading.Event()
 DRIVER_POLL_S = 0.25  # how often a pool worker checks that the batch's driver is still there
 ORPHAN_STOP_S = 60.0  # the most an orphaned worker waits for its running log to write its partial set
@@ -246,6 +251,7 @@ def stopped_row(task: LogTask, config, since_ns: int) -> dict:
     except OSError:
         fresh = False
     if fresh:
+        assert report is not None  # fresh: the report was read
         return row_from_report(task.name, task.log, task.out_dir, report, status="ok",
                                message="finished as the batch was interrupted (Ctrl-C)")
     return interrupted_row(task.name, task.log, task.out_dir)

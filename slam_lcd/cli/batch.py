@@ -129,6 +129,7 @@ def _append_to_map(args, cfg, res) -> int:
     if last is None:
         print(f"map {args.map}: nothing appended (it holds every log already)")
     else:
+        assert last.map is not None  # run_log with a map to append to fills it (an interrupted run returned above)
         for line in summary_lines(last.map):
             print(line)
     return 0

@@ -158,7 +158,9 @@ def _run_sessions(args, cfg, extractor, notice) -> int:
     print(f"  features: {cfg.features.kind}" + (f" ({notice})" if notice else ""))
     if res is None:
         print(f"  map {out / 'map'}: nothing appended (it holds every demo session already)")
-    for line in summary_lines(res.map) if res is not None else []:
-        print(f"  {line.strip()}")
+    else:
+        assert res.map is not None  # run_log with a map to append to fills it (an interrupted run returned above)
+        for line in summary_lines(res.map):
+            print(f"  {line.strip()}")
     print(f"outputs in {out}/ (map/, session1/ ... : each run's files, map/ in each: every session in the map frame)")
     return 0

@@ -13,12 +13,17 @@ import dataclasses
 import json
 import logging
 import time
+from collections.abc import Iterable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import InputError
 from .run import add_alias, add_config_args, config_from_args
+
+if TYPE_CHECKING:
+    from ..io.image_folder import Frame
 
 log = logging.getLogger(__name__)
 
@@ -100,6 +105,7 @@ def run(args) -> int:
     outputs = OutputSet(out, EVAL_OUTPUTS)
     outputs.check({"SOURCE": src, "--gt": args.gt, "--vocab": args.vocab, "--weights": args.weights,
                    "--config": args.config if args.config and Path(args.config).exists() else None})
+    frames: Iterable[Frame]  # the folder's frames read lazily, a log's all at once
     if src.is_dir() and not (src / "metadata.yaml").exists():
         names, stamps, frames = folder_frames(src, exclude=[args.gt])
     else:

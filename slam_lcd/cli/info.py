@@ -47,7 +47,7 @@ def topic_rates(reader) -> dict[str, tuple[int, int, int]]:
         else:
             s[0] += 1
             s[2] = t
-    return {k: tuple(v) for k, v in seen.items()}
+    return {k: (v[0], v[1], v[2]) for k, v in seen.items()}
 
 
 def run(args) -> int:

@@ -26,8 +26,9 @@ def one_line_errors(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
             self.error(f"unrecognized arguments: {' '.join(extras)}{_suggest_option(self, extras)}")
         return ns, extras
 
-    parser.error = types.MethodType(error, parser)
-    parser.parse_known_args = types.MethodType(parse_known_args, parser)
+    # per-instance overrides: argparse builds the subcommand parsers itself, so no subclass reaches them
+    parser.error = types.MethodType(error, parser)  # type: ignore[method-assign]
+    parser.parse_known_args = types.MethodType(parse_known_args, parser)  # type: ignore[method-assign]
     return parser
 
 

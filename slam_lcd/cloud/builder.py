@@ -16,6 +16,7 @@ import logging
 import queue
 import threading
 import time
+from typing import Any
 
 import numpy as np
 
@@ -35,7 +36,7 @@ def keyframe_points(kf: Keyframe, conf: MapCloudConfig) -> SensorPoints | None:
     if cam is None:
         return None
     colour = getattr(kf, "colour", None)
-    kw = dict(step=conf.pixel_step, min_depth=conf.min_depth_m, max_depth=conf.max_depth_m)
+    kw: dict[str, Any] = dict(step=conf.pixel_step, min_depth=conf.min_depth_m, max_depth=conf.max_depth_m)
     if kf.depth is not None:
         return depth_points(cam, kf.depth, colour if colour is not None else kf.image, **kw)
     if kf.right_image is not None and kf.image is not None and cam.baseline:
@@ -162,6 +163,7 @@ class MapCloudBuilder:
             self.seconds += time.perf_counter() - t0
 
     def _work(self) -> None:
+        assert self._queue is not None  # the thread is made with its queue
         while True:
             kf = self._queue.get()
             try:
@@ -205,7 +207,7 @@ class MapCloudBuilder:
 
     def close(self) -> None:
         """Stop the builder's thread (after the keyframes handed over) and remove the store's file."""
-        if self._thread is not None and self._thread.is_alive():
+        if self._queue is not None and self._thread is not None and self._thread.is_alive():
             self._queue.put(None)
             self._thread.join()
         self.store.close()

@@ -22,7 +22,7 @@ _DT = np.dtype([("xyz", "<i2", (3,)), ("rgb", "u1", (3,))])
 class KeyframeCloudStore:
     """Append-only file of per-keyframe points; :meth:`items` reads them back in order."""
 
-    def __init__(self, voxel: float, folder: str | os.PathLike | None = None):
+    def __init__(self, voxel: float, folder: str | os.PathLike[str] | None = None):
         self.unit = float(voxel) / _Q
         self._fh = tempfile.TemporaryFile(prefix="slam-lcd-cloud-", dir=folder)
         self.index: list[tuple[int, int, int, int]] = []  # (keyframe id, stamp, offset, count)

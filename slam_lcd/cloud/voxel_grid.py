@@ -92,7 +92,7 @@ class VoxelGrid:
         self._csums = np.zeros((0, 3), np.float32)
         self._counts = np.zeros(0, np.int32)  # points merged into the voxel
         self._views = np.zeros(0, np.int32)  # batches (keyframes) that put a point into it
-        self._pending: list[tuple] = []
+        self._pending: list[tuple[np.ndarray, ...]] = []
         self._n_pending = 0
         self.points_in = 0
 
@@ -146,7 +146,7 @@ class VoxelGrid:
     @property
     def nbytes(self) -> int:
         """Bytes the grid's arrays hold (pending batches included)."""
-        arrays = [self._keys, self._sums, self._csums, self._counts, self._views]
+        arrays: list[np.ndarray] = [self._keys, self._sums, self._csums, self._counts, self._views]
         arrays += [a for b in self._pending for a in b]
         return int(sum(a.nbytes for a in arrays))
 

@@ -76,6 +76,7 @@ def load_loop_matrix(path: str | Path, names: Sequence[str]) -> np.ndarray:
                 continue
             if len(row) < 2:
                 raise InputError(f"line {line_no}: expected 'query,match'", path)
+            ij: list[int] | None  # None: a token is neither a stem nor an index
             ij = []
             for tok in row[:2]:
                 tok = tok.strip()

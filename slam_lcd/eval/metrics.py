@@ -220,15 +220,15 @@ def pairs_by_frames(n: int, delta: int) -> np.ndarray:
 
 def pairs_by_distance(positions: np.ndarray, delta_m: float) -> np.ndarray:
     """Consecutive pairs whose path length along ``positions`` first reaches ``delta_m``."""
-    ids = [0]
+    picked = [0]
     travelled = 0.0
     steps = np.linalg.norm(np.diff(positions, axis=0), axis=1)
     for i, step in enumerate(steps, start=1):
         travelled += float(step)
         if travelled >= delta_m:
-            ids.append(i)
+            picked.append(i)
             travelled = 0.0
-    ids = np.asarray(ids, dtype=np.int64)
+    ids = np.asarray(picked, dtype=np.int64)
     return np.stack([ids[:-1], ids[1:]], axis=1) if len(ids) > 1 else np.zeros((0, 2), dtype=np.int64)
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, cast
 
 import matplotlib
 
@@ -18,6 +19,9 @@ from matplotlib.figure import Figure
 from ..files.atomic import atomic_path
 from ..types import Trajectory
 from .metrics import AteResult
+
+if TYPE_CHECKING:
+    from mpl_toolkits.mplot3d import Axes3D
 
 _PLANES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2)}
 
@@ -219,7 +223,7 @@ def plot_run_trajectories(
     three_d = mode == "xyz"
     fig = _new_figure((7.5, 6.5))
     ax = fig.add_subplot(1, 1, 1, projection="3d" if three_d else None)
-    axes = (0, 1, 2) if three_d else _PLANES[mode]
+    axes: tuple[int, ...] = (0, 1, 2) if three_d else _PLANES[mode]
 
     def xy(p):
         return [p[..., k] for k in axes]
@@ -236,10 +240,13 @@ def plot_run_trajectories(
 
             lc = Line3DCollection(segs, cmap="viridis", linewidths=2.0)
         else:
-            lc = LineCollection(segs, cmap="viridis", linewidths=2.0)
+            lc = LineCollection(cast("Sequence[np.ndarray]", segs), cmap="viridis", linewidths=2.0)  # stub: a list
         lc.set_array(err)
         lc.set_label("corrected (colour: error)")
-        (ax.add_collection3d if three_d else ax.add_collection)(lc)
+        if three_d:  # (add_subplot's stub returns Axes; projection="3d" gives an Axes3D)
+            cast("Axes3D", ax).add_collection3d(lc)
+        else:
+            ax.add_collection(lc)
         fig.colorbar(lc, ax=ax, shrink=0.7, label="corrected: translation error [m]")
     else:
         ax.plot(*xy(p), "-", color="tab:blue", linewidth=1.4, label="corrected")
@@ -252,7 +259,7 @@ def plot_run_trajectories(
     ax.set_xlabel(f"{names[axes[0]]} [m]")
     ax.set_ylabel(f"{names[axes[1]]} [m]")
     if three_d:
-        ax.set_zlabel(f"{names[axes[2]]} [m]")
+        cast("Axes3D", ax).set_zlabel(f"{names[axes[2]]} [m]")
     else:
         ax.set_aspect("equal", adjustable="datalim")
         ax.autoscale_view()

@@ -125,6 +125,7 @@ class PoseErrorResult:
         if self.metric == "ape":
             text = f"APE w.r.t. {RELATION_TITLES[self.relation]}{unit}"
         else:
+            assert self.delta_unit is not None  # an RPE result carries its pair spacing (see rpe)
             text = (f"RPE w.r.t. {RELATION_TITLES[self.relation]}{unit} for delta = {self.delta:g} "
                     f"({DELTA_UNITS[self.delta_unit]}) using {'all' if self.all_pairs else 'consecutive'} pairs"
                     + (", pairs from the reference" if self.pairs_from_reference else ", pairs from the estimate"))
@@ -212,14 +213,14 @@ def pairs_by_path(positions: np.ndarray, delta: float, tol: float, all_pairs: bo
             if np.abs(ahead[k] - delta) <= tol:
                 out.append((i, k + i + 1))
         return np.array(out, dtype=np.int64).reshape(-1, 2)
-    ids = [0]
+    picked = [0]
     travelled = 0.0
     for i in range(1, len(positions)):
         travelled += float(np.linalg.norm(positions[i, :3] - positions[i - 1, :3]))
         if travelled >= delta:
-            ids.append(i)
+            picked.append(i)
             travelled = 0.0
-    ids = np.asarray(ids, dtype=np.int64)
+    ids = np.asarray(picked, dtype=np.int64)
     return np.stack([ids[:-1], ids[1:]], axis=1) if len(ids) > 1 else np.zeros((0, 2), np.int64)
 
 
@@ -263,7 +264,9 @@ def _pairs_by_angle_all(rotations: np.ndarray, lo: float, hi: float) -> np.ndarr
     from scipy.spatial.transform import Rotation
 
     n = len(rotations)
-    quats = Rotation.from_matrix(rotations) if n else None
+    if n == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    quats = Rotation.from_matrix(rotations)
     out = []
     for i in range(n - 1):
         cos = (np.einsum("kab,ab->k", rotations[i + 1:], rotations[i]) - 1.0) / 2.0

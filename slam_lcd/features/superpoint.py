@@ -252,7 +252,7 @@ class SuperPoint(nn.Module):
         bi, yi, xi = torch.nonzero(keep, as_tuple=True)
         all_scores = scores[bi, yi, xi]
         counts = torch.bincount(bi, minlength=b).tolist()
-        out = {"keypoints": [], "keypoint_scores": [], "descriptors": []}
+        out: dict[str, list[torch.Tensor]] = {"keypoints": [], "keypoint_scores": [], "descriptors": []}
         start = 0
         for i, n in enumerate(counts):
             s = all_scores[start : start + n]

@@ -30,6 +30,7 @@ def triangulate_pair(kf: Keyframe, other: Keyframe, conf: FrontendConfig | None 
     Points are in ``kf``'s camera frame; NaN where no valid triangulation exists.
     """
     conf = conf or FrontendConfig()
+    assert kf.features is not None and kf.camera is not None  # triangulate_landmarks checked both
     n = len(kf.features)
     pts = np.full((n, 3), np.nan)
     par = np.zeros(n)

@@ -133,6 +133,7 @@ class _FrameToKeyframeOdometry:
     def _track(self, feats: Features):
         """PnP of ``feats`` against the tracking keyframe: ``(PnpResult | None, n_matches)``."""
         ref = self.ref
+        assert ref is not None  # process() tracks only against a reference keyframe
         valid = np.flatnonzero(np.isfinite(ref.points[:, 0]))
         if len(valid) < self.conf.vo_min_inliers or len(feats) < self.conf.vo_min_inliers:
             return None, 0
@@ -174,6 +175,7 @@ class _FrameToKeyframeOdometry:
                 return self._emit(VoFrame(stamp_ns, "lost", self.segment, n_matches=n_matches,
                                           reason="tracking failed"))
             # second failure in a row: start a new segment here (if this frame has 3-D structure)
+            assert self.last_T_world_cam is not None and self.last_cov is not None  # set with the first reference
             T_wc = self.last_T_world_cam
             cov = compose_covariance(self.last_cov, np.eye(4), self._lost_covariance())
             n3d = self._make_ref(feats, gray, aux, T_wc, cov, stamp_ns)
@@ -239,9 +241,10 @@ class StereoOdometry(_FrameToKeyframeOdometry):
     def __init__(self, camera: CameraModel, conf: FrontendConfig | None = None,
                  T_body_camera: np.ndarray | None = None, extractor=None, baseline: float | None = None):
         super().__init__(camera, conf, T_body_camera, extractor)
-        self.baseline = baseline if baseline is not None else camera.baseline
-        if not self.baseline or self.baseline <= 0:
+        baseline = baseline if baseline is not None else camera.baseline
+        if not baseline or baseline <= 0:
             raise InputError("stereo odometry needs a positive baseline (camera.baseline or baseline=...)")
+        self.baseline: float = baseline
 
     def process(self, stamp_ns: int, image: np.ndarray, right: np.ndarray | None = None,
                 features: Features | None = None) -> VoFrame:

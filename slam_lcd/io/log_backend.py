@@ -7,8 +7,9 @@ A backend (:mod:`.rosbags_backend`, :mod:`.mcap_backend`) opens a log and return
 """
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, Protocol
 
 from ..errors import CorruptLogError, stamp_text
 
@@ -52,6 +53,20 @@ class LogContents:
     @property
     def message_count(self) -> int:
         return sum(t.count for t in self.topics.values())
+
+
+class LogBackend(Protocol):
+    """What the reader uses of an open backend (:class:`~.rosbags_backend.RosbagsBackend`,
+    :class:`~.mcap_backend.McapStreamBackend`)."""
+
+    contents: LogContents
+    deser: Callable[[Any, str], Any]  # (serialised bytes, message type) -> message object
+
+    def raw(self, names) -> Iterator[RawMessage]: ...
+
+    def messages(self, names, use_header, raw_names=(), raw_sink=None) -> Iterator[LogMessage]: ...
+
+    def close(self) -> None: ...
 
 
 def build_typestore(connections, default_store, path):

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from ..errors import FileMissingError, TopicNotFoundError, UnsupportedFormatError
 from .config import IOConfig
-from .log_backend import LogContents, LogMessage, RawMessage, TopicInfo
+from .log_backend import LogBackend, LogContents, LogMessage, RawMessage, TopicInfo
 from .mcap_backend import MCAP_MAGIC, open_mcap
 from .rosbags_backend import RosbagsBackend
 
@@ -72,7 +72,7 @@ class LogReader:
             raise ValueError(f"stamp_source must be 'header' or 'log_time', not {stamp_source!r}")
         self.stamp_source = stamp_source
         self.format, self.storage = detect_format(self.path)
-        self._backend = None
+        self._backend: LogBackend | None = None
         self._contents = LogContents()
 
     # -- life cycle ---------------------------------------------------------------------
@@ -159,6 +159,7 @@ class LogReader:
         names = self.resolve_topics(topics)
         if not names:
             return iter(())
+        assert self._backend is not None, "the log is not open (open_log)"
         return self._backend.raw(names)
 
     def messages(self, topics: Iterable[str] | str | None = None, *, raw_topics: Iterable[str] | None = None,
@@ -172,10 +173,12 @@ class LogReader:
         raw = self.resolve_topics(raw_topics) if raw_sink is not None and raw_topics else []
         if not names and not raw:
             return iter(())
+        assert self._backend is not None, "the log is not open (open_log)"
         return self._backend.messages(names, self.stamp_source == "header", raw, raw_sink if raw else None)
 
     def deserialise(self, raw: RawMessage):
         """The message object of a :class:`RawMessage` read from this log."""
+        assert self._backend is not None, "the log is not open (open_log)"
         return self._backend.deser(raw.data, raw.msgtype)
 
     def __repr__(self):

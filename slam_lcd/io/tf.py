@@ -30,7 +30,7 @@ class _Edge:
 
     def __init__(self, parent: str, child: str, static: bool):
         self.parent, self.child, self.static = parent, child, static
-        self.T = None
+        self.T: np.ndarray | None = None  # a static edge's transform
         self._pending: list[tuple[int, tuple, tuple]] = []
         self._stamps = np.zeros(0, np.int64)
         self._t = np.zeros((0, 3))
@@ -57,6 +57,7 @@ class _Edge:
 
     def at(self, stamp: int, tol: int) -> np.ndarray:
         if self.static:
+            assert self.T is not None  # add_transform sets it with the static flag
             return self.T
         st, tt, qq = self.arrays()
         i = int(np.searchsorted(st, stamp))
@@ -179,13 +180,14 @@ class TfBuffer:
             raise TfLookupError(f"frames {parent!r} and {child!r} are not connected in the TF tree")
         path = []
         f = child
-        while prev[f] is not None:
-            p = prev[f]
+        p = prev[f]
+        while p is not None:
             if (p, f) in self.edges:
                 path.append((self.edges[(p, f)], True))
             else:
                 path.append((self.edges[(f, p)], False))
             f = p
+            p = prev[f]
         return path[::-1]
 
     def lookup(self, parent: str, child: str, stamp_ns: int) -> np.ndarray:

@@ -181,7 +181,7 @@ class LoopDetector:
         kf.features = self.extractor.extract(kf.image)
         return kf.features
 
-    def _match(self, dq: np.ndarray, dm: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _match(self, dq: np.ndarray, dm: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """One-to-one matches, distances and symmetric ratios (None when no ratio test is on;
         ``mutual_nn_match_symmetric``)."""
         c = self.conf

@@ -156,12 +156,12 @@ def estimate_loop_pose(
     matches: np.ndarray,
     conf: LcdConfig | None = None,
     points3d_m: np.ndarray | None = None,
-    source: str | None = None,
+    source: str = "none",
 ) -> PoseVerdict:
     """``T_match_query`` (body frames) from query keypoints seen against the match's 3-D points.
 
     ``points3d_m`` (per keypoint of ``kf_m``, camera frame) may be given when already known
-    (the detector caches them); otherwise they are computed with :func:`keyframe_points3d`.
+    (the detector caches them), with their ``source``; otherwise they are computed with :func:`keyframe_points3d`.
     When the match has no 3-D points but the query does, the problem is solved the other way
     round and inverted.
     """
@@ -181,6 +181,7 @@ def estimate_loop_pose(
         matches = matches[:, ::-1]
         points3d_m, source = pts_q, src_q
         swapped = True
+    assert kf_q.features is not None and kf_q.camera is not None and kf_m.camera is not None  # checked on entry
     X = points3d_m[matches[:, 1]]
     uv = np.asarray(kf_q.features.keypoints, dtype=np.float64)[matches[:, 0]]
     valid = np.all(np.isfinite(X), axis=1)
@@ -192,7 +193,7 @@ def estimate_loop_pose(
     f = 0.5 * (kf_q.camera.fx + kf_q.camera.fy)
     T_cq_cm, inl = pnp_ransac(X[idx], xn, np.eye(3), threshold=conf.pnp_threshold_px / f, iterations=500,
                               flags=cv2.SOLVEPNP_EPNP)
-    if T_cq_cm is None or len(inl) < min_inliers:
+    if T_cq_cm is None or inl is None or len(inl) < min_inliers:
         n_inl = 0 if inl is None else len(inl)
         return PoseVerdict(False, None, None, n_inl, float("nan"), "pnp_failed", source)
     T_cm_cq, info_cam, rms, keep = refine_pose_reprojection(inv(T_cq_cm), X[idx], xn, f, inl, conf.pnp_threshold_px,

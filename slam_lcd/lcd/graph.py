@@ -147,7 +147,7 @@ class _Comparison:
 
 def _directional(src: np.ndarray, dst: np.ndarray, tri: np.ndarray, edges: np.ndarray, n: int):
     """Violations of the graph built on ``src`` when drawn on ``dst``: per-node flip and crossing fractions."""
-    flips = np.zeros(n)
+    flips: np.ndarray = np.zeros(n)  # float: bincount with weights (numpy's stub says int)
     tri_count = np.zeros(n)
     if len(tri):
         s_src = np.sign(_signed_area2(src, tri))
@@ -159,7 +159,7 @@ def _directional(src: np.ndarray, dst: np.ndarray, tri: np.ndarray, edges: np.nd
         orient = 1.0 - float(flipped.mean())
     else:
         orient = 0.0
-    crosses = np.zeros(n)
+    crosses: np.ndarray = np.zeros(n)  # float: bincount with weights
     edge_count = np.zeros(n)
     if len(edges):
         c = crosses_any(dst, edges).astype(np.float64)

@@ -53,7 +53,10 @@ def canonical_flip(fa: Features, da: np.ndarray, fb: Features, db: np.ndarray) -
 
 
 def _ratio_mask(ratios: np.ndarray | None, n: int, ratio: float | None) -> np.ndarray:
-    return np.ones(n, bool) if ratio is None else ratios < ratio
+    if ratio is None:
+        return np.ones(n, bool)
+    assert ratios is not None  # the matcher gives ratios whenever a ratio test is on (LoopDetector._match)
+    return ratios < ratio
 
 
 def _budget(matches, distances, feats_first: Features, conf: LcdConfig) -> np.ndarray:

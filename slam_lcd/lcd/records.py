@@ -135,7 +135,7 @@ class StoredKeyframe:
     T_body_camera: np.ndarray
     points3d: np.ndarray | None
     points_source: str
-    keyframe: Keyframe = field(repr=False, default=None)  # light copy without images
+    keyframe: Keyframe = field(repr=False)  # light copy without images (every entry has one)
     path_m: float = 0.0  # odometry distance travelled from the first keyframe to this one
 
     def nbytes(self) -> int:

@@ -41,7 +41,7 @@ from scipy.sparse.csgraph import connected_components
 
 from ..backend.gnc import gnc_loop_weights
 from ..geometry import inv, rotation_angle_deg
-from ..types import Trajectory
+from ..types import LoopClosure, Trajectory
 from .config import MapConfig
 from .joint_graph import information_noise, odometry_covariance, solve_lm
 
@@ -99,8 +99,8 @@ def localise(map_poses: dict[int, np.ndarray], session_of: dict[int, str], compo
     order = sorted(fixes)
     pair = _pairs(order, fixes, map_poses, T_odom, path, conf)
     confirmed = _confirmed(order, pair, conf, reasons)
-    kept = _settle_groups(order, confirmed, pair, conf, reasons)
-    kept = {order[a]: fixes[order[a]] for a in kept}
+    settled = _settle_groups(order, confirmed, pair, conf, reasons)
+    kept = {order[a]: fixes[order[a]] for a in settled}
     if kept:
         kept, poses = _joint_solve(kept, T_odom, cov, reasons)
     if not kept:
@@ -118,7 +118,7 @@ def localise(map_poses: dict[int, np.ndarray], session_of: dict[int, str], compo
 def _best_fixes(map_poses: dict, kf_ids: list[int], closures) -> dict[int, tuple]:
     """One fix per keyframe (index -> (closure, T_map_keyframe)): its match with most inliers."""
     index = {int(k): i for i, k in enumerate(kf_ids)}
-    best: dict[int, object] = {}
+    best: dict[int, LoopClosure] = {}
     for c in closures:
         q = int(c.query_id)
         if q in index and int(c.match_id) in map_poses and np.all(np.isfinite(c.T_match_query)):
@@ -188,10 +188,10 @@ def _groups(rows: list[int], pair: _Pairs) -> list[list[int]]:
     """Fixes linked by agreement, fix to nearby fix along the log: each group one hypothesis of where the log is."""
     if not rows:
         return []
-    rows = np.asarray(rows, int)
-    links = (pair.agree & pair.near)[np.ix_(rows, rows)]
+    idx = np.asarray(rows, int)
+    links = (pair.agree & pair.near)[np.ix_(idx, idx)]
     _, label = connected_components(csr_matrix(links), directed=False)
-    return [rows[label == g].tolist() for g in np.unique(label)]
+    return [idx[label == g].tolist() for g in np.unique(label)]
 
 
 def _settle_groups(order: list[int], rows: list[int], pair: _Pairs, conf: MapConfig, reasons: dict) -> list[int]:

@@ -8,6 +8,8 @@ the session would score alone, without the map).
 """
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from ..eval.align import umeyama
@@ -49,7 +51,7 @@ def session_ates(m) -> dict[str, dict]:
             name = m.manifest.sessions[i]["name"]
             ok = np.all(np.isfinite(s.T_gt[:, :3, 3]), axis=1)
             odo = s.T_odom[ok, :3, 3]
-            entry = {"keyframes_with_gt": int(n), "component": comp}
+            entry: dict[str, Any] = {"keyframes_with_gt": int(n), "component": comp}
             if aligned is not None and n >= 3:
                 entry["ate_map"] = _rmse(aligned[start:start + n], G)
                 entry["ate_odometry"] = _rmse(_aligned(odo, G), G)
@@ -82,7 +84,7 @@ def map_summary(m, joined=None, *, current: str | None = None, pipe=None) -> dic
     sess_of = {int(k): m.manifest.sessions[si]["name"] for si, s in enumerate(m.sessions) for k in s.ids}
     gt_of = {int(k): s.T_gt[i, :3, 3] for s in m.sessions for i, k in enumerate(s.ids)}
     g = m.graph
-    inter = []
+    inter: list[dict[str, Any]] = []  # JSON rows
     within = accepted_within = links = 0
     for q, mt, acc, why in zip(g.loop_query, g.loop_match, g.loop_accepted, g.loop_reason, strict=True):
         a, b = sess_of.get(int(mt)), sess_of.get(int(q))

@@ -116,10 +116,10 @@ def keyframe_frames(log_path: Path, sensor: dict, stamps: np.ndarray, io_conf=No
                 for s, left, right in stereo.add_right(int(m.stamp), decode_gray(m)):
                     yield _near(stamps, s), left, None, None, right
                 continue
-            w = waiting.get(i)
-            if w is not None and w[0] is not None and w[2] is not None:
+            held = waiting.get(i)
+            if held is not None and held[0] is not None and held[2] is not None:
                 del waiting[i]
-                yield i, w[0], w[1], w[2], None
+                yield i, held[0], held[1], held[2], None
         if stereo is not None:
             for s, left, right in stereo.flush():
                 yield _near(stamps, s), left, None, None, right

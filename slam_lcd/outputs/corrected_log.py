@@ -47,6 +47,7 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -227,7 +228,7 @@ def write_corrected_log(path: Path, *, odom: Trajectory, corrected: Trajectory, 
         plan = plan_frames(run_conf, log_frames, log_tf_parents(reader, chosen, spooled))
         for note in plan.notes:
             log.info("corrected.mcap: %s", note)
-        own = []  # (stamp, order, topic, message)
+        own: list[tuple[int, int, str, Any]] = []  # (stamp, order, topic, message)
 
         def add(stamp, topic, msg):
             own.append((int(stamp), len(own), topic, msg))
@@ -249,12 +250,14 @@ def write_corrected_log(path: Path, *, odom: Trajectory, corrected: Trajectory, 
                 add(s, "/tf", tf)
         s0 = int(cs[0]) if len(cs) else 0
         if plan.link_gt and gt_alignment is not None:
+            assert plan.gt_frame is not None  # plan_frames links a ground truth only when it has a frame
             T_gt_c = np.eye(4)  # the corrected trajectory's frame seen from the ground truth's (the ATE alignment)
             T_gt_c[:3, :3], T_gt_c[:3, 3] = gt_alignment.R, gt_alignment.t
             link = ((T_gt_c, s0, plan.gt_frame, plan.map_frame) if plan.publish_map_odom else
                     (inv(T_gt_c), s0, plan.corrected_frame, plan.gt_frame))
             add(s0, "/tf_static", M.tf_message([link]))
         if gt_poses is not None:  # ground truth from a file: written here so that it can be overlaid
+            assert plan.gt_frame is not None  # its frame is log_frames['gt'] (see the docstring)
             gt_msgs = M.pose_stamped_msgs(gt_poses.poses, gt_poses.stamps, plan.gt_frame) if len(gt_poses) else []
             for s, msg in zip(gt_poses.stamps.tolist(), gt_msgs, strict=True):
                 add(s, GT_TOPIC, msg)

@@ -132,7 +132,7 @@ def _loop_table(rows: list[dict], out_dir: Path, pictures: set[str], thumbs: dic
                 names = (picture_name(r["query_id"], r["match_id"], v) for v in ("accepted", "rejected"))
                 name = next((n for n in names if n in pictures), None)
                 if name and thumbs and name in thumbs:  # drawn this run: its thumbnail is at hand
-                    uri = "data:image/jpeg;base64," + base64.b64encode(thumbs[name]).decode()
+                    uri: str | None = "data:image/jpeg;base64," + base64.b64encode(thumbs[name]).decode()
                 else:
                     uri = data_uri(out_dir / LOOPS_DIR / name, THUMB_WIDTH) if name else None
                 cells.append(f"<td class=t data-v='{0 if uri else 1}'>" + (

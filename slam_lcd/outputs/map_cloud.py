@@ -16,10 +16,12 @@ import logging
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from ..cloud import sharpness, write_cloud
+from ..cloud import write_cloud
+from ..cloud.sharpness import sharpness  # not from ..cloud: once the submodule is imported, that name is it
 from ..cloud.topview import common_bounds, height_band, top_view_png
 from ..cloud.truth import aligned, truth_figures
 from ..eval.metrics import ratio_or_none
@@ -100,7 +102,7 @@ def write_map_clouds(out_dir: Path, pipe, conf, ate_before=None, ate_after=None,
             t3 = time.perf_counter()
             figures = {"odometry": odo_figures.result(), "corrected": corr_figures}
         sharp = {k: f[0] for k, f in figures.items()}
-        truth = None
+        truth: dict[str, Any] | None = None
         if with_truth:
             truth = {k: f[1] for k, f in figures.items()}
             truth["ratio_after_before"] = ratio_or_none(truth["corrected"]["mean_m"], truth["odometry"]["mean_m"])

@@ -144,8 +144,9 @@ def growth_png(summary: dict) -> bytes | None:
     ax2 = ax.twinx()
     ax2.plot(x, [(g["bytes"] or 0) / 1e6 for g in rows], "^--", color="tab:red", label="MB")
     ax2.set_ylabel("MB of arrays")
-    lines = ax.get_legend_handles_labels()[0] + ax2.get_legend_handles_labels()[0]
-    ax.legend(lines, [line.get_label() for line in lines], loc="upper left", fontsize=8)
+    lines, labels = ax.get_legend_handles_labels()
+    lines2, labels2 = ax2.get_legend_handles_labels()
+    ax.legend(lines + lines2, labels + labels2, loc="upper left", fontsize=8)
     ax.set_title("map growth over sessions")
     fig.tight_layout()
     buf = _io.BytesIO()

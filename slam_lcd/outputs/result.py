@@ -81,6 +81,7 @@ class RunResult:
     def summary_lines(self) -> list[str]:
         lines = []
         if self.in_map_frame:  # the map's result first: the session's own figures follow, labelled
+            assert self.map is not None  # in_map_frame: there is a map
             cur = self.map["current"]
             ate = f", ATE ({self.alignment}) {self._ate_text(self.ate_after)}" if self.ate_before is not None else ""
             lines.append(f"map {self.map['root']}: session {cur['name']} "
@@ -90,6 +91,7 @@ class RunResult:
         lines.append(f"frames: {self.n_frames}, keyframes: {self.n_keyframes}")
         if self.in_map_frame:
             own = self.session_frame
+            assert own is not None  # in_map_frame: the session's own frame is there
             lines.append(f"this session on its own (its odometry frame, corrected_session.tum): "
                          f"{self.loops_proposed} loop candidates, {self.loops_verified} verified, "
                          f"{own['loops_accepted']} accepted by its back end, {own['loops_rejected_by_backend']} "

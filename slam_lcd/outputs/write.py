@@ -132,6 +132,7 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
     if _appended_to_map(pipe, result):  # the result is the map's: this log in the map frame
         from .map_outputs import current_in_map_frame
 
+        assert result.map is not None  # _appended_to_map
         corrected_session = corrected
         corrected, kf_corr = current_in_map_frame(pipe, pipe.map, result.map["current_session"])
         files = [("odometry.tum", odom), ("corrected.tum", corrected), ("keyframes_corrected.tum", kf_corr),
@@ -151,6 +152,7 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
     rows = loop_rows(pipe.candidate_records, pipe.loop_records, pipe.keyframes, gt,
                      position_only=result.gt_position_only, keyframe_poses=kf_session)
     if _appended_to_map(pipe, result):
+        assert result.map is not None  # _appended_to_map
         add_map_verdicts(rows, pipe.candidate_records, pipe.map, result.map["inter_session_loops"])
     write_loops_csv(out_dir / "loops.csv", rows)
     outputs.append("loops.csv")
@@ -161,6 +163,7 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
     result.loops_accepted = sum(1 for r in pipe.loop_records if r.verdict == ACCEPTED)
     result.loops_rejected_backend = sum(1 for r in pipe.loop_records if r.verdict != ACCEPTED)
     if corrected_session is not None:  # a map run: its headline is the joint graph's (this session's loops in it)
+        assert result.map is not None  # a map run (_appended_to_map above)
         result.session_frame = {"loops_accepted": result.loops_accepted,
                                 "loops_rejected_by_backend": result.loops_rejected_backend, "ate_after": None}
         result.loops_accepted = int(result.map["current"]["loops_accepted"])
@@ -178,16 +181,19 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
             log.warning("ATE against the ground truth not computed: %s", e.problem)
     if ate_before is not None and not result.gt_position_only:  # RPE needs the ground truth's orientation
         try:
+            assert gt is not None  # the ATE was computed against it
             rpe_before, rpe_after = (rpe_with_config(gt, t, cfg.eval) for t in (odom, corrected))
         except SlamLcdError as e:  # e.g. a log shorter than one RPE step
             rpe_before = rpe_after = None
             log.warning("RPE against the ground truth not computed: %s", e.problem)
     if ate_before is not None and corrected_session is not None:  # the same ATE of the session's own correction
+        assert result.session_frame is not None  # set above for a map run
         try:
             result.session_frame["ate_after"] = ate_with_config(gt, corrected_session, cfg.eval).rmse
         except SlamLcdError:
             pass
     if ate_before is not None:
+        assert ate_after is not None  # computed together with ate_before
         result.ate_before, result.ate_after = ate_before.rmse, ate_after.rmse
         result.alignment = result.alignment or cfg.eval.align  # the runner may add a note (position-only ground truth)
         result.false_loops_accepted = count_false_accepted(rows, cfg.run.loop_true_max_distance)
@@ -262,7 +268,8 @@ class _PictureThread:
     def __init__(self, out_dir: Path, album, rows, cfg):
         import threading
 
-        self.album, self.names, self.stop = album, [], threading.Event()
+        self.album, self.stop = album, threading.Event()
+        self.names: list[str] = []
         self.thumbs: dict[str, bytes] = {}  # the HTML report's thumbnails
         self.thread = threading.Thread(target=self._run, args=(out_dir, rows, cfg), name="slam-lcd-loop-pictures",
                                        daemon=True)

@@ -78,7 +78,7 @@ def native_stderr():
             cap.text = _sink.read(64 * 1024).decode("utf-8", "replace").strip()
 
 
-def one_line(text: str, limit: int = 200) -> str:
-    """``text`` without ANSI colour codes, on one line, at most ``limit`` characters."""
+def one_line(text: object, limit: int = 200) -> str:
+    """``str(text)`` (a message, an exception) without ANSI colour codes, on one line, at most ``limit`` characters."""
     s = " ".join(_ANSI.sub("", str(text)).split())
     return s if len(s) <= limit else s[: limit - 3] + "..."

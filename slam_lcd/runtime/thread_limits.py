@@ -11,6 +11,7 @@ OpenMP thread count is set for the calling thread only and restored afterwards.
 from __future__ import annotations
 
 import contextlib
+from types import ModuleType
 
 _CONTROLLER = None
 
@@ -33,12 +34,14 @@ def limited_threads(n: int):
     if n <= 0:
         yield
         return
+    faiss: ModuleType | None
     try:
         import faiss
     except ImportError:  # pragma: no cover - faiss-cpu is a dependency
         faiss = None
-    before = faiss.omp_get_max_threads() if faiss is not None else None
+    before = 0  # faiss's thread count, restored afterwards
     if faiss is not None:
+        before = faiss.omp_get_max_threads()
         faiss.omp_set_num_threads(min(n, before))
     try:
         with blas_limit(n):

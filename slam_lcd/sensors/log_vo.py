@@ -73,7 +73,8 @@ def visual_odometry_from_log(path, conf: FrontendConfig | None = None, *, image_
         raise PipelineError("visual odometry needs exactly one of a depth topic (RGB-D) "
                             "or a right image topic (stereo)")
     mode = "rgbd" if depth_topic else "stereo"
-    aux_topic = depth_topic or right_topic
+    aux_topic = depth_topic or right_topic  # stereo: the right topic
+    assert aux_topic is not None  # exactly one of the two is given (checked above)
     info_topic = camera_info_topic or camera_info_topic_of(image_topic)
     with open_log(path) as reader:
         topics = reader.topics
@@ -91,7 +92,7 @@ def visual_odometry_from_log(path, conf: FrontendConfig | None = None, *, image_
             raise PipelineError(f"camera info topic {info_topic} has no messages; visual odometry needs the intrinsics",
                                 reader.path)
         if mode == "stereo" and not given_camera:
-            rinfo = right_camera_info_topic or camera_info_topic_of(right_topic)
+            rinfo = right_camera_info_topic or camera_info_topic_of(aux_topic)
             if rinfo in topics:
                 for m in reader.messages([rinfo]):
                     rc = camera_from_camera_info(m.msg)

@@ -98,6 +98,7 @@ def choose_topics(reader, image_topic=None, odom_topic=None, gt_topic=None, dept
         gt_topic, parent, child = split_tf_spec(gt_topic)
         gt_topic = reader.resolve_topics(gt_topic)[0]
         if parent is not None:
+            assert child is not None  # split_tf_spec gives both frames or neither
             _check_type(reader, "--gt-topic", gt_topic, (TF_TYPE,), "a TF topic for TOPIC:PARENT:CHILD")
             gt_frames = (parent, child)
         elif reader.topics[gt_topic].msgtype == TF_TYPE:
@@ -148,7 +149,8 @@ def copyable_topics(reader, copy_images: bool, log_path) -> list[str]:
     """Input topics copied into corrected.mcap: all (or all but images), minus types we cannot describe."""
     from ..io.writers import describable
 
-    chosen, skipped = [], []
+    chosen: list[str] = []
+    skipped: list[str] = []
     for t, i in reader.topics.items():
         if not (copy_images or i.msgtype not in IMAGE_TYPES):
             continue

@@ -137,9 +137,9 @@ def _other_building(seed: int) -> Building:
     lamp_half = [(5, 12), (8, 8), (16, 4)][int(g.integers(3))]
     # floor tiles and ceiling panels: other sizes, grids shifted
     floor_tile = float(g.choice([0.6, 0.75]))
-    floor_phase = tuple(float(g.uniform(0.15, floor_tile - 0.15)) for _ in range(2))
+    floor_phase = (float(g.uniform(0.15, floor_tile - 0.15)), float(g.uniform(0.15, floor_tile - 0.15)))
     ceil_tile = float(g.choice([0.5, 0.75]))
-    ceil_phase = tuple(float(g.uniform(0.1, ceil_tile - 0.1)) for _ in range(2))
+    ceil_phase = (float(g.uniform(0.1, ceil_tile - 0.1)), float(g.uniform(0.1, ceil_tile - 0.1)))
     # every wall another material than the demo's
     materials = {w: str(g.choice([m for m in MATERIALS if m != mat])) for w, mat in _DEMO_MATERIALS.items()}
     # decal groups at other walls and places (>= 2.5 m from a demo site of the same wall)

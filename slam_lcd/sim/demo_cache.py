@@ -33,7 +33,6 @@ def ensure_demo_log(frames: int | None = None, seed: int = 0, rebuild: bool = Fa
 
     path = demo_log_path(frames, seed if session is None else 0, width, height, session)
     if rebuild or not path.exists():
-        extra = {"session": session} if session is not None else {"seed": seed}
         make_demo_log(path, "mcap", frames=frames, depth=True, progress=progress, width=width,
-                      height=height, **extra)
+                      height=height, session=session, seed=seed if session is None else None)
     return path

@@ -3,10 +3,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..types import CameraModel
+
+if TYPE_CHECKING:
+    from .kinect import KinectDepthModel
 
 
 @dataclass
@@ -28,7 +32,7 @@ class DemoLogInfo:
     seed: int = 0
     kind: str = "laps"
     layout: str = "demo"
-    depth_model: object = None  # the depth sensor model the depth images carry (None: exact depth)
+    depth_model: KinectDepthModel | None = None  # the depth sensor model the depth images carry (None: exact depth)
     calibration_path: Path | None = None  # the Kalibr camchain written beside the log (layout euroc)
     session: int | None = None  # the session preset (slam_lcd.sim.sessions), None: a plain demo log
     world_seed: int = 0

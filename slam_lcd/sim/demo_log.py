@@ -32,6 +32,7 @@ import math
 import os
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -114,7 +115,7 @@ def _resolve(session: int | None, **given) -> dict:
     not None win over the preset's, the preset's over the plain log's defaults."""
     plain = {"kind": "laps", "laps": 2.0, "seed": 0, "world_seed": None, "start_at": None, "lighting": 0.0,
              "exposure": 1.0, "appearance": "day"}
-    out = {k: given.get(k) for k in plain}
+    out: dict[str, Any] = {k: given.get(k) for k in plain}
     extra = {"start_ns": START_NS, "odom_at_start": False, "world_frame": rig.WORLD_FRAME}
     if session is not None:
         from .sessions import session_preset, session_start_ns, world_frame

@@ -32,6 +32,7 @@ def write_demo_log(out, fmt, sc: DemoScenario, frames_iter, *, depth, stereo, co
     left_cam = CameraModel(**{**sc.camera.__dict__, "baseline": None})
     types: dict[str, str] = {}
     odo = sc.odom
+    assert odo.covariances is not None  # simulated odometry carries its covariances (sim.odometry)
     gt = sc.gt_odo
     cam_index = {int(s): i for i, s in enumerate(sc.cam_stamps)}
 
@@ -109,7 +110,7 @@ def write_demo_folder(out: Path, sc: DemoScenario, frames_iter, *, color, depth,
     with atomic_path(out, directory=True) as tmp:
         tmp.mkdir()
         (tmp / "image").mkdir()
-        lists = {"image": []}
+        lists: dict[str, list[str]] = {"image": []}
         if depth:
             (tmp / "depth").mkdir()
             lists["depth"] = []

@@ -45,7 +45,7 @@ def demo_keyframes(extractor, *, laps: float = 2.0, rate_hz: float = 1.0, width:
     traj = make_trajectory("laps", laps=laps, rate_hz=rate_hz, seed=seed)
     cam = demo_camera(width, height, baseline=0.12 if sensor == "stereo" else None)
     T_bc = T_body_camera()
-    T_lr = T_left_right(cam.baseline) if sensor == "stereo" else None
+    T_lr = T_left_right(cam.baseline) if cam.baseline is not None else None  # set for stereo only
     fc = FeatureCache(extractor) if cache else None
     virtual_log = (cache_dir() / "sim"
                    / f"demo-keyframes-seed{seed}-laps{laps:g}-{rate_hz:g}hz-{width}x{height}-v{__version__}")

@@ -72,13 +72,13 @@ class RawCamera:
     camera: CameraModel  # the raw camera as its calibration states it (radtan)
     T_rect_raw: np.ndarray  # raw camera in the rectified frame of its side of the pair (rotation only)
     canvas: CameraModel  # the pinhole camera rendered (same focal length, bigger, shifted)
-    map_xy: tuple  # per raw pixel, where it lies on the canvas
+    map_xy: tuple[np.ndarray, np.ndarray]  # per raw pixel, where it lies on the canvas
 
 
 def raw_camera(name: str, pinhole: CameraModel) -> RawCamera:
     D = np.array(EUROC_RADTAN[name], np.float64)
     cam = CameraModel(width=pinhole.width, height=pinhole.height, fx=pinhole.fx, fy=pinhole.fy, cx=pinhole.cx,
-                      cy=pinhole.cy, D=[float(x) for x in D], distortion_model="plumb_bob")
+                      cy=pinhole.cy, D=D, distortion_model="plumb_bob")
     u, v = np.meshgrid(np.arange(cam.width, dtype=np.float64), np.arange(cam.height, dtype=np.float64))
     grid = np.stack([u.ravel(), v.ravel()], 1).reshape(-1, 1, 2)
     ideal = cv2.undistortPoints(grid, cam.K, D, P=cam.K).reshape(cam.height, cam.width, 2)

@@ -133,7 +133,7 @@ def render(
     Rt = R_wc.T
     for pi in idx:
         plane = world.planes[pi]
-        poly = _clip_polygon([tuple(map(float, c)) for c in cc[pi]], fplanes)
+        poly = _clip_polygon([(float(c[0]), float(c[1]), float(c[2])) for c in cc[pi]], fplanes)
         if len(poly) < 3:
             continue
         P = np.asarray(poly)

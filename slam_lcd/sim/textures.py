@@ -49,7 +49,8 @@ def _tint(noise: np.ndarray, base_rgb, contrast: float) -> np.ndarray:
 
 
 def random_color(rng: np.random.Generator, lo: int = 30, hi: int = 230) -> tuple[int, int, int]:
-    return tuple(int(c) for c in rng.integers(lo, hi, size=3))
+    r, g, b = rng.integers(lo, hi, size=3)
+    return int(r), int(g), int(b)
 
 
 def plaster(rng: np.random.Generator, h: int, w: int, res: float) -> np.ndarray:
@@ -166,12 +167,12 @@ def poster(rng: np.random.Generator, h: int, w: int, res: float) -> np.ndarray:
     cv2.putText(img, title, (int(0.05 * w), int(0.05 * res) + int(0.06 * res)), font, title_scale,
                 ink, max(1, int(0.006 * res)), cv2.LINE_AA)
     line_h = 0.035 * res
-    y = h * rng.uniform(0.55, 0.7)
-    while y < h - line_h:
+    line_y = h * rng.uniform(0.55, 0.7)
+    while line_y < h - line_h:
         words = " ".join("".join(rng.choice(list(_GLYPHS), size=int(rng.integers(2, 7)))) for _ in range(4))
-        cv2.putText(img, words, (int(0.05 * w), int(y)), cv2.FONT_HERSHEY_SIMPLEX, 0.02 * res / 22.0,
+        cv2.putText(img, words, (int(0.05 * w), int(line_y)), cv2.FONT_HERSHEY_SIMPLEX, 0.02 * res / 22.0,
                     ink, max(1, int(0.003 * res)), cv2.LINE_AA)
-        y += line_h
+        line_y += line_h
     border = max(2, int(0.015 * res))
     cv2.rectangle(img, (0, 0), (w - 1, h - 1), random_color(rng, 0, 80), border)
     return img

@@ -363,8 +363,8 @@ def _build_world(seed: int, appearance: str) -> DemoWorld:
     ceil = tx.ceiling_panels(rng, ch, cw, CEIL_RES, tile_m=bld.ceil_tile_m, phase_m=bld.ceil_phase_m)
     hx, hy = bld.lamp_half_px
     for lx, ly, _ in lamps:  # lamp panels: bright rectangles
-        c, r_ = int(lx * CEIL_RES), int((Y1 - ly) * CEIL_RES)
-        cv2.rectangle(ceil, (c - hx, r_ - hy), (c + hx, r_ + hy), (250, 250, 245), -1)
+        lc, lr = int(lx * CEIL_RES), int((Y1 - ly) * CEIL_RES)
+        cv2.rectangle(ceil, (lc - hx, lr - hy), (lc + hx, lr + hy), (250, 250, 245), -1)
     if bld.lookalike:
         lookalike.copy_floor_or_ceiling(ceil, CEIL_RES)
     planes += _horizontal_planes("ceiling", ceil, CEIL_RES, HEIGHT, lambda x, y: lit_by((x, y)), False, light)

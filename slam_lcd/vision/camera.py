@@ -61,7 +61,7 @@ def undistort_points(camera: CameraModel, pts: np.ndarray, normalized: bool = Fa
     if len(pts) == 0:
         return pts.copy()
     if not _has_distortion(camera):
-        n = np.column_stack([(pts[:, 0] - camera.cx) / camera.fx, (pts[:, 1] - camera.cy) / camera.fy])
+        n: np.ndarray = np.column_stack([(pts[:, 0] - camera.cx) / camera.fx, (pts[:, 1] - camera.cy) / camera.fy])
     elif camera.distortion_model == "equidistant":
         n = cv2.fisheye.undistortPoints(pts.reshape(-1, 1, 2), camera.K,
                                         np.asarray(camera.D, np.float64)[:4]).reshape(-1, 2)

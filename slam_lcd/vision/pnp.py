@@ -150,7 +150,7 @@ def solve_pnp(X: np.ndarray, cov_X: np.ndarray, uv: np.ndarray, K: np.ndarray, *
     if n < max(6, min_inliers):
         return _fail(f"only {n} 2D-3D correspondences")
     T_cur_ref, inl = pnp_ransac(X, uv, K, threshold=reprojection_px, iterations=iterations, flags=cv2.SOLVEPNP_SQPNP)
-    if T_cur_ref is None or len(inl) < min_inliers:
+    if T_cur_ref is None or inl is None or len(inl) < min_inliers:
         return _fail(f"PnP-RANSAC found {0 if inl is None else len(inl)} inliers of {n}")
     T0 = inv(T_cur_ref)
     T, H, m2, r = refine_pose(T0, X[inl], cov_X[inl], uv[inl], K, pixel_sigma)

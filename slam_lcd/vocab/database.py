@@ -100,6 +100,7 @@ class BowDatabase:
     def idf(self, words: np.ndarray | None = None) -> np.ndarray:
         """Current idf of ``words`` (all words when None)."""
         if not self.idf_from_database:
+            assert self.vocab is not None  # the vocabulary's idf: not online, so there is a vocabulary
             return self.vocab.idf if words is None else self.vocab.idf[words]
         self._df.ensure(self.n_words)
         df = self._df.a[: max(self.n_words, self._df.n)] if words is None else self._df.a[words]
@@ -141,6 +142,7 @@ class BowDatabase:
         return self._once(d, "unit", as_unit_vectors)
 
     def _quantized(self, d: np.ndarray) -> np.ndarray:
+        assert self.vocab is not None  # called with a vocabulary only
         return self._once(d, "words", self.vocab.quantize)
 
     def transform(self, descriptors: np.ndarray) -> BowVector:
@@ -169,6 +171,7 @@ class BowDatabase:
         else:
             u = self._unit(d)
             if self.words is None:
+                assert self._desc_kind is not None  # _check set it
                 self.words = IncrementalWords(u.shape[1], self.conf.match_ratio, self.conf.match_max_distance,
                                               self._desc_kind, radius=self.conf.online_word_radius,
                                               index=WordIndex.from_config(u.shape[1], self.conf))
@@ -225,6 +228,7 @@ class BowDatabase:
             self._logdf_sum.push(float((bow.counts * np.log(2.0 + old)).sum()))
             self._post.append(index, bow.words, bow.counts)
         else:
+            assert self.vocab is not None  # the vocabulary's idf: not online, so there is a vocabulary
             w = bow.counts * self.vocab.idf[bow.words]
             norm = float(w.sum())
             self._logdf_sum.push(0.0)

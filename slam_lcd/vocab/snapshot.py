@@ -43,13 +43,14 @@ def snapshot(db: BowDatabase, centres: str = "int8") -> dict[str, np.ndarray] | 
     lens = np.array([len(b) for b in db._bow_words], np.int64)
     idx = w.index
     graph = np.zeros(0, np.uint8)
-    proj = np.zeros((0, 0), np.float32)
+    proj: np.ndarray = np.zeros((0, 0), np.float32)
     state = np.zeros(3, np.int64)
     ends = np.zeros(0, np.int64)
     if idx is not None and idx.active:
         import faiss
 
         graph = faiss.serialize_index(idx.graph)
+        assert idx.proj is not None  # an active index has its projection (WordIndex._build)
         proj = idx.proj
         state = np.array([idx.n_indexed, idx.built_at, idx.n_builds], np.int64)
         ends = np.array(list(idx._image_ends), np.int64)
@@ -93,6 +94,7 @@ def restore_words(state: dict[str, np.ndarray], conf: VocabConfig | None = None)
         import faiss
 
         idx = w.index
+        assert idx is not None  # the words were made with WordIndex.from_config above
         idx.proj = np.ascontiguousarray(state["proj"], np.float32)
         idx.graph = faiss.deserialize_index(np.ascontiguousarray(state["graph"], np.uint8))
         idx.n_indexed, idx.built_at, idx.n_builds = (int(v) for v in state["index_state"])

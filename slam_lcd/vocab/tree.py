@@ -133,7 +133,8 @@ def tree_from_bottom_up(words: np.ndarray, labels_per_level: list[np.ndarray], w
         ws.append(np.bincount(lab, weights=ws[-1], minlength=n_par).astype(np.float32))
     # top-down ordering: sort each level by its (already ordered) parent
     n_levels = len(labels_per_level)
-    orders = [None] * n_levels  # orders[k]: nodes of bottom-up level k in stored order
+    # orders[k]: nodes of bottom-up level k in stored order (every level's is set below, top first)
+    orders: list[np.ndarray] = [np.empty(0, np.int64)] * n_levels
     top_lab = labels_per_level[-1]
     orders[n_levels - 1] = np.argsort(top_lab, kind="stable")
     for k in range(n_levels - 2, -1, -1):

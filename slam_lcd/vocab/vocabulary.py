@@ -11,6 +11,7 @@ import json
 import zipfile
 from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -88,7 +89,8 @@ class Vocabulary:
     # ----------------------------------------------------------------- files
     def save(self, path: str | Path) -> None:
         """Write an ``.npz`` (no pickled objects) atomically."""
-        arrays = {
+        # Any: numpy's stub of savez has allow_pickle (numpy >= 2.1), a bool that **arrays could fill for mypy
+        arrays: dict[str, Any] = {
             "format": np.array(FORMAT), "version": np.array(VERSION),
             "n_levels": np.array(self.tree.depth), "idf": self.idf, "word_counts": self.word_counts,
             "word_images": self.word_images, "n_images": np.array(self.n_images),

@@ -62,6 +62,7 @@ from __future__ import annotations
 
 from collections import deque
 from concurrent.futures import Future
+from typing import cast
 
 import numpy as np
 
@@ -228,6 +229,7 @@ class WordIndex:
         pool = pool[pool < self.n_indexed]
         if self.graph is None or len(u) == 0 or len(pool) == 0:
             return out
+        assert self.proj is not None  # made with the graph (_build)
         rows = self._storage()[pool]
         if self.storage == "sq8":
             import faiss
@@ -289,14 +291,16 @@ class WordIndex:
         (words, pca_dims) vectors with ``flat`` storage, uint8 codes with ``sq8``."""
         import faiss
 
-        store = faiss.downcast_index(self.graph.storage)
+        store = faiss.downcast_index(self.graph.storage)  # (its stub returns the base Index)
         if self.storage == "flat":
-            return faiss.rev_swig_ptr(store.get_xb(), self.graph.ntotal * self.pca_dims).reshape(-1, self.pca_dims)
-        return faiss.rev_swig_ptr(store.codes.data(), self.graph.ntotal * store.code_size).reshape(-1, store.code_size)
+            xb = cast("faiss.IndexFlat", store).get_xb()
+            return faiss.rev_swig_ptr(xb, self.graph.ntotal * self.pca_dims).reshape(-1, self.pca_dims)
+        sq = cast("faiss.IndexScalarQuantizer", store)
+        return faiss.rev_swig_ptr(sq.codes.data(), self.graph.ntotal * sq.code_size).reshape(-1, sq.code_size)
 
     def _write(self, ids: np.ndarray, projected: np.ndarray) -> None:
         """Words ``ids`` now lie at ``projected`` (their links stay): written into the graph's storage."""
-        rows = np.ascontiguousarray(projected, dtype=np.float32)
+        rows: np.ndarray = np.ascontiguousarray(projected, dtype=np.float32)  # sq8: encoded to uint8
         if self.storage == "sq8":
             import faiss
 
@@ -337,8 +341,9 @@ class WordIndex:
         if self.storage == "sq8":
             # 8 bits per projected dimension, range per dimension from the settled words (a word
             # outside it is clipped: only its rank among the candidates suffers, the re-ranking is exact)
-            self.graph = faiss.IndexHNSWSQ(self.pca_dims, faiss.ScalarQuantizer.QT_8bit, self.hnsw_m,
-                                           faiss.METRIC_INNER_PRODUCT)
+            # (faiss's stub has a ScalarQuantizer where the constructor takes its QuantizerType, an int)
+            self.graph = faiss.IndexHNSWSQ(self.pca_dims, faiss.ScalarQuantizer.QT_8bit,  # type: ignore[arg-type]
+                                           self.hnsw_m, faiss.METRIC_INNER_PRODUCT)
             self.graph.train(np.ascontiguousarray(sample @ self.proj))
         else:
             self.graph = faiss.IndexHNSWFlat(self.pca_dims, self.hnsw_m, faiss.METRIC_INNER_PRODUCT)

@@ -225,7 +225,8 @@ class IncrementalWords:
         if self.index is None or not self.index.active:
             ids, sims = exact_nearest(self.centres, desc)
         else:
-            hints = search = None
+            hints: np.ndarray | None = None
+            search: np.ndarray | None = None
             age = np.zeros(n, dtype=np.int64)
             m, dist = self._match(desc)
             held = None  # rows that keep their track's word and candidates (tracked=True)
@@ -242,10 +243,12 @@ class IncrementalWords:
                 if hints is None:
                     hints = np.full((n, self.index.hint_candidates + 1), -1, dtype=np.int64)
                     search = np.ones(n, dtype=bool)
+                assert search is not None  # made with hints
                 self._pool_hints(desc, pool, hints, search)
             if held is None or not held.any():
                 ids, sims, cands = self.index.nearest(self.centres, desc, hints, search)
             else:
+                assert hints is not None and search is not None  # held is made from them
                 rest = np.flatnonzero(~held)
                 k = self.index.hint_candidates
                 ids, sims = hints[:, k].copy(), np.full(n, np.nan, dtype=np.float32)
@@ -264,6 +267,7 @@ class IncrementalWords:
         tests, then ``hint_max_distance`` and the track's age), between the two small sets only:
         a few hundred rows against the few hundred lost features, instead of a graph search each.
         """
+        assert self._gap is not None  # _searched calls this with one
         g_desc, g_cands, g_words, g_age = self._gap
         rows = np.flatnonzero(search)
         if len(rows) == 0 or len(g_desc) == 0:
@@ -286,6 +290,7 @@ class IncrementalWords:
         the rows it scores pauses the pool for the next ``_POOL_PAUSE`` images (decided per image in
         :meth:`add_image`, so an image's query and insertion see the same pool).
         """
+        assert self.index is not None  # _searched calls this in index mode
         rows = np.flatnonzero(search)
         if len(rows) == 0:
             return
@@ -305,6 +310,7 @@ class IncrementalWords:
         closer than ``hint_max_distance`` and the candidates are younger than ``hint_images`` images.
         ``track``: (candidates, words, ages) of that image's features.
         """
+        assert self.index is not None  # _searched calls this in index mode
         cands, words, ages = track
         ok = (ages[j] < self.index.hint_images) & (dist < self.index.hint_max_distance)
         i, j = i[ok], j[ok]
@@ -331,7 +337,9 @@ class IncrementalWords:
         n = len(desc)
         words = np.full(n, -1, dtype=np.int64)
         m, _ = self._match(desc)
-        words[m[:, 0]] = self._prev_words[m[:, 1]] if len(m) else words[:0]
+        if len(m):  # (matches are to the previous image's features)
+            assert self._prev_words is not None
+            words[m[:, 0]] = self._prev_words[m[:, 1]]
         cands = age = None
         if self.radius is not None and self.n_words:
             free = np.flatnonzero(words < 0)
@@ -368,7 +376,9 @@ class IncrementalWords:
         self._pool_pause = _POOL_PAUSE if self._pool_missed else max(0, self._pool_pause - 1)
         self._pool_missed = False
         self._gap = None
-        if cands is not None and self.index.hint_gap and self._prev_cands is not None:
+        # (candidates come from the index; the previous image's arrays are set together)
+        if cands is not None and self.index is not None and self.index.hint_gap and self._prev_cands is not None:
+            assert self._prev_desc is not None and self._prev_words is not None and self._prev_age is not None
             lost = np.ones(len(self._prev_desc), dtype=bool)
             lost[m[:, 1]] = False
             self._gap = (self._prev_desc[lost], self._prev_cands[lost], self._prev_words[lost], self._prev_age[lost])
