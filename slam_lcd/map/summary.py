@@ -61,8 +61,6 @@ def session_ates(m) -> dict[str, dict]:
 
 def gt_alignment(m, component: int = 0):
     """(R, t) taking this component's map frame to the ground truth's frame, from the sessions' keyframe GT; or None."""
-    from ..eval.align import umeyama
-
     P, G = [], []
     poses = m.poses()
     for meta, s in zip(m.manifest.sessions, m.sessions, strict=True):
