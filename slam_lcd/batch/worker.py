@@ -32,7 +32,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import SlamLcdError
-from ..runtime.interrupts import keep_lost_interrupts
+from ..outputs.output_set import _process_alive
+from ..run.options import Models, OutputOptions, Sources
+from ..runtime.interrupts import STOP_SIGNALS, _terminate, keep_lost_interrupts
+from .done import completed_report
 from .rows import cancelled_row, error_row, interrupted_row, row_from_report, row_from_result
 
 
@@ -133,8 +136,6 @@ def pool_worker_init(stop_event, threads: int | None, driver_pid: int | None = N
     When the driver (``driver_pid``) is gone, whatever killed it, the worker stops its running
     log (a partial set), runs nothing more and exits.
     """
-    from ..runtime.interrupts import STOP_SIGNALS
-
     try:
         os.setpgrp()
     except OSError:  # pragma: no cover - already a group leader
@@ -160,8 +161,6 @@ def _forward_stop(stop_event) -> None:
 
 def _watch_driver(driver_pid: int) -> None:
     """Stop this worker once the batch's driver is gone (see :func:`pool_worker_init`)."""
-    from ..outputs.output_set import _process_alive
-
     while _process_alive(driver_pid) and os.getppid() != 1:
         time.sleep(DRIVER_POLL_S)
     _POOL["orphaned"] = True
@@ -176,8 +175,6 @@ def _watch_driver(driver_pid: int) -> None:
 # --------------------------------------------------------------------------- one log
 def run_task(task: LogTask, shared: SharedWork) -> dict:
     """Run one log and return its summary row; never raises for a failing log (an error row)."""
-    from ..runtime.interrupts import STOP_SIGNALS, _terminate
-
     stop = _POOL["stop"]
     if stop is None:
         return _run(task, shared)
@@ -197,7 +194,6 @@ def run_task(task: LogTask, shared: SharedWork) -> dict:
 
 
 def _run(task: LogTask, shared: SharedWork) -> dict:
-    from ..run.options import Models, OutputOptions, Sources
     from ..run.runner import run_log
 
     if task.problem:
@@ -238,8 +234,6 @@ def stopped_row(task: LogTask, config, since_ns: int) -> dict:
     complete set (between the rename and the return). That folder is a finished result of
     this configuration, written since ``since_ns``: it is reported ``ok``, from its report.
     """
-    from .done import completed_report
-
     report, _ = completed_report(task.out_dir, config, task.log)
     try:
         fresh = report is not None and (Path(task.out_dir) / "report.json").stat().st_mtime_ns >= since_ns

@@ -50,7 +50,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import InvalidPoseError
 from ..geometry import interpolate_poses, inv
+from ..io.reader import open_log
 from ..types import Trajectory
 
 log = logging.getLogger(__name__)
@@ -213,12 +215,9 @@ def write_corrected_log(path: Path, *, odom: Trajectory, corrected: Trajectory, 
     ``cloud``: the map's :class:`~slam_lcd.cloud.Cloud` in the corrected trajectory's frame,
     written on ``cloud_topic``."""
     from ..io import message_builders as M
-    from ..io.reader import open_log
     from ..io.writers import open_writer
 
     if not np.all(np.isfinite(corrected.poses)):
-        from ..errors import InvalidPoseError
-
         raise InvalidPoseError("the corrected trajectory has NaN/inf poses; corrected.mcap not written")
     with open_log(copy_from) as reader:
         chosen = copied_topics(copy_topics)
