@@ -16,6 +16,8 @@ import cv2
 import numpy as np
 
 from ..files.atomic import atomic_path
+from ..io.config import IOConfig
+from ..io.trajectory_files import write_tum
 from ..types import CameraModel, Trajectory
 from . import rig
 from .demo_scenario import DemoScenario
@@ -80,8 +82,6 @@ def write_demo_log(out, fmt, sc: DemoScenario, frames_iter, *, depth, stereo, co
 
 def demo_io_conf(io_conf):
     """``io_conf``, or the defaults with ROS1 bags compressed: raw depth would make them large."""
-    from ..io.config import IOConfig
-
     conf = io_conf
     if conf is None:
         conf = IOConfig()
@@ -96,8 +96,6 @@ def _stamp_name(stamp_ns: int) -> str:
 
 def _write_tum(path: Path, traj: Trajectory) -> None:
     """TUM lines ``t x y z qx qy qz qw``."""
-    from ..io.trajectory_files import write_tum
-
     write_tum(path, traj)
 
 

@@ -20,8 +20,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ..cloud.files import read_cloud
 from ..errors import FileMissingError, InputError, SlamLcdError
+from ..eval.config import EvalConfig
+from ..eval.metrics import ate_with_config
 from ..io.trajectory_files import read_tum
+from ..map.store import is_map
 from ..types import Trajectory
 
 log = logging.getLogger(__name__)
@@ -75,8 +79,6 @@ class LocalizationFolder:
 
 def folder_kind(path: str | Path) -> str:
     """``'run'`` or ``'map'``; anything else is an :class:`InputError` naming the path."""
-    from ..map.store import is_map
-
     p = Path(path)
     if not p.exists():
         raise FileMissingError("no such folder", p)
@@ -121,8 +123,6 @@ def read_run(root: str | Path, *, ground_truth: bool = True, gt: Trajectory | No
     """Read run folder ``root`` (typed errors naming the file). ``ground_truth``: read the log's ground
     truth (a topic of the log or a file, as report.json names it) for the ATE over time, when it is there;
     ``gt``: that ground truth already in hand (the run that just wrote the folder), not read again."""
-    from ..cloud.files import read_cloud
-
     root = Path(root)
     missing = [n for n in RUN_FILES if not (root / n).is_file()]
     if missing:
@@ -163,9 +163,6 @@ def _ground_truth(report: dict) -> Trajectory | None:
 
 def _add_ate(run: RunFolder, gt: Trajectory | None = None) -> None:
     """Per-pose ATE of the odometry and the corrected trajectory, with the run's own evaluation settings."""
-    from ..eval.config import EvalConfig
-    from ..eval.metrics import ate_with_config
-
     ev = run.report.get("eval") or {}
     try:
         gt = gt if gt is not None else _ground_truth(run.report)
