@@ -108,7 +108,7 @@ def _prepare_shared(config: Config, vocab: str | Path | None) -> dict:
         if not fc.weights:  # every worker reads the same file (no download per worker)
             env["SLAM_LCD_SUPERPOINT_WEIGHTS"] = str(Path(weights).resolve())
     if vocab is not None:
-        from ..vocab import Vocabulary
+        from ..vocab import Vocabulary  # lazy: the batch driver loads numpy only to check --vocab
 
         Vocabulary.load(vocab)  # a VocabularyError now, not one per log
     return env

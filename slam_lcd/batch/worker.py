@@ -78,7 +78,7 @@ LOADS = {"extractor": 0, "vocabulary": 0}  # how often this process loaded one (
 
 def shared_extractor(features_conf):
     """The extractor of ``features_conf``, loaded once per process (weights read once)."""
-    from ..features import load_extractor
+    from ..features import load_extractor  # lazy: the driver imports this module too; models load in workers
 
     key = (json.dumps(dataclasses.asdict(features_conf), sort_keys=True, default=str),
            os.environ.get("SLAM_LCD_SUPERPOINT_WEIGHTS"), os.environ.get("SLAM_LCD_CACHE_DIR"))
@@ -93,7 +93,7 @@ def shared_vocabulary(path: str | None):
     """The vocabulary at ``path``, loaded once per process (and again only if the file changes)."""
     if path is None:
         return None
-    from ..vocab import Vocabulary
+    from ..vocab import Vocabulary  # lazy: as load_extractor above
 
     p = Path(path)
     st = p.stat() if p.is_file() else None
@@ -194,7 +194,7 @@ def run_task(task: LogTask, shared: SharedWork) -> dict:
 
 
 def _run(task: LogTask, shared: SharedWork) -> dict:
-    from ..run.runner import run_log
+    from ..run.runner import run_log  # at call time: tests patch it on runner
 
     if task.problem:
         return error_row(task.name, task.log, task.out_dir, task.problem)

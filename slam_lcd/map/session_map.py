@@ -366,7 +366,7 @@ class Map:
         keyframe that comes without them): the verified matches come back as
         ``LoopClosure`` with ``match_id`` a map keyframe, ``T_match_query`` and ``information``.
         """
-        from ..lcd import LoopDetector
+        from ..lcd import LoopDetector  # lazy: OpenCV (`slam-lcd map info` needs none)
 
         det = LoopDetector(lcd_conf, extractor=extractor, vocab_conf=vocab_conf)
         self.load_into(det)

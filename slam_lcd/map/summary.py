@@ -166,7 +166,7 @@ def localisation_report(m, loc, gt=None) -> dict:
     ground truth's frame once, from the map's keyframes (never from the localised log), and each
     localised keyframe's position is compared with its ground truth at that stamp.
     """
-    from ..geometry import interpolate_poses
+    from ..geometry import interpolate_poses  # lazy: scipy
 
     ks = loc.keyframes
     reasons: dict[str, int] = {}

@@ -35,7 +35,7 @@ STAMP_TOLERANCE_NS = 1_000_000  # TUM files keep stamps to the microsecond or so
 
 def read_run(run_dir: Path, odometry: bool = False) -> tuple[dict, np.ndarray, np.ndarray]:
     """``(report, keyframe stamps, keyframe poses)`` of a run folder (typed errors naming the file)."""
-    from ..io.trajectory_files import read_trajectory
+    from ..io.trajectory_files import read_trajectory  # lazy: scipy, like the others in this module
 
     report_path = run_dir / "report.json"
     if not run_dir.is_dir():

@@ -170,7 +170,7 @@ def plan_frames(run_conf, log_frames: dict, parents: dict[str, str]) -> TfPlan:
 
 def _keyframe_paths(kf: Trajectory, frame: str):
     """(stamp, Path) once per keyframe (at most MAX_PATH_MESSAGES), each with the keyframes so far."""
-    from ..io import message_builders as M
+    from ..io import message_builders as M  # lazy: rosbags (the runner imports this module)
 
     n = len(kf)
     if n == 0:

@@ -39,7 +39,7 @@ NOT_VERIFIED = "rejected"
 
 def loop_columns() -> list[str]:
     """The header of ``loops.csv``: the same with 0 candidates as with 100 (taken from the record type itself)."""
-    from ..lcd.detector import CandidateRecord
+    from ..lcd.detector import CandidateRecord  # lazy: OpenCV
 
     return ["query_stamp_ns", "match_stamp_ns", *CandidateRecord(0, 0, 0, 0.0).row().keys(),
             "verdict", "backend_verdict", "backend_reason", "gt_distance_m", "err_trans_m", "err_rot_deg",

@@ -121,7 +121,7 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
     ``skipped`` (a list) means a partial result: outputs that have nothing to hold yet
     (no odometry, no keyframe) are left out and said so in ``skipped`` instead of failing.
     """
-    from ..io.trajectory_files import write_tum
+    from ..io.trajectory_files import write_tum  # at call time: tests patch it on trajectory_files
 
     cfg = pipe.config
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -261,7 +261,7 @@ class _PictureThread:
 
     def _run(self, out_dir, rows, cfg) -> None:
         try:
-            from .loop_pictures import write_loop_pictures
+            from .loop_pictures import write_loop_pictures  # at call time: tests patch it on loop_pictures
 
             self.names = write_loop_pictures(out_dir, self.album, rows, cfg.lcd, cfg.run.loop_pictures_rejected,
                                              stop=self.stop, thumbnails=self.thumbs, thumb_width=THUMB_WIDTH)
@@ -297,7 +297,7 @@ def _write_mcap_and_plots(pipe, out_dir, result, gt, mcap_source, copy_topics, s
     if mcap_source is not None and len(corrected) == 0 and skipped is not None:
         skipped.append("corrected.mcap: not written (no poses yet)")
     elif mcap_source is not None:
-        from .corrected_log import GT_FILE_FRAME, write_corrected_log
+        from .corrected_log import GT_FILE_FRAME, write_corrected_log  # at call time: tests patch it on corrected_log
 
         gt_file = gt if (gt is not None and (result.gt_source or "").startswith("file ")) else None
         frames = dict(result.frames, gt=GT_FILE_FRAME) if gt_file is not None else result.frames

@@ -281,7 +281,7 @@ def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int |
     frames_iter = render_frames(sc, color=color, depth=depth, stereo=stereo, seed=seed, workers=workers,
                                 render_one=render_one)
     if progress:
-        from ..runtime.progress import progress_bar
+        from ..runtime.progress import progress_bar  # lazy: like layouts above
 
         frames_iter = progress_bar(frames_iter, total=len(sc.cam_stamps), unit="frame", desc="rendering")
     try:

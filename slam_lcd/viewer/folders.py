@@ -104,7 +104,7 @@ def _report(root: Path) -> dict:
 
 def read_loops_csv(path: Path) -> list[dict]:
     """``loops.csv`` rows as dicts (strings), its header checked against the runner's."""
-    from ..outputs.loops import loop_columns
+    from ..outputs.loops import loop_columns  # lazy: GTSAM
 
     try:
         with open(path, newline="", encoding="utf-8") as fh:
@@ -147,7 +147,7 @@ def read_run(root: str | Path, *, ground_truth: bool = True, gt: Trajectory | No
 
 def _ground_truth(report: dict) -> Trajectory | None:
     """The run's ground truth as report.json names it (``file PATH`` / ``topic NAME`` of its log), or None."""
-    from ..sensors.trajectories import load_trajectory_source
+    from ..sensors.trajectories import load_trajectory_source  # lazy: OpenCV
 
     source = (report.get("input") or {}).get("gt_source") or ""
     kind, _, name = source.partition(" ")
@@ -182,7 +182,7 @@ def _add_ate(run: RunFolder, gt: Trajectory | None = None) -> None:
 
 def read_map(root: str | Path) -> MapFolder:
     """Map folder ``root``, read only (no lock): sessions in the map frame and the joint graph's loops."""
-    from ..map.session_map import Map
+    from ..map.session_map import Map  # lazy: GTSAM
 
     root = Path(root)
     m = Map.open(root)
