@@ -21,7 +21,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial.transform import Rotation, Slerp
 
-from .errors import ConfigError
+from .errors import ConfigError, InvalidPoseError
 
 # ----------------------------------------------------------------------------- rigid transforms
 
@@ -338,8 +338,6 @@ def ros_covariance_to_gtsam(cov, T_world_body, frame: str = "parent") -> np.ndar
     covariance is already about the body axes (only the order changes). Returns None for ROS's
     "unknown" conventions (all zeros, or ``cov[0] == -1``).
     """
-    from .errors import InvalidPoseError
-
     c = np.asarray(cov, dtype=np.float64).reshape(6, 6)
     if not c.any() or c[0, 0] == -1:
         return None

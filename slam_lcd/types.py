@@ -130,7 +130,7 @@ class LoopClosure:
         names one ('huber', 'cauchy', 'dcs', 'geman_mcclure') or is a GTSAM mEstimator.
         See :func:`slam_lcd.backend.loop_factors.between_factor` (GTSAM is imported there).
         """
-        from .backend.loop_factors import between_factor
+        from .backend.loop_factors import between_factor  # lazy: GTSAM (every stage imports this module)
 
         return between_factor(self, key_match, key_query, kernel=kernel, kernel_width=kernel_width)
 

@@ -29,8 +29,10 @@ from typing import Any
 
 from ..config import Config, validate_config
 from ..errors import FileMissingError, InputError
+from ..features.weights import cache_dir, resolve_weights
 from ..files.atomic import check_no_clash
 from ..runtime.interrupts import defer_sigint
+from ..runtime.progress import progress_bar
 from .config import gpus_per_task
 from .discovery import LogEntry, discover_logs, ground_truth_in
 from .done import completed_report
@@ -97,21 +99,17 @@ def make_engine(ray: str | None, workers: int | None, config: Config, *, ray_tem
 
 def _prepare_shared(config: Config, vocab: str | Path | None) -> dict:
     """Work done once for the whole batch, before any log: weights found, vocabulary checked, cache folder."""
-    from ..features.weights import cache_dir
-
     env = {}
     cache = cache_dir(config.features.cache_dir)
     env["SLAM_LCD_CACHE_DIR"] = str(cache.resolve())
     if config.features.kind == "superpoint":
-        from ..features.weights import resolve_weights
-
         fc = config.features
         weights = resolve_weights(fc.weights, cache=fc.cache_dir, url=fc.weights_url, sha256=fc.weights_sha256,
                                   allow_download=fc.allow_download)
         if not fc.weights:  # every worker reads the same file (no download per worker)
             env["SLAM_LCD_SUPERPOINT_WEIGHTS"] = str(Path(weights).resolve())
     if vocab is not None:
-        from ..vocab import Vocabulary
+        from ..vocab import Vocabulary  # lazy: the batch driver loads numpy only to check --vocab
 
         Vocabulary.load(vocab)  # a VocabularyError now, not one per log
     return env
@@ -185,7 +183,6 @@ def run_batch(
 
     rows: dict[str, dict] = {}
     stream = status_stream if status_stream is not None else sys.stdout
-    from ..runtime.progress import progress_bar
 
     bar: Any = None  # progress_bar's tqdm, StageLine or silent bar, made before take() is first called
 

@@ -18,6 +18,7 @@ from pathlib import Path
 
 from ..files.atomic import write_text
 from ..outputs.output_set import OutputSet
+from ..runtime.interrupts import signal_name
 from .rows import COLUMNS
 
 SUMMARY_OUTPUTS = ("summary.csv", "summary.md", "ate_before_after.png")
@@ -62,8 +63,6 @@ def summary_md(rows: Sequence[dict], *, engine: str, wall_s: float, interrupted:
     counts = {s: sum(1 for r in rows if r["status"] == s) for s in dict.fromkeys(r["status"] for r in rows)}
     lines = ["# slam-lcd batch summary", ""]
     if interrupted:
-        from ..runtime.interrupts import signal_name
-
         lines += [f"**Interrupted ({signal_name()}): a partial summary.** "
                   "Logs marked `interrupted` hold a result marked",
                   "partial (or nothing); `cancelled` ones were not run. Run the same command again to finish.", ""]
@@ -130,7 +129,6 @@ def write_summary(out_dir: str | Path, rows: Sequence[dict], *, engine: str, wal
     try:
         if interrupted:
             not_done = [r["name"] for r in rows if r["status"] in ("interrupted", "cancelled")]
-            from ..runtime.interrupts import signal_name
 
             outputs.mark_partial(f"This batch was interrupted ({signal_name()}): the summary lists every log, "
                                  "but these did "

@@ -33,7 +33,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..errors import SlamLcdError
-from ..runtime.interrupts import keep_lost_interrupts
+from ..outputs.output_set import _process_alive
+from ..run.options import Models, OutputOptions, Sources
+from ..runtime.interrupts import STOP_SIGNALS, _terminate, keep_lost_interrupts
+from .done import completed_report
 from .rows import cancelled_row, error_row, interrupted_row, row_from_report, row_from_result
 
 if TYPE_CHECKING:
@@ -79,7 +82,7 @@ LOADS = {"extractor": 0, "vocabulary": 0}  # how often this process loaded one (
 
 def shared_extractor(features_conf):
     """The extractor of ``features_conf``, loaded once per process (weights read once)."""
-    from ..features import load_extractor
+    from ..features import load_extractor  # lazy: the driver imports this module too; models load in workers
 
     key = (json.dumps(dataclasses.asdict(features_conf), sort_keys=True, default=str),
            os.environ.get("SLAM_LCD_SUPERPOINT_WEIGHTS"), os.environ.get("SLAM_LCD_CACHE_DIR"))
@@ -94,7 +97,7 @@ def shared_vocabulary(path: str | None):
     """The vocabulary at ``path``, loaded once per process (and again only if the file changes)."""
     if path is None:
         return None
-    from ..vocab import Vocabulary
+    from ..vocab import Vocabulary  # lazy: as load_extractor above
 
     p = Path(path)
     st = p.stat() if p.is_file() else None
@@ -138,8 +141,6 @@ def pool_worker_init(stop_event, threads: int | None, driver_pid: int | None = N
     When the driver (``driver_pid``) is gone, whatever killed it, the worker stops its running
     log (a partial set), runs nothing more and exits.
     """
-    from ..runtime.interrupts import STOP_SIGNALS
-
     try:
         os.setpgrp()
     except OSError:  # pragma: no cover - already a group leader
@@ -165,8 +166,6 @@ def _forward_stop(stop_event) -> None:
 
 def _watch_driver(driver_pid: int) -> None:
     """Stop this worker once the batch's driver is gone (see :func:`pool_worker_init`)."""
-    from ..outputs.output_set import _process_alive
-
     while _process_alive(driver_pid) and os.getppid() != 1:
         time.sleep(DRIVER_POLL_S)
     _POOL["orphaned"] = True
@@ -181,8 +180,6 @@ def _watch_driver(driver_pid: int) -> None:
 # --------------------------------------------------------------------------- one log
 def run_task(task: LogTask, shared: SharedWork) -> dict:
     """Run one log and return its summary row; never raises for a failing log (an error row)."""
-    from ..runtime.interrupts import STOP_SIGNALS, _terminate
-
     stop = _POOL["stop"]
     if stop is None:
         return _run(task, shared)
@@ -202,8 +199,7 @@ def run_task(task: LogTask, shared: SharedWork) -> dict:
 
 
 def _run(task: LogTask, shared: SharedWork) -> dict:
-    from ..run.options import Models, OutputOptions, Sources
-    from ..run.runner import run_log
+    from ..run.runner import run_log  # at call time: tests patch it on runner
 
     if task.problem:
         return error_row(task.name, task.log, task.out_dir, task.problem)
@@ -243,8 +239,6 @@ def stopped_row(task: LogTask, config, since_ns: int) -> dict:
     complete set (between the rename and the return). That folder is a finished result of
     this configuration, written since ``since_ns``: it is reported ``ok``, from its report.
     """
-    from .done import completed_report
-
     report, _ = completed_report(task.out_dir, config, task.log)
     try:
         fresh = report is not None and (Path(task.out_dir) / "report.json").stat().st_mtime_ns >= since_ns

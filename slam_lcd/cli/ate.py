@@ -18,7 +18,9 @@ import math
 from pathlib import Path
 
 from ..errors import InputError
-from ..eval.relations import APE_RELATIONS, RPE_RELATIONS
+from ..eval import align_mode_from_flags
+from ..eval.errors import AlignmentError, AssociationError
+from ..eval.relations import APE_RELATIONS, RPE_RELATIONS, ape, rpe
 from ..files.atomic import write_text
 from ..io.trajectory_files import FORMATS
 from .util import check_outputs, write_guard
@@ -128,8 +130,6 @@ def _check_args(args) -> None:
 @contextlib.contextmanager
 def _naming_both(args):
     """Association and alignment errors concern both trajectories: name both files."""
-    from ..eval.errors import AlignmentError, AssociationError
-
     try:
         yield
     except (AssociationError, AlignmentError) as e:
@@ -145,8 +145,6 @@ def _short(spec: str) -> str:
 
 
 def run(args) -> int:
-    from ..eval import align_mode_from_flags
-    from ..eval.relations import ape, rpe
     from ..sensors.trajectories import load_trajectory_source
 
     _check_args(args)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..runtime.interrupts import exit_status
 from .run import add_alias, add_config_args, config_from_args, config_inputs
 
 
@@ -77,8 +78,6 @@ def run(args) -> int:
         if rc:
             return rc
     if res.interrupted:
-        from ..runtime.interrupts import exit_status
-
         return exit_status()  # 130 Ctrl-C, 143 SIGTERM, 129 SIGHUP
     return 2 if res.failed else 0
 
@@ -100,7 +99,6 @@ def _append_to_map(args, cfg, res) -> int:
     from ..map.summary import summary_lines
     from ..run.options import MapUse, Models, OutputOptions, Sources
     from ..run.runner import run_log
-    from ..runtime.interrupts import exit_status
 
     rows = sorted((r for r in res.rows if r["status"] in ("ok", "skipped")), key=lambda r: r["name"])
     if not rows:

@@ -14,6 +14,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from ..files.atomic import check_no_clash
+from ..runtime.interrupts import exit_status
 from .run import add_config_args, config_from_args, config_inputs
 from .util import parse_size
 
@@ -85,7 +87,6 @@ def load_demo_extractor(args):
 
 
 def run(args) -> int:
-    from ..files.atomic import check_no_clash
     from ..run.options import Models, OutputOptions
     from ..run.runner import run_log
     from ..sim.demo_cache import demo_log_path, ensure_demo_log
@@ -114,7 +115,6 @@ def run(args) -> int:
     for line in res.summary_lines():
         print(f"  {line}")
     print(f"outputs in {res.out_dir}/ (corrected.tum, loops.csv, report.md, trajectory.png, ...)")
-    from ..runtime.interrupts import exit_status
 
     return exit_status() if res.interrupted else 0  # 130 Ctrl-C, 143 SIGTERM, 129 SIGHUP
 
@@ -125,7 +125,6 @@ def _run_sessions(args, cfg, extractor, notice) -> int:
     from ..map.summary import summary_lines
     from ..run.options import MapUse, Models, OutputOptions
     from ..run.runner import run_log
-    from ..runtime.interrupts import exit_status
     from ..sim.demo_cache import ensure_demo_log
 
     width, height = args.size

@@ -19,7 +19,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..config import save_config, validate_config
 from ..errors import InputError
+from ..files.atomic import write_text
 from .run import add_alias, add_config_args, config_from_args
 
 if TYPE_CHECKING:
@@ -69,7 +71,6 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ..config import validate_config
     from ..eval.loop_detection import (
         format_retrieval,
         format_table,
@@ -171,9 +172,7 @@ def run(args) -> int:
 
 
 def _write_set(outputs, cfg, det, gt, names, results, src, args, kind, elapsed, recall_at, places) -> None:
-    from ..config import save_config
     from ..eval.loop_detection import plot_pr, write_candidates_csv, write_pr_csv
-    from ..files.atomic import write_text
 
     out = outputs.staging
     write_candidates_csv(out / "candidates.csv", det.records, gt, names)

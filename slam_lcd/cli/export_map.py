@@ -11,6 +11,10 @@ import dataclasses
 import json
 from pathlib import Path
 
+from ..cloud import MapCloudConfig
+from ..config import Config, apply_override, validate_config
+from ..errors import InputError
+
 
 def register(sub) -> None:
     p = sub.add_parser("export-map", help="rebuild a finished run's map point cloud (PLY / PCD) from its log",
@@ -36,10 +40,6 @@ def register(sub) -> None:
 
 def _settings(run_dir: Path, args):
     """The run's ``map_cloud`` section with the flags applied, range-checked like any config."""
-    from ..cloud import MapCloudConfig
-    from ..config import Config, apply_override, validate_config
-    from ..errors import InputError
-
     cfg = Config()
     try:
         section = json.loads((run_dir / "report.json").read_text(encoding="utf-8")).get("config", {}).get(

@@ -8,7 +8,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .run import add_config_args, add_source_args, config_from_args, config_inputs
+from ..runtime.interrupts import exit_status
+from .run import add_config_args, add_source_args, config_from_args, config_inputs, run_input_paths, sources_of
 
 
 def register(sub) -> None:
@@ -35,7 +36,6 @@ def run(args) -> int:
     from ..run.checks import check_run_paths
     from ..run.options import MapUse, Models, OutputOptions
     from ..run.runner import run_log
-    from .run import run_input_paths, sources_of
 
     cfg = config_from_args(args)
     inputs = config_inputs(args)
@@ -55,7 +55,5 @@ def run(args) -> int:
     print(f"outputs in {res.out_dir}/ ({', '.join(res.outputs)})"
           + (" -- a partial set, see PARTIAL.txt" if res.interrupted else ""))
     if res.interrupted:
-        from ..runtime.interrupts import exit_status
-
         return exit_status()  # 130 Ctrl-C, 143 SIGTERM, 129 SIGHUP
     return 0 if res.localization is not None and res.localization["localised"] else 1

@@ -18,6 +18,16 @@ import warnings
 
 from .. import __version__
 from ..errors import SlamLcdError
+from ..files.atomic import user_path
+from ..runtime.interrupts import (
+    Terminated,
+    exit_status,
+    install_stop_signals,
+    interrupt_behind,
+    keep_lost_interrupts,
+    signal_name,
+    status_of,
+)
 from .util import one_line_errors, subparsers_of
 
 # module name in slam_lcd.cli -> registered subcommands
@@ -75,14 +85,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def stopped_line(prefix: str, exc: BaseException) -> str:
     """``slam-lcd run: interrupted`` (Ctrl-C) or ``slam-lcd run: terminated (SIGTERM)``."""
-    from ..runtime.interrupts import Terminated, signal_name
-
     return f"{prefix}: terminated ({signal_name(exc)})" if isinstance(exc, Terminated) else f"{prefix}: interrupted"
 
 
 def main(argv: list[str] | None = None) -> int:
-    from ..runtime.interrupts import exit_status, install_stop_signals, interrupt_behind, keep_lost_interrupts
-
     install_stop_signals()  # SIGTERM and SIGHUP take Ctrl-C's path (exit 143 / 129)
     keep_lost_interrupts()  # a Ctrl-C that lands in a finaliser still stops the command
     try:
@@ -122,7 +128,6 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as e:  # a file system error no subcommand turned into its own message
         if args.debug:
             raise
-        from ..files.atomic import user_path
 
         where = f"{user_path(e.filename)}: " if getattr(e, "filename", None) else ""
         print(f"slam-lcd {args.command}: error: {where}{e.strerror or e}", file=sys.stderr)
@@ -141,8 +146,6 @@ def main(argv: list[str] | None = None) -> int:
 def console() -> int:
     """The installed ``slam-lcd`` script: :func:`main`, then stop signals ignored while Python exits
     (:func:`slam_lcd.runtime.interrupts.status_of`)."""
-    from ..runtime.interrupts import status_of
-
     return status_of(main)
 
 

@@ -3,8 +3,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..errors import InputError
+from ..sim import make_demo_log
+from ..sim.demo_log import loops_path_for
 from ..sim.sessions import SESSIONS
-from .util import parse_size
+from .util import check_outputs, parse_size, write_guard
 
 
 def _preset_text(p) -> str:
@@ -92,12 +95,8 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ..errors import InputError
     from ..io.writers import format_for_path
-    from ..sim import make_demo_log
-    from ..sim.demo_log import loops_path_for
     from ..sim.layouts import camchain_path_for
-    from .util import check_outputs, write_guard
 
     w, h = args.size
     if args.out and args.out_opt and args.out != args.out_opt:

@@ -4,6 +4,11 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from ..errors import InputError
+from ..files.atomic import atomic_path, atomic_write, check_apart, check_writable_target
+from .run import config_from_args
+from .util import write_guard
+
 FORMATS = ("tum", "kitti", "euroc", "mcap")
 
 
@@ -75,8 +80,6 @@ def info(args) -> int:
 
 
 def _write_plot(out: Path, summary: dict, map_dir: Path) -> None:
-    from ..errors import InputError
-    from ..files.atomic import atomic_write, check_apart, check_writable_target
     from ..outputs.map_outputs import growth_png
 
     check_apart("DIR", map_dir, {"--plot": out})
@@ -91,7 +94,6 @@ def _write_plot(out: Path, summary: dict, map_dir: Path) -> None:
 def compact(args) -> int:
     """``map compact DIR``: the map reduced in memory, then one commit (the writer lock held throughout)."""
     from ..map.session_map import Map
-    from .run import config_from_args
 
     cfg = config_from_args(args)
     with Map.open(args.map_dir, conf=cfg.map, write=True) as m:
@@ -104,9 +106,6 @@ def compact(args) -> int:
 
 
 def export(args) -> int:
-    from ..files.atomic import check_apart, check_writable_target
-    from .util import write_guard
-
     out = Path(args.out)
     check_apart("DIR", args.map_dir, {"OUT": out})  # before the map is read: nothing of it is written
     m = _open(args.map_dir)
@@ -117,7 +116,6 @@ def export(args) -> int:
 
 
 def _export(args, m, out: Path, names: list[str]) -> int:
-    from ..files.atomic import atomic_path
     from ..io.trajectory_files import write_trajectory
     from ..map.store import MANIFEST
     from ..outputs.map_outputs import session_file_stem

@@ -4,13 +4,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..config import load_config
+from ..config import load_config, preset_names
+from ..errors import InputError
+from ..files.atomic import check_no_clash
+from ..runtime.interrupts import exit_status
 
 
 def add_config_args(p, *, device: bool = True) -> None:
     """The configuration flags every command that builds a pipeline stage shares (one name per concept)."""
-    from ..config import preset_names
-
     p.add_argument("--config", default=None, metavar="NAME|FILE",
                    help=f"preset name ({', '.join(preset_names())}) or YAML file (default: default)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE",
@@ -127,8 +128,6 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ..errors import InputError
-
     extra = ["run.copy_images=true"] if args.copy_images else []
     if args.plot_mode:
         extra.append(f"run.plot_mode={args.plot_mode}")
@@ -205,7 +204,6 @@ def _live(args, log_path: Path, out: Path):
     from ..viewer.live import SPAWN, LiveRecorder
 
     if args.rerun != SPAWN:
-        from ..files.atomic import check_no_clash
         from ..viewer.targets import check_rrd_target
 
         inputs = {"the log": log_path, "--gt": args.gt, "--map": args.map, **run_input_paths(args)}
@@ -236,7 +234,7 @@ def _truth(args):
     """The true surfaces of ``--truth-world`` (the demo world of that seed), or None."""
     if args.truth_world is None:
         return None
-    from ..sim import demo_surfaces
+    from ..sim import demo_surfaces  # lazy: the demo world (OpenCV, the renderer) only with --truth-world
 
     return demo_surfaces(args.truth_world)
 
@@ -251,6 +249,5 @@ def _print_result(res) -> int:
             print(line)
     print(f"outputs in {res.out_dir}/ ({', '.join(res.outputs)})"
           + (" -- a partial set, see PARTIAL.txt" if res.interrupted else ""))
-    from ..runtime.interrupts import exit_status
 
     return exit_status() if res.interrupted else 0  # 130 Ctrl-C, 143 SIGTERM, 129 SIGHUP

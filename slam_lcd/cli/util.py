@@ -5,6 +5,9 @@ import argparse
 import sys
 import types
 
+from ..errors import InputError
+from ..files.atomic import check_no_clash, check_writable_target
+
 
 def one_line_errors(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     """Make argparse usage errors one line on stderr with exit status 2 (no usage dump), with a
@@ -93,8 +96,6 @@ def check_outputs(outputs: dict, inputs: dict, *, folders=()) -> None:
     (:func:`slam_lcd.files.atomic.check_no_clash`); then each output must be writable
     (:func:`slam_lcd.files.atomic.check_writable_target`; ``folders``: the flags whose output is a folder).
     """
-    from ..files.atomic import check_no_clash, check_writable_target
-
     outs = {w: o for w, o in outputs.items() if o is not None}
     check_no_clash(outs, {w: _input_path(p) for w, p in inputs.items()})
     for w, o in outs.items():
@@ -104,8 +105,6 @@ def check_outputs(outputs: dict, inputs: dict, *, folders=()) -> None:
 def write_guard(out):
     """Turn OS errors while writing ``out`` (permissions, full disk) into a one-line InputError."""
     import contextlib
-
-    from ..errors import InputError
 
     @contextlib.contextmanager
     def guard():

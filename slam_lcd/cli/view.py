@@ -6,6 +6,8 @@ Nothing is run again: the recording is made from the folder's files (slam_lcd.vi
 """
 from __future__ import annotations
 
+from ..errors import InputError
+
 
 def register(sub) -> None:
     p = sub.add_parser("view", help="show a run or map folder in the Rerun viewer (or save a .rrd recording)",
@@ -29,7 +31,6 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ..errors import InputError
     from ..viewer import targets
     from ..viewer.view import plan
 

@@ -10,8 +10,11 @@ import logging
 import time
 from pathlib import Path
 
-from ..errors import FileMissingError, InputError
+from ..config import validate_config
+from ..errors import DamagedImageError, FileMissingError, InputError, SlamLcdError, in_context, stamp_text
+from ..files.atomic import check_no_clash, check_writable_target
 from .run import add_alias, add_config_args, config_from_args
+from .util import write_guard
 
 log = logging.getLogger(__name__)
 
@@ -70,8 +73,6 @@ def iter_source_images(source: Path, topic: str | None, every: int = 1, max_imag
     Damaged or unreadable images are skipped when ``skipped`` (a list) is given: their
     errors are appended to it (the caller warns once); otherwise they raise.
     """
-    from ..errors import DamagedImageError, SlamLcdError, in_context, stamp_text
-
     every = max(1, every)
     count = 0
     if source.is_dir() and not (source / "metadata.yaml").exists():
@@ -122,12 +123,9 @@ def iter_source_images(source: Path, topic: str | None, every: int = 1, max_imag
 
 
 def run_train(args) -> int:
-    from ..config import validate_config
     from ..features import load_extractor
-    from ..files.atomic import check_no_clash, check_writable_target
     from ..runtime.progress import progress_bar, stage
     from ..vocab import train_hkmeans, train_vocabulary
-    from .util import write_guard
 
     if args.every < 1:
         raise InputError(f"--every must be >= 1, got {args.every}")

@@ -9,6 +9,9 @@ needed), 2 on an error. ``slam-lcd weights fetch`` downloads the official releas
 """
 from __future__ import annotations
 
+from ..config import load_config
+from ..features.config import SUPERPOINT_SHA256
+
 
 def register(sub) -> None:
     p = sub.add_parser(
@@ -38,8 +41,6 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ..config import load_config
-
     cfg = load_config(args.config or "default", args.overrides)
     fc = cfg.features
     if args.action == "fetch":
@@ -48,7 +49,6 @@ def run(args) -> int:
 
 
 def _show(args, fc) -> int:
-    from ..features.config import SUPERPOINT_SHA256
     from ..features.weights import weights_report
 
     rep = weights_report(args.weights or fc.weights, cache=fc.cache_dir, url=fc.weights_url,

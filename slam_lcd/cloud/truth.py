@@ -39,7 +39,7 @@ def aligned(points: np.ndarray, R: np.ndarray, t: np.ndarray, scale: float = 1.0
 
 def truth_figures(points: np.ndarray, surfaces: Rectangles, n_eval: int = 20000, seed: int = 0) -> dict:
     """Mean, median and 90th-percentile distance (m) of (a seeded sample of) the points to the surfaces."""
-    from .sharpness import sample_indices
+    from .sharpness import sample_indices  # lazy: scipy
 
     pts = np.asarray(points, np.float64).reshape(-1, 3)
     if len(pts) == 0:

@@ -30,7 +30,7 @@ import numpy as np
 
 from ..errors import FileMissingError, InputError, UnsupportedFormatError
 from ..files.atomic import atomic_path, write_text
-from ..files.image_files import IMAGE_SUFFIXES
+from ..files.image_files import IMAGE_SUFFIXES, read_image
 from ..lcd.detector import CandidateRecord
 
 # ----------------------------------------------------------------------------- ground truth
@@ -50,8 +50,6 @@ def load_loop_matrix(path: str | Path, names: Sequence[str]) -> np.ndarray:
     suffix = path.suffix.lower()
     if suffix in IMAGE_SUFFIXES:
         import cv2
-
-        from ..files.image_files import read_image
 
         try:
             img = read_image(path, cv2.IMREAD_GRAYSCALE)

@@ -18,6 +18,7 @@ from ..geometry import inv, rotation_angle_deg
 from ..types import Trajectory
 from .align import Alignment, fit_alignment
 from .associate import associate
+from .config import EvalConfig
 from .errors import AssociationError
 
 
@@ -278,8 +279,6 @@ def rpe(
 
 def ate_with_config(ref: Trajectory, est: Trajectory, conf=None) -> AteResult:
     """:func:`ate` with the association and alignment settings of an ``EvalConfig``."""
-    from .config import EvalConfig
-
     conf = conf or EvalConfig()
     return ate(ref, est, conf.align, t_max_diff=conf.t_max_diff, t_offset=conf.t_offset, n_to_align=conf.n_to_align)
 
@@ -290,8 +289,6 @@ def rpe_with_config(ref: Trajectory, est: Trajectory, conf=None) -> RpeResult:
     The alignment is the ATE's: an SE(3) one leaves relative motions (so RPE) unchanged; a
     Sim(3) or scale one puts a scale-free estimate's translations in metres first.
     """
-    from .config import EvalConfig
-
     conf = conf or EvalConfig()
     return rpe(ref, est, conf.rpe_delta, conf.rpe_delta_unit, conf.align, t_max_diff=conf.t_max_diff,
                t_offset=conf.t_offset, n_to_align=conf.n_to_align)

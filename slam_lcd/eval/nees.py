@@ -14,6 +14,7 @@ import numpy as np
 from scipy.special import chdtri
 
 from ..geometry import inv, se3_log
+from ..lcd.config import LcdConfig
 
 CHI2_6_99 = float(chdtri(6, 0.01))  # 16.81
 
@@ -84,7 +85,7 @@ def demo_loop_nees(extractor, *, sensor: str = "rgbd", laps: float = 2.0, width:
 
     ``frames``: already rendered :class:`~slam_lcd.sim.keyframes.DemoKeyframes` (a test's session fixture).
     """
-    from ..sim.keyframes import demo_keyframes
+    from ..sim.keyframes import demo_keyframes  # lazy: the demo world, on demand
 
     dk = frames or demo_keyframes(extractor, laps=laps, width=width, height=height, sensor=sensor)
     return detector_nees(run_detector(dk, extractor, conf), dk)
@@ -92,8 +93,7 @@ def demo_loop_nees(extractor, *, sensor: str = "rgbd", laps: float = 2.0, width:
 
 def run_detector(frames, extractor, conf=None):
     """A :class:`~slam_lcd.lcd.LoopDetector` fed with every keyframe of ``frames`` (demo settings)."""
-    from ..lcd.config import LcdConfig
-    from ..lcd.detector import LoopDetector
+    from ..lcd.detector import LoopDetector  # lazy: OpenCV
 
     det = LoopDetector(conf or LcdConfig(exclude_recent_s=20.0, exclude_recent_n=0), extractor=extractor)
     for kf in frames.keyframes:

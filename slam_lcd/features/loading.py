@@ -22,7 +22,7 @@ def load_extractor(conf: FeaturesConfig | None = None, *, weights: str | Path | 
     if conf.kind == "orb":
         return OrbExtractor(conf)
     if conf.kind == "superpoint":
-        from .superpoint_extractor import SuperPointExtractor
+        from .superpoint_extractor import SuperPointExtractor  # lazy: torch (ORB runs without it)
 
         return SuperPointExtractor(conf, weights=weights, device=device if device != "auto" else conf.device)
     raise ConfigError(f"features.kind must be 'superpoint' or 'orb', got {conf.kind!r}")

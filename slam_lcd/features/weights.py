@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING
 from ..errors import DownloadError, WeightsError
 from ..files.atomic import atomic_path
 from ..files.hashing import sha256_of
+from ..runtime.quiet import one_line
 from .config import SUPERPOINT_SHA256, SUPERPOINT_URL
 
 if TYPE_CHECKING:
@@ -179,8 +180,6 @@ def load_state_dict_checked(model: torch.nn.Module, path: str | Path) -> None:
     try:
         obj = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as e:  # corrupt zip/pickle, truncated file, not a torch file
-        from ..runtime.quiet import one_line
-
         if "weights only load failed" in str(e).lower():  # torch's long, ANSI-coloured advice: ours instead
             raise WeightsError("holds pickled Python objects besides tensors, which slam-lcd refuses to load "
                                "(weights_only=True); save a plain state dict: torch.save(model.state_dict(), path)",

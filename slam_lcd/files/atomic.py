@@ -16,6 +16,7 @@ import tempfile
 from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 
+from ..errors import InputError
 from ..runtime.interrupts import defer_sigint, finish
 
 
@@ -141,8 +142,6 @@ def check_no_clash(outputs: Iterable[str | Path] | Mapping[str, str | Path | Non
     them (inputs, other outputs) are left alone, so only their own names count.
     The error names the output, its flag and the other path.
     """
-    from ..errors import InputError
-
     if isinstance(outputs, Mapping):
         outs = [(str(w), Path(o)) for w, o in outputs.items() if o is not None and str(o) != ""]
     else:
@@ -196,8 +195,6 @@ def check_apart(what: str, folder: str | Path, others: Mapping[str, str | Path |
     appended to (``run --map``), and whether or not it exists yet; an output folder around it or
     inside it would mix a run's files with the map's (a run's ``map/`` output replaced a map
     ``OUT/map``). The error names both paths."""
-    from ..errors import InputError
-
     f = Path(folder)
     for w, o in others.items():
         if o is None or str(o) == "":
@@ -211,8 +208,6 @@ def check_apart(what: str, folder: str | Path, others: Mapping[str, str | Path |
 
 def guard_not_input(out: str | Path, *inputs: str | Path) -> None:
     """Refuse to write an output onto one of the inputs."""
-    from ..errors import InputError
-
     for inp in inputs:
         if inp is not None and Path(inp).exists() and same_path(out, inp):
             raise InputError("output path is the same as an input; refusing to overwrite an input", out)
@@ -226,8 +221,6 @@ def check_writable_target(out: str | Path, *, folder: bool = False) -> None:
     folder is created and removed): read-only mounts, ``/proc`` and missing permissions
     are reported here rather than after the work.
     """
-    from ..errors import InputError
-
     out = Path(out)
     if folder and out.exists() and not out.is_dir():
         raise InputError("output folder is an existing file; give a folder name", out)

@@ -13,7 +13,8 @@ import numpy as np
 from ..types import CameraModel, Features, Keyframe
 from ..vision.gray import to_gray_uint8
 from ..vision.points import backproject, nearest_pixels, unit_rays
-from .config import FrontendConfig
+from .config import FrontendConfig, default_extractor
+from .stereo import stereo_disparities
 
 
 def _covariances(camera: CameraModel, rays: np.ndarray, z: np.ndarray, sz: np.ndarray, ok: np.ndarray,
@@ -59,8 +60,6 @@ def points_from_stereo(camera: CameraModel, baseline: float, feats: Features, le
                        right: np.ndarray, extractor, conf: FrontendConfig | None = None
                        ) -> tuple[np.ndarray, np.ndarray]:
     """Like :func:`points_from_depth`, with depth ``f b / disparity`` from a rectified pair."""
-    from .stereo import stereo_disparities
-
     c = conf or FrontendConfig()
     n = len(feats)
     pts = np.full((n, 3), np.nan)
@@ -90,8 +89,6 @@ def landmarks_from_sensor(kf: Keyframe, conf: FrontendConfig | None = None, extr
         if not kf.camera.baseline:
             raise ValueError("stereo keyframe without a baseline in its camera model")
         if extractor is None:
-            from .config import default_extractor
-
             extractor = default_extractor(conf or FrontendConfig())
         pts, _ = points_from_stereo(kf.camera, kf.camera.baseline, kf.features, to_gray_uint8(kf.image),
                                     to_gray_uint8(kf.right_image), extractor, conf)

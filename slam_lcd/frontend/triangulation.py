@@ -18,6 +18,7 @@ from ..vision.camera import undistort_points
 from ..vision.gray import to_gray_uint8
 from .config import FrontendConfig
 from .matching import match_descriptors
+from .two_view import refine_matches_klt
 
 
 def _camera_pose(kf: Keyframe) -> np.ndarray:
@@ -46,7 +47,6 @@ def triangulate_pair(kf: Keyframe, other: Keyframe, conf: FrontendConfig | None 
     p1 = kf.features.keypoints[m[:, 0]].astype(np.float64)
     p2 = other.features.keypoints[m[:, 1]].astype(np.float64)
     if kf.image is not None and other.image is not None:  # sub-pixel correspondences
-        from .two_view import refine_matches_klt
         p2, _ = refine_matches_klt(to_gray_uint8(kf.image), to_gray_uint8(other.image), p1, p2)
     n1 = undistort_points(cam1, p1, normalized=True)
     n2 = undistort_points(cam2, p2, normalized=True)

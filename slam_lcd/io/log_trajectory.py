@@ -10,6 +10,7 @@ from ..errors import InputError, InvalidPoseError, MessageEncodingError
 from ..types import Trajectory
 from .decode import decode_pose
 from .reader import LogReader, open_log
+from .tf import TfBuffer
 
 log = logging.getLogger(__name__)
 
@@ -93,8 +94,6 @@ def _from_topic(reader: LogReader, topic: str, with_covariance: bool) -> Traject
 
 
 def _from_tf(reader: LogReader, parent: str, child: str) -> Trajectory:
-    from .tf import TfBuffer
-
     buf = TfBuffer.from_log(reader, extrapolation_ns=int(reader.conf.tf_extrapolation_s * 1e9))
     stamps = buf.stamps(parent, child)
     if len(stamps) == 0:

@@ -23,6 +23,8 @@ from .log_backend import (
     unreadable,
     with_raw_copies,
 )
+from .mcap_recover import Channel, Message, ScanEnd, Schema, scan
+from .rosbags_backend import RosbagsBackend
 
 log = logging.getLogger(__name__)
 
@@ -48,8 +50,6 @@ def mcap_profile_and_complete(path: Path) -> tuple[str, bool]:
 
 def open_mcap(path: Path, conf: IOConfig):
     """The backend for an MCAP file (rosbags for complete ros2 files, else :class:`McapStreamBackend`)."""
-    from .rosbags_backend import RosbagsBackend
-
     profile, complete = mcap_profile_and_complete(path)
     if not complete:
         if conf.on_truncated == "error":
@@ -116,8 +116,6 @@ class McapStreamBackend:
 
     def _scan(self):
         """Forward scan of all message records; stops quietly where the readable bytes end."""
-        from .mcap_recover import Channel, Message, ScanEnd, Schema, scan
-
         for rec in scan(self.fh):
             if isinstance(rec, Message):
                 if rec.channel_id in self.channels:

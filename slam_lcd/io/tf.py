@@ -18,6 +18,7 @@ import numpy as np
 from ..errors import InputError, InvalidPoseError
 from ..geometry import inv, quat_slerp, quat_to_rot
 from .decode import transform_to_matrix
+from .reader import LogReader, open_log
 from .transforms import checked_quat, tq_from_pose
 
 
@@ -136,8 +137,6 @@ class TfBuffer:
     @classmethod
     def from_log(cls, source, tf_topics=("/tf",), static_topics=("/tf_static",), extrapolation_ns: int = 0) -> TfBuffer:
         """Buffer filled from an open LogReader or a path (topics that the log lacks are skipped)."""
-        from .reader import LogReader, open_log
-
         buf = cls(extrapolation_ns)
         own = not isinstance(source, LogReader)
         reader = open_log(source) if own else source

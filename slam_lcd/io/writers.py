@@ -29,6 +29,7 @@ from ..runtime.interrupts import defer_sigint, finish
 from ..types import Trajectory
 from . import message_builders as M
 from .config import IOConfig
+from .reader import open_log
 from .typestores import ros1_store, ros2_store
 
 log = logging.getLogger(__name__)
@@ -311,8 +312,6 @@ def write_trajectory_log(
     ``child_frame_id`` that the input's TF tree does not already have a parent for.
     Returns message counts per topic.
     """
-    from .reader import open_log
-
     path = Path(path)
     inputs = (copy_from,) if copy_from is not None else ()
     stamps = traj.stamps.tolist()

@@ -18,9 +18,11 @@ from functools import partial
 import numpy as np
 
 from ..errors import InputError
+from ..features import load_extractor
 from ..features.matching import mutual_nn_match_symmetric
-from ..types import CameraModel, Features, Keyframe, LoopClosure
+from ..types import CameraModel, Features, Keyframe, LoopCandidate, LoopClosure
 from ..vision.camera import default_camera
+from ..vocab import BowDatabase
 from .candidate_check import verify_candidate
 from .config import LcdConfig, stops_at_first_accepted
 from .geometry import keyframe_points3d
@@ -49,8 +51,6 @@ class LoopDetector:
 
     def __init__(self, conf: LcdConfig | None = None, vocab=None, extractor=None, *, vocab_conf=None,
                  run_all_checks: bool = False, retrieval_depth: int = 0):
-        from ..vocab import BowDatabase
-
         self.conf = conf or LcdConfig()
         if self.conf.verify not in VERIFY_MODES:
             raise InputError(f"lcd.verify must be one of {list(VERIFY_MODES)}, got {self.conf.verify!r}")
@@ -152,8 +152,6 @@ class LoopDetector:
         (metric, from the 3-D points), which is far less biased than wheel odometry over a
         session (``slam_lcd.map``). Not recorded in :attr:`records`.
         """
-        from ..types import LoopCandidate
-
         q = self._entries[int(query_id)]
         # RANSAC and the metric pose only: two consecutive keyframes are no look-alike-place question, and
         # the graph check would cost most of the time on their ~1000 matches
@@ -175,8 +173,6 @@ class LoopDetector:
         if kf.image is None:
             raise InputError(f"keyframe {kf.id} has neither features nor an image")
         if self.extractor is None:
-            from ..features import load_extractor
-
             self.extractor = load_extractor()
         kf.features = self.extractor.extract(kf.image)
         return kf.features

@@ -13,7 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ..lcd.store import DescriptorSource
 from ..types import Features, Keyframe
+from ..vocab.snapshot import restore_into
 from . import store
 from .contents import MapError, MapManifest, SessionKeyframes, kept_ids
 from .keyframe_arrays import camera_from_json
@@ -35,8 +37,6 @@ def map_keyframes(manifest: MapManifest, sessions: list[SessionKeyframes]):
 
     Float descriptors come as a :class:`~slam_lcd.lcd.store.DescriptorSource` (read from the
     map's arrays when a keyframe is a candidate), ORB's bytes as they are."""
-    from ..lcd.store import DescriptorSource
-
     dim = int(manifest.features.get("descriptor_dim", 0))
     for meta, s in zip(manifest.sessions, sessions, strict=True):
         camera = camera_from_json(meta.get("camera"))
@@ -59,8 +59,6 @@ def map_keyframes(manifest: MapManifest, sessions: list[SessionKeyframes]):
 
 def restore_vocab(detector, root: Path, manifest: MapManifest, sessions: list[SessionKeyframes], vocab_fh=None):
     """Bags of words of the snapshot restored into ``detector.db``, or None (replay instead)."""
-    from ..vocab.snapshot import restore_into
-
     db = detector.db
     if manifest.vocab_file is None or not db.online or len(db) or db.words is not None:
         return None

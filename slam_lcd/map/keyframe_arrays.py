@@ -96,7 +96,7 @@ def session_arrays(detector, kfs: list[Keyframe], gt: Trajectory | None, form: s
     stamps_a = np.array(stamps, np.int64)
     T_gt = np.full((len(ids), 4, 4), np.nan)
     if gt is not None and len(gt) > 1:
-        from ..geometry import interpolate_poses
+        from ..geometry import interpolate_poses  # lazy: scipy
 
         inside = (stamps_a >= gt.stamps[0]) & (stamps_a <= gt.stamps[-1])
         if inside.any():

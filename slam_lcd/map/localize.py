@@ -43,6 +43,7 @@ from ..backend.gnc import gnc_loop_weights
 from ..geometry import inv, rotation_angle_deg
 from ..types import LoopClosure, Trajectory
 from .config import MapConfig
+from .contents import MapError
 from .joint_graph import information_noise, odometry_covariance, solve_lm
 
 NEIGHBOURS = 10  # keyframes either side whose fixes may confirm a fix
@@ -290,8 +291,6 @@ def _nothing_localised(kf_ids, stamps, reasons: dict[int, str], fixes: dict, com
 
 def localise_pipeline(m, pipeline) -> Localisation:
     """:func:`localise` of a finished pipeline's keyframes against the map ``m`` (``Map.localise``)."""
-    from .contents import MapError
-
     session_of, component_of = {}, {}
     for meta, s in zip(m.manifest.sessions, m.sessions, strict=True):
         for k in s.ids:

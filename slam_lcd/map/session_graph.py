@@ -10,7 +10,7 @@ import numpy as np
 
 from ..geometry import inv
 from .contents import MapGraph, SessionKeyframes
-from .joint_graph import JointLoop, SessionPoses
+from .joint_graph import JointLoop, SessionPoses, information_noise, odometry_covariance
 from .joint_types import is_link
 
 BUILTIN_VO = "visual odometry (built in)"  # a session's odometry source when slam-lcd's own VO made it
@@ -50,8 +50,6 @@ def factor_graph(table: list[dict], sessions: list[SessionKeyframes], graph: Map
     The factors are the joint solve's: a session on the built-in visual odometry has its linked
     odometry steps and their links at half their information (:func:`slam_lcd.map.links.shared_weight`)."""
     import gtsam
-
-    from .joint_graph import information_noise, odometry_covariance
 
     key = key or (lambda k: int(k))
     half = {int(k) for meta, s in zip(table, sessions, strict=True) if odometry_independent(meta) is False

@@ -22,6 +22,7 @@ from typing import BinaryIO
 import numpy as np
 
 from ..types import Trajectory
+from ..vocab.snapshot import keep_only, snapshot
 from . import store
 from .config import MapConfig
 from .contents import kept_ids
@@ -36,10 +37,11 @@ from .keyframe_arrays import (
     session_holding,
     visual_links,
 )
-from .lifelong import array_bytes, reduce_append
+from .lifelong import array_bytes, compact, counts, reduce_append
+from .localize import localise_pipeline
 from .locks import WriterLock
 from .session_graph import existing_loops, factor_graph, odometry_independent, session_poses
-from .store import LogAlreadyInMapError, MapError, MapGraph, MapManifest, SessionKeyframes, check_map_target
+from .store import LogAlreadyInMapError, MapError, MapGraph, MapManifest, SessionKeyframes, check_map_target, read_vocab
 
 log = logging.getLogger(__name__)
 
@@ -316,8 +318,6 @@ class Map:
         """The detector's online vocabulary and bags of words when its keyframes are ``expected`` (default: the
         map's kept ones; after an append, those before it and the new session's), in order; pruned to the
         keyframes the map keeps now."""
-        from ..vocab.snapshot import keep_only, snapshot
-
         kept = kept_ids(self.sessions)
         expected = kept if expected is None else expected
         state = snapshot(detector.db, self.conf.vocab_centres)
@@ -330,9 +330,6 @@ class Map:
         :meth:`save` commits it). Returns the map's counts (:func:`slam_lcd.map.lifelong.counts`) before and after."""
         if self._lock is None:
             raise MapError("the map was opened read-only: open it with write=True to compact it", self.root)
-        from ..vocab.snapshot import keep_only
-        from .lifelong import compact, counts
-        from .store import read_vocab
 
         before = counts(self.graph, self.sessions)
         after, changed, graph = compact(self.manifest.sessions, self.sessions, self.graph, self.poses(),
@@ -369,7 +366,7 @@ class Map:
         keyframe that comes without them): the verified matches come back as
         ``LoopClosure`` with ``match_id`` a map keyframe, ``T_match_query`` and ``information``.
         """
-        from ..lcd import LoopDetector
+        from ..lcd import LoopDetector  # lazy: OpenCV (`slam-lcd map info` needs none)
 
         det = LoopDetector(lcd_conf, extractor=extractor, vocab_conf=vocab_conf)
         self.load_into(det)
@@ -389,8 +386,6 @@ class Map:
     # ------------------------------------------------------------------ localisation
     def localise(self, pipeline):
         """Map-frame poses of a finished pipeline's keyframes from its matches to the map (the map is not changed)."""
-        from .localize import localise_pipeline
-
         return localise_pipeline(self, pipeline)
 
 

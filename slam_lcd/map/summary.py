@@ -63,8 +63,6 @@ def session_ates(m) -> dict[str, dict]:
 
 def gt_alignment(m, component: int = 0):
     """(R, t) taking this component's map frame to the ground truth's frame, from the sessions' keyframe GT; or None."""
-    from ..eval.align import umeyama
-
     P, G = [], []
     poses = m.poses()
     for meta, s in zip(m.manifest.sessions, m.sessions, strict=True):
@@ -170,7 +168,7 @@ def localisation_report(m, loc, gt=None) -> dict:
     ground truth's frame once, from the map's keyframes (never from the localised log), and each
     localised keyframe's position is compared with its ground truth at that stamp.
     """
-    from ..geometry import interpolate_poses
+    from ..geometry import interpolate_poses  # lazy: scipy
 
     ks = loc.keyframes
     reasons: dict[str, int] = {}

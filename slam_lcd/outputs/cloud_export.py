@@ -23,7 +23,10 @@ from ..cloud import MapCloudBuilder, MapCloudConfig, write_cloud
 from ..cloud.files import cloud_suffix
 from ..errors import FileMissingError, InputError
 from ..files.atomic import check_no_clash, check_writable_target
+from ..io import open_log
+from ..sensors.rectify import stereo_rectifier
 from ..types import CameraModel, Keyframe
+from ..vision.gray import image_to_gray
 
 log = logging.getLogger(__name__)
 
@@ -32,7 +35,7 @@ STAMP_TOLERANCE_NS = 1_000_000  # TUM files keep stamps to the microsecond or so
 
 def read_run(run_dir: Path, odometry: bool = False) -> tuple[dict, np.ndarray, np.ndarray]:
     """``(report, keyframe stamps, keyframe poses)`` of a run folder (typed errors naming the file)."""
-    from ..io.trajectory_files import read_trajectory
+    from ..io.trajectory_files import read_trajectory  # lazy: scipy, like the others in this module
 
     report_path = run_dir / "report.json"
     if not run_dir.is_dir():
@@ -81,9 +84,7 @@ def _near(stamps: np.ndarray, s: int) -> int | None:
 
 def keyframe_frames(log_path: Path, sensor: dict, stamps: np.ndarray, io_conf=None):
     """``(keyframe index, grey, colour | None, depth | None, right | None)`` for each keyframe found in the log."""
-    from ..io import open_log
     from ..sensors.messages import decode_any_image, decode_depth, decode_gray
-    from ..vision.gray import image_to_gray
 
     image_t, depth_t, right_t = sensor["image_topic"], sensor.get("depth_topic"), sensor.get("right_topic")
     stereo = None
@@ -128,7 +129,6 @@ def keyframe_frames(log_path: Path, sensor: dict, stamps: np.ndarray, io_conf=No
 def _rectifier(sensor: dict, log_path: Path):
     """The rectification of the run's raw pair, from the calibration files it named."""
     from ..sensors.calibration import load_calibration
-    from ..sensors.rectify import stereo_rectifier
 
     files = sensor.get("calibration") or []
     gone = [f for f in files if not Path(f).is_file()]

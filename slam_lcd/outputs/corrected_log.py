@@ -51,7 +51,9 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import InvalidPoseError
 from ..geometry import interpolate_poses, inv
+from ..io.reader import open_log
 from ..types import Trajectory
 
 log = logging.getLogger(__name__)
@@ -169,7 +171,7 @@ def plan_frames(run_conf, log_frames: dict, parents: dict[str, str]) -> TfPlan:
 
 def _keyframe_paths(kf: Trajectory, frame: str):
     """(stamp, Path) once per keyframe (at most MAX_PATH_MESSAGES), each with the keyframes so far."""
-    from ..io import message_builders as M
+    from ..io import message_builders as M  # lazy: rosbags (the runner imports this module)
 
     n = len(kf)
     if n == 0:
@@ -214,12 +216,9 @@ def write_corrected_log(path: Path, *, odom: Trajectory, corrected: Trajectory, 
     ``cloud``: the map's :class:`~slam_lcd.cloud.Cloud` in the corrected trajectory's frame,
     written on ``cloud_topic``."""
     from ..io import message_builders as M
-    from ..io.reader import open_log
     from ..io.writers import open_writer
 
     if not np.all(np.isfinite(corrected.poses)):
-        from ..errors import InvalidPoseError
-
         raise InvalidPoseError("the corrected trajectory has NaN/inf poses; corrected.mcap not written")
     with open_log(copy_from) as reader:
         chosen = copied_topics(copy_topics)

@@ -14,7 +14,7 @@ def write_plots(out_dir: Path, odom, corrected, gt, keyframes, kf_corrected, loo
     title); the corrected trajectory is coloured by its ATE error; loops the back end
     accepted are solid, those it rejected dashed.
     """
-    from ..eval.plots import plot_error_over_time, plot_run_trajectories
+    from ..eval.plots import plot_error_over_time, plot_run_trajectories  # lazy: matplotlib (see run.runner)
 
     kf = kf_corrected
     errors = None

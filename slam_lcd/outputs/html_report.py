@@ -21,7 +21,10 @@ import cv2
 
 from ..backend.pose_graph import ACCEPTED
 from ..files.atomic import write_text
+from ..map.summary import localisation_lines
 from .loop_pictures import LOOPS_DIR, picture_name
+from .map_cloud import TOP_FILE, TOP_ODOMETRY_FILE, cloud_lines
+from .map_outputs import growth_png
 from .report import command_text
 
 THUMB_WIDTH = 240
@@ -196,8 +199,6 @@ def write_html_report(out_dir: Path, facts: dict, summary_lines: list[str], rows
 
 def _cloud_section(cloud: dict | None, out_dir: Path) -> list[str]:
     """The map seen from above with the odometry poses and with the corrected ones (same scale), and its figures."""
-    from .map_cloud import TOP_FILE, TOP_ODOMETRY_FILE, cloud_lines
-
     if not cloud:
         return []
     if not cloud.get("built"):
@@ -217,8 +218,6 @@ def _cloud_section(cloud: dict | None, out_dir: Path) -> list[str]:
 def _growth_figure(summary: dict) -> list[str]:
     """The map's keyframes (all, kept) and size after each of its sessions (``map info --plot`` draws the same)."""
     import base64
-
-    from .map_outputs import growth_png
 
     try:
         png = growth_png(summary)
@@ -261,8 +260,6 @@ def _map_section(summary: dict | None, localization: dict | None) -> list[str]:
                            f"<td class=t>{_e(verdict)}</td><td>{'' if d is None else f'{d:.2f}'}</td></tr>")
             out.append("</table>")
     if localization is not None:
-        from ..map.summary import localisation_lines
-
         out.append("<h2>Localisation against the map</h2><ul>"
                    + "".join(f"<li>{_e(line.strip())}</li>" for line in localisation_lines(localization)) + "</ul>")
     return out

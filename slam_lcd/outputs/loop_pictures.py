@@ -28,6 +28,10 @@ import cv2
 import numpy as np
 
 from ..backend.pose_graph import ACCEPTED
+from ..features.matching import mutual_nn_match_bf
+from ..lcd.budget import select_matches
+from ..lcd.graph import planar_graph, verify_graph
+from ..lcd.store import compact_descriptors
 
 log = logging.getLogger(__name__)
 
@@ -68,8 +72,6 @@ class KeyframeAlbum:
             log.info("loop pictures: keyframes no longer kept (%s)", self.failed)
 
     def _keep(self, kf) -> None:
-        from ..lcd.store import compact_descriptors
-
         img = np.asarray(kf.image)
         if img.dtype != np.uint8:
             img = np.clip(img * (255.0 if img.max() <= 1.0 else 1.0), 0, 255).astype(np.uint8)
@@ -124,8 +126,6 @@ def picture_name(query_id: int, match_id: int, verdict: str) -> str:
 
 
 def _graph_edges(kq: np.ndarray, matches: np.ndarray, kept: np.ndarray, conf) -> np.ndarray:
-    from ..lcd.graph import planar_graph
-
     if len(kept) < 3:
         return np.zeros((0, 2), np.int64)
     return planar_graph(kq[matches[kept, 0]].astype(np.float64), conf.graph_max_edge_factor)[1]
@@ -143,10 +143,6 @@ def _loop_arrays(rec_row: dict, q, m, conf, album: KeyframeAlbum):
 def _recompute(rec_row: dict, q, m, conf):
     """Matches, the rows the graph kept and the graph's edges, recomputed as the detector computes them
     (for candidates the detector rejected, whose arrays it did not hand on)."""
-    from ..features.matching import mutual_nn_match_bf
-    from ..lcd.budget import select_matches
-    from ..lcd.graph import verify_graph
-
     _, kq, dq, size_q, _ = q
     _, km, dm, _, _ = m
     binary = dq.dtype == np.uint8

@@ -27,6 +27,8 @@ from pathlib import Path
 import numpy as np
 
 from ..backend.records import ACCEPTED, REJECTED
+from ..eval.align import umeyama
+from ..eval.errors import AlignmentError
 from ..files.atomic import write_text
 from ..geometry import interpolate_poses, inv, rotation_angle_deg
 from ..types import Trajectory
@@ -37,7 +39,7 @@ NOT_VERIFIED = "rejected"
 
 def loop_columns() -> list[str]:
     """The header of ``loops.csv``: the same with 0 candidates as with 100 (taken from the record type itself)."""
-    from ..lcd.detector import CandidateRecord
+    from ..lcd.detector import CandidateRecord  # lazy: OpenCV
 
     return ["query_stamp_ns", "match_stamp_ns", *CandidateRecord(0, 0, 0, 0.0).row().keys(),
             "verdict", "backend_verdict", "backend_reason", "gt_distance_m", "err_trans_m", "err_rot_deg",
@@ -59,9 +61,6 @@ def gt_at_keyframes(gt: Trajectory, kf_stamp: dict[int, int]) -> dict[int, np.nd
 
 def _position_only_frames(gt_pose: dict, keyframe_poses: Trajectory | None, kf_stamp: dict) -> dict | None:
     """Per keyframe id, the rotation of its body in the ground truth's frame (corrected rotation, aligned)."""
-    from ..eval.align import umeyama
-    from ..eval.errors import AlignmentError
-
     if keyframe_poses is None or len(keyframe_poses) < 3:
         return None
     by_stamp = {int(s): T for s, T in zip(keyframe_poses.stamps, keyframe_poses.poses, strict=True)}

@@ -18,7 +18,10 @@ import numpy as np
 
 from ..backend import correct_full_rate
 from ..files.atomic import write_text
+from ..io.trajectory_files import write_tum
+from ..map.summary import gt_alignment
 from ..types import Trajectory
+from .corrected_log import SessionLayer
 
 MAP_DIR = "map"
 LOCALIZATION_FILES = ("localized.tum", "keyframes_localized.tum", "localization.csv")
@@ -40,8 +43,6 @@ def session_file_stem(name: str) -> str:
 
 def write_map_outputs(out_dir: Path, pipe, result, the_map) -> list[str]:
     """Write ``map/`` for a run that appended to ``the_map``; returns the names written."""
-    from ..io.trajectory_files import write_tum
-
     folder = out_dir / MAP_DIR
     folder.mkdir(parents=True, exist_ok=True)
     summary = result.map
@@ -78,8 +79,6 @@ def session_layer(the_map, current: str, inter_session_loops: list[dict]):
     truth's) or is None without ground truth in the map."""
     from types import SimpleNamespace
 
-    from .corrected_log import SessionLayer
-
     comp = {m["name"]: int(m["component"]) for m in the_map.manifest.sessions}
     mine = comp[current]
     poses = the_map.poses()
@@ -91,7 +90,6 @@ def session_layer(the_map, current: str, inter_session_loops: list[dict]):
     loops = [(poses[int(r["match_id"])][:3, 3], poses[int(r["query_id"])][:3, 3]) for r in inter_session_loops
              if r["accepted"] and comp[r["query_session"]] == mine and comp[r["match_session"]] == mine
              and int(r["match_id"]) in poses and int(r["query_id"]) in poses]
-    from ..map.summary import gt_alignment
 
     al = gt_alignment(the_map, mine)
     return (SessionLayer(names, paths, joined, loops),
@@ -99,8 +97,6 @@ def session_layer(the_map, current: str, inter_session_loops: list[dict]):
 
 
 def write_localization_outputs(out_dir: Path, pipe, result) -> list[str]:
-    from ..io.trajectory_files import write_tum
-
     rep = result.localization
     loc = rep["_loc"]
     written = []

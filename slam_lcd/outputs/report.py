@@ -13,9 +13,12 @@ from pathlib import Path
 
 from .. import __version__
 from ..backend.pose_graph import ACCEPTED
+from ..config import config_to_dict
 from ..eval.metrics import ratio_or_none
 from ..files.atomic import write_text
+from ..map.summary import localisation_lines, summary_lines
 from ..sensors.ground_truth import POSITION_ONLY_REASON
+from .map_cloud import cloud_lines
 from .report_schema import REPORT_SCHEMA_VERSION
 from .result import RunResult
 
@@ -52,8 +55,6 @@ def _loop_entry(row: dict) -> dict:
 def report_facts(result: RunResult, cfg, rows: list[dict], ate_before, ate_after, rpe_before=None,
                  rpe_after=None) -> dict:
     """Everything ``report.json`` holds (the shape is :data:`~.report_schema.REPORT_SCHEMA`)."""
-    from ..config import config_to_dict
-
     ev = None
     if ate_before is not None:
         e = cfg.eval
@@ -146,8 +147,6 @@ def write_report(out_dir: Path, facts: dict, summary_lines: list[str]) -> None:
 
 def _cloud_section(cloud: dict | None) -> list[str]:
     """report.md's table of the map cloud's figures, odometry poses against corrected poses."""
-    from .map_cloud import cloud_lines
-
     if not cloud:
         return []
     if not cloud.get("built"):
@@ -176,8 +175,6 @@ def _mm2(x):
 
 def _map_section(summary: dict | None, localization: dict | None) -> list[str]:
     """report.md's part on the map this run appended to or was localised against."""
-    from ..map.summary import localisation_lines, summary_lines
-
     md: list[str] = []
     if summary is not None:
         md += ["", "## Map", ""] + [f"- {line.strip()}" for line in summary_lines(summary)]

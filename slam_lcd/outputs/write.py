@@ -15,13 +15,23 @@ import numpy as np
 from ..backend.pose_graph import ACCEPTED
 from ..config import save_config
 from ..errors import InputError, SlamLcdError
-from ..runtime.interrupts import defer_sigint
+from ..eval import ate_with_config
+from ..eval.metrics import rpe_with_config
+from ..runtime.interrupts import defer_sigint, interrupted_word, signal_name
 from ..types import Trajectory
 from .figures import write_plots
+from .html_report import THUMB_WIDTH, write_html_report
 from .loop_pictures import LOOPS_DIR
 from .loops import VERIFIED, add_map_verdicts, count_false_accepted, loop_rows, write_loops_csv
-from .map_cloud import MAP_CLOUD_FILES
-from .map_outputs import LOCALIZATION_FILES, MAP_DIR
+from .map_cloud import MAP_CLOUD_FILES, not_built, write_map_clouds
+from .map_outputs import (
+    LOCALIZATION_FILES,
+    MAP_DIR,
+    current_in_map_frame,
+    session_layer,
+    write_localization_outputs,
+    write_map_outputs,
+)
 from .output_set import PARTIAL_MARKER, OutputSet
 from .report import report_facts, write_report
 from .result import RunResult
@@ -41,14 +51,10 @@ def partial_text(result: RunResult, notes=(), *, read_to_end: bool, while_writin
     """What PARTIAL.txt says: why the set is incomplete, and what is missing from it."""
     lines = []
     if not read_to_end:
-        from ..runtime.interrupts import signal_name
-
         lines += [f"This run was interrupted ({signal_name()}) after {result.n_frames} frames: the files here hold the",
                   "result up to that point and agree with each other, but the log was not processed to its end."]
     lines += list(notes)
     if while_writing:
-        from ..runtime.interrupts import interrupted_word
-
         lines.append(f"This run was {interrupted_word()}{' again' if lines else ''} while the outputs were written: "
                      "only the files present here were written.")
     return "\n".join(lines)
@@ -83,7 +89,6 @@ def write_set(outputs: OutputSet, pipe, result: RunResult, gt, mcap_source, copy
         except OSError as e:
             outputs.discard()
             raise _write_error(e, outputs) from None
-        from ..runtime.interrupts import interrupted_word
 
         log.warning(f"{interrupted_word()} while writing the outputs: %s holds a partial set (see %s)",
                     outputs.target, PARTIAL_MARKER)
@@ -116,9 +121,7 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
     ``skipped`` (a list) means a partial result: outputs that have nothing to hold yet
     (no odometry, no keyframe) are left out and said so in ``skipped`` instead of failing.
     """
-    from ..eval import ate_with_config
-    from ..eval.metrics import rpe_with_config
-    from ..io.trajectory_files import write_tum
+    from ..io.trajectory_files import write_tum  # at call time: tests patch it on trajectory_files
 
     cfg = pipe.config
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -130,8 +133,6 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
     kf_session, corrected_session = kf_corr, None  # the session's own correction (a map run's is the map's)
     files = [("odometry.tum", odom), ("corrected.tum", corrected), ("keyframes_corrected.tum", kf_corr)]
     if _appended_to_map(pipe, result):  # the result is the map's: this log in the map frame
-        from .map_outputs import current_in_map_frame
-
         assert result.map is not None  # _appended_to_map
         corrected_session = corrected
         corrected, kf_corr = current_in_map_frame(pipe, pipe.map, result.map["current_session"])
@@ -201,8 +202,6 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
     # ---- the map as a point cloud, before and after the correction (corrected.mcap carries it)
     cloud = None
     if getattr(pipe, "map_cloud", None) is not None:
-        from .map_cloud import write_map_clouds
-
         name, by_frame = surfaces if surfaces is not None else ("", {})
         rects = by_frame.get(result.frames.get("gt") or "world")  # the surfaces in the ground truth's frame
         try:
@@ -211,8 +210,6 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
         except OSError:
             raise
         except Exception as e:  # the map must never cost the user the trajectory
-            from .map_cloud import not_built
-
             log.warning("map cloud not written: %s", e)
             result.map_cloud = not_built(f"failed: {e}")
         if result.map_cloud.get("built"):
@@ -236,20 +233,14 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
         after = "corrected.mcap" if "corrected.mcap" in outputs else "loops.csv"
         outputs.insert(outputs.index(after) + 1, LOOPS_DIR + "/")
     if _appended_to_map(pipe, result):
-        from .map_outputs import write_map_outputs
-
         outputs += write_map_outputs(out_dir, pipe, result, pipe.map)
     if result.localization is not None:
-        from .map_outputs import write_localization_outputs
-
         outputs += write_localization_outputs(out_dir, pipe, result)
     outputs += ["report.json", "report.md", "report.html"]
     result.outputs = outputs
     facts = report_facts(result, cfg, rows, ate_before, ate_after, rpe_before, rpe_after)
     write_report(out_dir, facts, result.summary_lines())
     try:
-        from .html_report import write_html_report
-
         write_html_report(out_dir, facts, result.summary_lines(), rows,
                           [f for f in outputs if f.endswith(".png") and f not in MAP_CLOUD_FILES], result.loop_pictures,
                           (out_dir / "config.yaml").read_text(encoding="utf-8"),
@@ -277,8 +268,7 @@ class _PictureThread:
 
     def _run(self, out_dir, rows, cfg) -> None:
         try:
-            from .html_report import THUMB_WIDTH
-            from .loop_pictures import write_loop_pictures
+            from .loop_pictures import write_loop_pictures  # at call time: tests patch it on loop_pictures
 
             self.names = write_loop_pictures(out_dir, self.album, rows, cfg.lcd, cfg.run.loop_pictures_rejected,
                                              stop=self.stop, thumbnails=self.thumbs, thumb_width=THUMB_WIDTH)
@@ -314,7 +304,7 @@ def _write_mcap_and_plots(pipe, out_dir, result, gt, mcap_source, copy_topics, s
     if mcap_source is not None and len(corrected) == 0 and skipped is not None:
         skipped.append("corrected.mcap: not written (no poses yet)")
     elif mcap_source is not None:
-        from .corrected_log import GT_FILE_FRAME, write_corrected_log
+        from .corrected_log import GT_FILE_FRAME, write_corrected_log  # at call time: tests patch it on corrected_log
 
         gt_file = gt if (gt is not None and (result.gt_source or "").startswith("file ")) else None
         frames = dict(result.frames, gt=GT_FILE_FRAME) if gt_file is not None else result.frames
@@ -325,8 +315,6 @@ def _write_mcap_and_plots(pipe, out_dir, result, gt, mcap_source, copy_topics, s
         alignment = ate_after.alignment if ate_after is not None else None
         layer = None
         if _appended_to_map(pipe, result):  # the log among the map's sessions (corrected is in the map frame)
-            from .map_outputs import session_layer
-
             layer, alignment = session_layer(pipe.map, result.map["current_session"],
                                              result.map["inter_session_loops"])
         write_corrected_log(out_dir / "corrected.mcap", odom=odom, corrected=corrected,

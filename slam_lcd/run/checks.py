@@ -12,6 +12,7 @@ from pathlib import Path
 from ..config import Config
 from ..errors import FileMissingError
 from ..files.atomic import check_apart, check_no_clash
+from ..map.store import check_map_target
 from ..outputs.output_set import OutputSet
 from ..outputs.write import RUN_OUTPUTS
 
@@ -57,7 +58,5 @@ def check_map_paths(map_dir, outputs: dict, inputs: dict, appended: bool) -> Non
     an input, and a folder a map can be written to (:func:`slam_lcd.map.store.check_map_target`)."""
     check_apart("--map", map_dir, outputs)
     if appended:
-        from ..map.store import check_map_target
-
         check_no_clash({"--map": map_dir}, inputs, merged=[map_dir])
         check_map_target(map_dir, create=True)

@@ -34,6 +34,7 @@ import numpy as np
 from ..backend import PoseGraph, correct_full_rate
 from ..backend.pose_graph import ACCEPTED
 from ..config import Config
+from ..features import load_extractor
 from ..frontend import KeyframeSelector
 from ..frontend.odometry_buffer import OdometryBuffer
 from ..lcd import LoopDetector
@@ -83,8 +84,6 @@ class Pipeline:
         self.camera = camera
         self.T_body_camera = np.eye(4) if T_body_camera is None else np.asarray(T_body_camera, float)
         if extractor is None:
-            from ..features import load_extractor
-
             extractor = load_extractor(self.config.features)
         self.extractor = extractor
         self.selector = KeyframeSelector(self.config.frontend, camera=camera, T_body_camera=self.T_body_camera,

@@ -25,10 +25,13 @@ from ..io import open_log
 from ..io.prefetch import prefetched
 from ..io.raw_spool import RawSpool
 from ..io.trajectory_files import read_trajectory
+from ..map.session_graph import BUILTIN_VO
+from ..map.summary import localisation_report, map_summary
 from ..outputs.corrected_log import copied_topics
+from ..outputs.loop_pictures import KeyframeAlbum
 from ..outputs.result import RunResult
 from ..outputs.write import write_set
-from ..runtime.interrupts import interrupted_word
+from ..runtime.interrupts import interrupted_word, signal_name
 from ..runtime.progress import progress_bar
 from ..sensors.ground_truth import POSITION_ONLY_NOTE, decode_ground_truth, ground_truth_from_messages
 from ..sensors.messages import (
@@ -141,8 +144,6 @@ def run_log(
                 result.topics["right"] = right
             tf = static_transforms(reader, log_path)
             if cfg.run.loop_pictures:  # a working folder inside the staging folder: discarded with it on failure
-                from ..outputs.loop_pictures import KeyframeAlbum
-
                 album = KeyframeAlbum(outputs.staging / ".loop_keyframes", cfg.lcd.descriptor_dtype)
             if copy_topics:  # the topics corrected.mcap copies, kept undecoded from the one pass over the log
                 spool = RawSpool(outputs.staging / ".corrected_mcap_spool", copied_topics(copy_topics))
@@ -173,7 +174,6 @@ def run_log(
         except KeyboardInterrupt:  # Ctrl-C (maybe a second one): skip the back end's final re-check
             log.warning("%s%s: the back end's final re-check is skipped", interrupted_word(),
                         " again" if result.interrupted else "")
-            from ..runtime.interrupts import signal_name
 
             notes.append(f"The back end's final re-check (GNC) was interrupted ({signal_name()}) and skipped.")
             result.interrupted = True
@@ -185,8 +185,6 @@ def run_log(
             result.gt_source = None  # a ground-truth topic without a message
         result.ground_truth = gt_traj
         if session_map is not None and map_mode == "localize":
-            from ..map.summary import localisation_report
-
             result.localization = localisation_report(session_map, session_map.localise(pipe), gt_traj)
         elif map_use is not None and session_map is not None:
             result.map = _append_to_map(map_use, pipe, result, log_path, gt_traj, notes)
@@ -260,9 +258,6 @@ class _ReadAheadJudge:
 
 def _append_to_map(map_use: MapUse, pipe, result: RunResult, log_path: Path, gt, notes: list[str]) -> dict:
     """Add the finished session to the map and commit it; an interrupted run adds nothing (said in the notes)."""
-    from ..map.session_graph import BUILTIN_VO
-    from ..map.summary import map_summary
-
     m = map_use.session_map
     if result.interrupted:
         notes.append(f"The map {m.root} was left as it was: an interrupted session is not added to a map.")

@@ -12,11 +12,18 @@ from __future__ import annotations
 import dataclasses
 import logging
 
+from ..cloud import MapCloudBuilder
 from ..errors import PipelineError, stamp_text
+from ..features import FeatureCache, load_extractor
+from ..outputs.map_cloud import camera_facts
 from ..outputs.output_set import OutputSet
 from ..outputs.result import RunResult
+from ..sensors.calibration import Calibration, load_calibration
 from ..sensors.ground_truth import ground_truth_from_tf
+from ..sensors.log_vo import visual_odometry_from_log
 from ..sensors.mounting import calibrated_mounting
+from ..sensors.rectify import is_rectified, stereo_rectifier
+from ..sensors.stereo_pairs import StereoFrames, right_camera_info_baseline
 from ..sensors.topics import Topics, choose_right_topic, static_tf_topics
 from ..types import Trajectory
 from .options import MapUse, Models
@@ -75,8 +82,6 @@ def set_calibrated_camera(pipe, cfg, calibrated, vo_odometry, stereo, tf, body_f
 
 def calibration_of(calib):
     """None, or the :class:`~slam_lcd.sensors.calibration.Calibration` of ``calib`` (paths or loaded)."""
-    from ..sensors.calibration import Calibration, load_calibration
-
     if calib is None or isinstance(calib, Calibration):
         return calib
     return load_calibration(calib)
@@ -120,8 +125,6 @@ def no_odometry_reason(image_topic: str) -> str:
 def stereo_rectifier_for(calibration, calibrated, log_path):
     """None for a rectified pair (or one described by CameraInfo); else the rectification of the
     calibrated pair (:mod:`slam_lcd.sensors.rectify`): the stereo VO matches along image rows."""
-    from ..sensors.rectify import is_rectified, stereo_rectifier
-
     if calibration is None or calibrated is None:
         return None  # CameraInfo pairs: the right camera's projection gives the baseline of a rectified pair
     partner = calibration.stereo_partner(calibrated)
@@ -139,8 +142,6 @@ def visual_odometry(log_path, topics: Topics, cfg, calibrated=None, right_topic:
                      rectifier=None):
     """Built-in RGB-D (or, with ``right_topic``, stereo) visual odometry over the whole log (a first
     pass; see slam_lcd.sensors.log_vo)."""
-    from ..sensors.log_vo import visual_odometry_from_log
-
     kind = f"stereo visual odometry on {topics.image} + {right_topic}" if right_topic else \
         f"RGB-D visual odometry on {topics.image} + {topics.depth}"
     log.warning("%s: no odometry topic; running the built-in %s first", log_path, kind)
@@ -154,8 +155,6 @@ def visual_odometry(log_path, topics: Topics, cfg, calibrated=None, right_topic:
 def stereo_frames(reader, right: str, calibrated, rectifier, vo_odometry):
     """The pairing of left and right images that gives the loop poses stereo points, or None (said)
     when the baseline of the pair is unknown."""
-    from ..sensors.stereo_pairs import StereoFrames, right_camera_info_baseline
-
     if rectifier is not None:
         baseline = rectifier.camera.baseline
     else:
@@ -181,7 +180,6 @@ def map_cloud_builder(cfg, topics: Topics, stereo, outputs: OutputSet, result: R
         log.info("%s: no map cloud (map.ply): %s", log_path, reason)
         result.map_cloud = {"built": False, "reason": reason}
         return None
-    from ..cloud import MapCloudBuilder
 
     source = topics.depth if topics.depth is not None else f"{topics.image} + {topics.right}"
     return MapCloudBuilder(cfg.map_cloud, source=f"{log_path}: {source}", folder=outputs.staging)
@@ -189,8 +187,6 @@ def map_cloud_builder(cfg, topics: Topics, stereo, outputs: OutputSet, result: R
 
 def cloud_sensor(pipe, topics: Topics, stereo, calibration) -> dict:
     """Where the cloud's points came from: ``export-map`` reads the same topics with the same camera."""
-    from ..outputs.map_cloud import camera_facts
-
     return {"kind": "depth" if topics.depth is not None else "stereo", "image_topic": topics.image,
             "depth_topic": topics.depth, "right_topic": topics.right if topics.depth is None else None,
             "rectified": bool(stereo is not None and stereo.rectifier is not None),
@@ -213,14 +209,11 @@ def make_pipeline(cfg, models: Models, log_path, topics: Topics, keyframe_sink=N
     """The pipeline with its collaborators: the extractor, the vocabulary (None: online), the feature
     cache of this log (``rectified``: the images are the rectified pair's, cached apart from the raw
     ones), whether frames wait for depth, the loop pictures' keyframe album, the map it uses."""
-    from ..features import load_extractor
     from .pipeline import Pipeline  # imported late: topic errors need no model
 
     extractor = models.extractor if models.extractor is not None else load_extractor(cfg.features)
     feature_source = None
     if cfg.features.feature_cache:
-        from ..features import FeatureCache
-
         cache = FeatureCache(extractor)
 
         cache_topic = f"{topics.image}#rectified" if rectified else topics.image

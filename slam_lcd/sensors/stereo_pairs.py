@@ -17,12 +17,11 @@ from __future__ import annotations
 import numpy as np
 
 from .log_vo import PAIR_TOLERANCE_NS, camera_info_topic_of  # the VO pass pairs its images within the same tolerance
+from .messages import camera_from_camera_info
 
 
 def right_camera_info_baseline(reader, right_topic: str) -> float | None:
     """The baseline a rectified right camera's ``CameraInfo`` states (``P[0,3] = -fx * b``), or None."""
-    from .messages import camera_from_camera_info
-
     info = camera_info_topic_of(right_topic)
     if info not in reader.topics:
         return None

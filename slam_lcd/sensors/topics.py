@@ -147,7 +147,7 @@ def static_tf_topics(reader) -> list[str]:
 
 def copyable_topics(reader, copy_images: bool, log_path) -> list[str]:
     """Input topics copied into corrected.mcap: all (or all but images), minus types we cannot describe."""
-    from ..io.writers import describable
+    from ..io.writers import describable  # lazy: rosbags
 
     chosen: list[str] = []
     skipped: list[str] = []

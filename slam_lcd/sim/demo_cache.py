@@ -9,12 +9,12 @@ from __future__ import annotations
 from pathlib import Path
 
 from .. import __version__
+from ..features.weights import cache_dir
+from . import make_demo_log
 
 
 def demo_log_path(frames: int | None = None, seed: int = 0, width: int = 640, height: int = 480,
                   session: int | None = None) -> Path:
-    from ..features.weights import cache_dir
-
     size = "" if (width, height) == (640, 480) else f"-{width}x{height}"
     route = f"session{session}" if session is not None else ("laps2" if frames is None else "")
     frames_tag = "" if frames is None else f"f{frames}"
@@ -29,8 +29,6 @@ def ensure_demo_log(frames: int | None = None, seed: int = 0, rebuild: bool = Fa
     ``session``: one of the demo world's session presets (``make-demo-log --session K``) instead
     of the two laps; its own seed then (``seed`` is ignored).
     """
-    from . import make_demo_log
-
     path = demo_log_path(frames, seed if session is None else 0, width, height, session)
     if rebuild or not path.exists():
         make_demo_log(path, "mcap", frames=frames, depth=True, progress=progress, width=width,

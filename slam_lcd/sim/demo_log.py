@@ -46,7 +46,8 @@ from .image_noise import NOISE_BANK, add_noise, noise_bank
 from .loops import gt_loop_pairs, write_loop_pairs
 from .odometry import end_drift, simulate_odometry
 from .render import render
-from .trajectory import START_AT, START_NS, make_path, path_trajectory, sample_stamps
+from .sessions import session_preset, session_start_ns, world_frame
+from .trajectory import KINDS, START_AT, START_NS, make_path, path_trajectory, sample_stamps
 
 log = logging.getLogger(__name__)
 
@@ -118,8 +119,6 @@ def _resolve(session: int | None, **given) -> dict:
     out: dict[str, Any] = {k: given.get(k) for k in plain}
     extra = {"start_ns": START_NS, "odom_at_start": False, "world_frame": rig.WORLD_FRAME}
     if session is not None:
-        from .sessions import session_preset, session_start_ns, world_frame
-
         pre = session_preset(session)
         for k in plain:
             if out[k] is None:
@@ -256,11 +255,10 @@ def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int |
     start_ns, odom_at_start, gt_frame = r["start_ns"], r["odom_at_start"], r["world_frame"]
     if fmt not in FORMATS:
         raise InputError(f"unknown demo-log format {fmt!r}; use one of {list(FORMATS)}", out)
-    from .trajectory import KINDS
 
     if kind not in KINDS:
         raise InputError(f"unknown trajectory kind {kind!r}; use one of {', '.join(KINDS)}")
-    from . import layouts as L
+    from . import layouts as L  # lazy: this module is loaded while the command line is built (--session)
 
     if layout not in L.LAYOUTS:
         raise InputError(f"unknown demo-log layout {layout!r}; use one of {', '.join(L.LAYOUTS)}")
@@ -284,7 +282,7 @@ def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int |
     frames_iter = render_frames(sc, color=color, depth=depth, stereo=stereo, seed=seed, workers=workers,
                                 render_one=render_one)
     if progress:
-        from ..runtime.progress import progress_bar
+        from ..runtime.progress import progress_bar  # lazy: like layouts above
 
         frames_iter = progress_bar(frames_iter, total=len(sc.cam_stamps), unit="frame", desc="rendering")
     try:

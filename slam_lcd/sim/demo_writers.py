@@ -16,6 +16,8 @@ import cv2
 import numpy as np
 
 from ..files.atomic import atomic_path
+from ..io.config import IOConfig
+from ..io.trajectory_files import write_tum
 from ..types import CameraModel, Trajectory
 from . import rig
 from .demo_scenario import DemoScenario
@@ -23,7 +25,7 @@ from .demo_scenario import DemoScenario
 
 def write_demo_log(out, fmt, sc: DemoScenario, frames_iter, *, depth, stereo, compressed, color, io_conf):
     """The demo topics as a ``fmt`` log at ``out``, in time order (camera first at equal stamps)."""
-    from ..io import message_builders as M
+    from ..io import message_builders as M  # lazy: rosbags (sim loads with the command line)
     from ..io.writers import open_writer
 
     conf = demo_io_conf(io_conf)
@@ -81,8 +83,6 @@ def write_demo_log(out, fmt, sc: DemoScenario, frames_iter, *, depth, stereo, co
 
 def demo_io_conf(io_conf):
     """``io_conf``, or the defaults with ROS1 bags compressed: raw depth would make them large."""
-    from ..io.config import IOConfig
-
     conf = io_conf
     if conf is None:
         conf = IOConfig()
@@ -97,8 +97,6 @@ def _stamp_name(stamp_ns: int) -> str:
 
 def _write_tum(path: Path, traj: Trajectory) -> None:
     """TUM lines ``t x y z qx qy qz qw``."""
-    from ..io.trajectory_files import write_tum
-
     write_tum(path, traj)
 
 

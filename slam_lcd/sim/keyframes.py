@@ -14,7 +14,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import __version__
+from ..features import FeatureCache
+from ..features.weights import cache_dir
 from ..types import CameraModel, Keyframe, Trajectory
+from .render import render
+from .rig import T_body_camera, T_left_right, demo_camera
+from .trajectory import make_trajectory
+from .world import build_world
 
 
 @dataclass
@@ -31,14 +38,6 @@ def demo_keyframes(extractor, *, laps: float = 2.0, rate_hz: float = 1.0, width:
 
     ``ids(k) -> int``: the keyframe ids (default ``k``). Features are attached to every keyframe.
     """
-    from .. import __version__
-    from ..features import FeatureCache
-    from ..features.weights import cache_dir
-    from .render import render
-    from .rig import T_body_camera, T_left_right, demo_camera
-    from .trajectory import make_trajectory
-    from .world import build_world
-
     if sensor not in ("rgbd", "stereo"):
         raise ValueError(f"sensor must be 'rgbd' or 'stereo', got {sensor!r}")
     world = build_world(seed)

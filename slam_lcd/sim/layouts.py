@@ -35,10 +35,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from ..files.atomic import write_text
 from ..geometry import inv, make_T
 from ..types import CameraModel
 from . import rig
+from .image_noise import NOISE_BANK, add_noise
 from .kinect import KINECT_V1, KinectDepthModel, depth_mm
+from .render import render
 
 LAYOUTS = ("demo", "euroc", "tum", "kitti")
 
@@ -108,16 +111,12 @@ def euroc_rig(pinhole: CameraModel, T_body_rect0: np.ndarray) -> EurocRig:
 
 
 def render_raw(world, raw: RawCamera, T_world_raw: np.ndarray, epoch: float, gain: float = 1.0) -> np.ndarray:
-    from .render import render
-
     img, _ = render(world, raw.canvas, T_world_raw, epoch=epoch, with_depth=False, gain=gain)
     return cv2.remap(img, *raw.map_xy, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
 
 
 def write_camchain(path: Path, er: EurocRig) -> None:
     """A Kalibr ``camchain.yaml`` of the rig: body = the IMU (here the demo body, base_link)."""
-    from ..files.atomic import write_text
-
     def block(T):
         return "\n".join("  - [" + ", ".join(f"{x:.12f}" for x in row) + "]" for row in T)
 
@@ -159,9 +158,6 @@ def frame_renderer(layout: str, sc, bank, er: EurocRig | None, *, seed: int = 0,
     ``depth_noise``: the layout's depth sensor model (:data:`DEPTH_MODELS`), seeded per frame;
     False: the rendered depth, exact up to the encoding's millimetres.
     """
-    from .image_noise import NOISE_BANK, add_noise
-    from .render import render
-
     sensor = depth_model(layout, depth_noise)
 
     def euroc(i):
@@ -201,7 +197,7 @@ def T_kinect_optical() -> np.ndarray:
 # ----------------------------------------------------------------------------- writing
 def write_layout_log(out, fmt, layout: str, sc, frames_iter, *, conf, er: EurocRig | None) -> dict:
     """Write the frames and ground truth of ``sc`` as ``layout`` lays out its bags; returns {topic: (type, count)}."""
-    from ..io import message_builders as M
+    from ..io import message_builders as M  # lazy: rosbags (sim loads with the command line)
     from ..io.writers import open_writer
 
     types: dict[str, str] = {}

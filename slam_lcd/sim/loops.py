@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..errors import InputError
 from ..files.atomic import atomic_write
 from ..types import Trajectory
 
@@ -161,8 +162,6 @@ def write_loop_pairs(
 
 def read_loop_pairs(path: str | Path) -> np.ndarray:
     """Read the ``(K, 2)`` index pairs back from a file written by :func:`write_loop_pairs`."""
-    from ..errors import InputError
-
     path = Path(path)
     lines = path.read_text(encoding="utf-8").splitlines()
     if not lines or lines[0].strip() != CSV_HEADER:

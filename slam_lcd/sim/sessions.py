@@ -44,6 +44,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ..errors import InputError
 from . import rig
 from .building import LOOKALIKE_SEED
 from .trajectory import START_NS
@@ -91,8 +92,6 @@ SESSIONS: dict[int, SessionPreset] = {
 
 def session_preset(session: int) -> SessionPreset:
     """The preset of ``session`` (1-8); an InputError names the valid ones otherwise."""
-    from ..errors import InputError
-
     if session not in SESSIONS:
         raise InputError(f"unknown session {session!r}; use one of {', '.join(map(str, SESSIONS))}")
     return SESSIONS[session]

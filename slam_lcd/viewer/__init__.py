@@ -12,6 +12,8 @@ imports it and turns its absence into a one-line :class:`~slam_lcd.errors.Viewer
 """
 from __future__ import annotations
 
+from ..errors import ViewerMissingError
+
 INSTALL_HINT = "pip install 'slam-lcd[viewer]'"
 APPLICATION_ID = "slam-lcd"
 TIMELINE = "stamp"  # the log's stamps (a timestamp timeline)
@@ -19,8 +21,6 @@ TIMELINE = "stamp"  # the log's stamps (a timestamp timeline)
 
 def require_rerun():
     """The ``rerun`` module, or :class:`~slam_lcd.errors.ViewerMissingError` saying how to install it."""
-    from ..errors import ViewerMissingError
-
     try:
         import rerun
     except ImportError:

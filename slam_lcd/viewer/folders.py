@@ -20,8 +20,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ..cloud.files import read_cloud
 from ..errors import FileMissingError, InputError, SlamLcdError
+from ..eval.config import EvalConfig
+from ..eval.metrics import ate_with_config
 from ..io.trajectory_files import read_tum
+from ..map.store import is_map
 from ..types import Trajectory
 
 log = logging.getLogger(__name__)
@@ -75,8 +79,6 @@ class LocalizationFolder:
 
 def folder_kind(path: str | Path) -> str:
     """``'run'`` or ``'map'``; anything else is an :class:`InputError` naming the path."""
-    from ..map.store import is_map
-
     p = Path(path)
     if not p.exists():
         raise FileMissingError("no such folder", p)
@@ -102,7 +104,7 @@ def _report(root: Path) -> dict:
 
 def read_loops_csv(path: Path) -> list[dict]:
     """``loops.csv`` rows as dicts (strings), its header checked against the runner's."""
-    from ..outputs.loops import loop_columns
+    from ..outputs.loops import loop_columns  # lazy: GTSAM
 
     try:
         with open(path, newline="", encoding="utf-8") as fh:
@@ -121,8 +123,6 @@ def read_run(root: str | Path, *, ground_truth: bool = True, gt: Trajectory | No
     """Read run folder ``root`` (typed errors naming the file). ``ground_truth``: read the log's ground
     truth (a topic of the log or a file, as report.json names it) for the ATE over time, when it is there;
     ``gt``: that ground truth already in hand (the run that just wrote the folder), not read again."""
-    from ..cloud.files import read_cloud
-
     root = Path(root)
     missing = [n for n in RUN_FILES if not (root / n).is_file()]
     if missing:
@@ -147,7 +147,7 @@ def read_run(root: str | Path, *, ground_truth: bool = True, gt: Trajectory | No
 
 def _ground_truth(report: dict) -> Trajectory | None:
     """The run's ground truth as report.json names it (``file PATH`` / ``topic NAME`` of its log), or None."""
-    from ..sensors.trajectories import load_trajectory_source
+    from ..sensors.trajectories import load_trajectory_source  # lazy: OpenCV
 
     source = (report.get("input") or {}).get("gt_source") or ""
     kind, _, name = source.partition(" ")
@@ -163,9 +163,6 @@ def _ground_truth(report: dict) -> Trajectory | None:
 
 def _add_ate(run: RunFolder, gt: Trajectory | None = None) -> None:
     """Per-pose ATE of the odometry and the corrected trajectory, with the run's own evaluation settings."""
-    from ..eval.config import EvalConfig
-    from ..eval.metrics import ate_with_config
-
     ev = run.report.get("eval") or {}
     try:
         gt = gt if gt is not None else _ground_truth(run.report)
@@ -185,7 +182,7 @@ def _add_ate(run: RunFolder, gt: Trajectory | None = None) -> None:
 
 def read_map(root: str | Path) -> MapFolder:
     """Map folder ``root``, read only (no lock): sessions in the map frame and the joint graph's loops."""
-    from ..map.session_map import Map
+    from ..map.session_map import Map  # lazy: GTSAM
 
     root = Path(root)
     m = Map.open(root)

@@ -20,8 +20,12 @@ from pathlib import Path
 
 import numpy as np
 
-from . import TIMELINE, require_rerun
-from .record import seconds
+from ..errors import SlamLcdError, ViewerMissingError
+from . import INSTALL_HINT, TIMELINE, require_rerun
+from .folders import read_run
+from .layout import blueprint
+from .record import log_run, seconds
+from .targets import AtomicRrd, check_display, close, new_stream
 
 log = logging.getLogger(__name__)
 
@@ -36,10 +40,6 @@ class LiveRecorder:
     def __init__(self, target: str, name: str):
         import importlib.util
         import threading
-
-        from ..errors import ViewerMissingError
-        from . import INSTALL_HINT
-        from .targets import AtomicRrd, check_display
 
         if importlib.util.find_spec("rerun") is None:  # said now, before the run starts, not at its first keyframe
             raise ViewerMissingError(f"the Rerun viewer needs rerun-sdk, which is not installed: {INSTALL_HINT}")
@@ -60,8 +60,6 @@ class LiveRecorder:
     def _open_stream(self, target: str, name: str) -> None:
         try:
             rr = require_rerun()
-            from .layout import blueprint
-            from .targets import new_stream
 
             bp = blueprint(images=True, ate=True)
             rec = new_stream(name)
@@ -135,11 +133,6 @@ class LiveRecorder:
 
         ``gt``: the ground truth the run evaluated against (``RunResult.ground_truth``): reading it
         again from the log would cost as much as a tenth of the run."""
-        from ..errors import SlamLcdError
-        from .folders import read_run
-        from .record import log_run
-        from .targets import close
-
         try:
             rec = self.rec
         except Exception as e:  # the stream never opened (a viewer that would not start): the run stands
@@ -156,8 +149,6 @@ class LiveRecorder:
         return self.file.commit() if self.file is not None else None
 
     def discard(self) -> None:
-        from .targets import close
-
         try:
             self._setup.join()
             if self._setup_error is None:

@@ -25,6 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry import interpolate_poses
+from ..io.trajectory_files import read_tum
 from . import TIMELINE, require_rerun
 from .folders import LocalizationFolder, MapFolder, RunFolder
 
@@ -104,8 +105,6 @@ def _float(row: dict, key: str) -> float:
 def _endpoint_frames(run: RunFolder) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Keyframe stamps and positions to draw loop ends from: this run's, and (a run into a map) each
     earlier session's as the run folder's ``map/<session>.tum`` gives them."""
-    from ..io.trajectory_files import read_tum
-
     frames = {"": (run.keyframes.stamps, run.keyframes.poses)}
     for s in {r.get("match_session") or "" for r in run.loops} - {""}:
         p = run.root / "map" / f"{s}.tum"

@@ -20,6 +20,7 @@ from pathlib import Path
 from urllib.parse import quote
 
 from ..errors import InputError
+from ..files.atomic import check_no_clash, check_writable_target, replace_path
 from ..runtime.interrupts import defer_sigint, finish
 from . import APPLICATION_ID, require_rerun
 
@@ -30,8 +31,6 @@ WEB_PORT = 9090
 def check_rrd_target(out: str | Path, inputs: dict) -> Path:
     """Refuse, before anything is logged, an ``.rrd`` output with another suffix, on or inside an input
     (``inputs``: what each input is -> its path), or in a place that cannot be written."""
-    from ..files.atomic import check_no_clash, check_writable_target
-
     out = Path(out)
     if out.suffix.lower() != RRD_SUFFIX:
         raise InputError(f"a Rerun recording is a {RRD_SUFFIX} file; give a name ending in {RRD_SUFFIX}", out)
@@ -59,8 +58,6 @@ class AtomicRrd:
         self.tmp = self._folder / self.target.name
 
     def commit(self) -> Path:
-        from ..files.atomic import replace_path
-
         if self._folder is not None:
             with defer_sigint():
                 replace_path(self.tmp, self.target)

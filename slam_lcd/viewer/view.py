@@ -9,7 +9,10 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..errors import InputError
+from . import record, require_rerun
 from .folders import folder_kind, read_localization, read_map, read_run
+from .layout import blueprint
 
 
 @dataclass
@@ -23,10 +26,6 @@ class Plan:
 
 def plan(folder: str | Path, localization: str | Path | None = None) -> Plan:
     """Read ``folder`` (a run or a map; ``localization``: a ``localize`` output folder, with a map only)."""
-    from ..errors import InputError
-    from . import record, require_rerun
-    from .layout import blueprint
-
     require_rerun()
     folder = Path(folder)
     kind = folder_kind(folder)

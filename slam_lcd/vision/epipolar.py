@@ -87,7 +87,7 @@ def refine_relative_pose(R, t, n1, n2, scale: float):
     """Minimise the robust (Huber) Sampson error over rotation and translation direction."""
     from scipy.optimize import least_squares
 
-    from ..geometry import so3_exp
+    from ..geometry import so3_exp  # lazy: scipy
 
     t = t / np.linalg.norm(t)
     # tangent basis of the unit sphere at t
