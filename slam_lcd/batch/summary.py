@@ -87,7 +87,7 @@ def summary_md(rows: Sequence[dict], *, engine: str, wall_s: float, interrupted:
     return "\n".join(lines) + "\n"
 
 
-def plot_ate(rows: Sequence[dict], out: Path) -> bool:
+def plot_ate_bars(rows: Sequence[dict], out: Path) -> bool:
     """Bars of ATE before / after per log (logs with ground truth); False when none has one."""
     import matplotlib
 
@@ -138,7 +138,7 @@ def write_summary(out_dir: str | Path, rows: Sequence[dict], *, engine: str, wal
         write_text(outputs.staging / "summary.md",
                    summary_md(rows, engine=engine, wall_s=wall_s, interrupted=interrupted))
         try:
-            plot_ate(rows, outputs.staging / PLOT_NAME)
+            plot_ate_bars(rows, outputs.staging / PLOT_NAME)
         except Exception as e:  # a plot must never cost the user the numbers
             import logging
 

@@ -20,7 +20,7 @@ from pathlib import Path
 from ..errors import InputError
 from ..eval import align_mode_from_flags
 from ..eval.errors import AlignmentError, AssociationError
-from ..eval.relations import APE_RELATIONS, RPE_RELATIONS, ape, rpe
+from ..eval.relations import APE_RELATIONS, RPE_RELATIONS, ape_by_relation, rpe_by_relation
 from ..files.atomic import write_text
 from ..io.trajectory_files import FORMATS
 from .util import check_outputs, write_guard
@@ -156,10 +156,11 @@ def run(args) -> int:
                   n_to_align=None if args.n_to_align == -1 else args.n_to_align)
     with _naming_both(args):
         if args.rpe:
-            res = rpe(ref, est, args.pose_relation, args.delta, args.delta_unit, mode, all_pairs=args.all_pairs,
-                      pairs_from_reference=args.pairs_from_reference, rel_delta_tol=args.delta_tol, **common)
+            res = rpe_by_relation(ref, est, args.pose_relation, args.delta, args.delta_unit, mode,
+                                  all_pairs=args.all_pairs, pairs_from_reference=args.pairs_from_reference,
+                                  rel_delta_tol=args.delta_tol, **common)
         else:
-            res = ape(ref, est, args.pose_relation, mode, **common)
+            res = ape_by_relation(ref, est, args.pose_relation, mode, **common)
     print(f"reference: {args.ref} ({len(ref)} poses)")
     print(f"estimate:  {args.est} ({len(est)} poses)")
     print(f"matched:   {res.n_matched} pose pairs (t_max_diff {args.t_max_diff} s, t_offset {args.t_offset} s)")

@@ -73,10 +73,6 @@ def subparsers_of(parser: argparse.ArgumentParser) -> list[argparse.ArgumentPars
     return found
 
 
-def describe(spec: str, fmt: str | None, n: int) -> str:
-    return f"{spec} ({fmt or 'auto'}, {n} poses)"
-
-
 def _input_path(spec):
     """The file an input names: ``LOG:TOPIC`` names its log."""
     from ..sensors.trajectories import split_log_topic

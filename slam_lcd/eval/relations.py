@@ -125,7 +125,7 @@ class PoseErrorResult:
         if self.metric == "ape":
             text = f"APE w.r.t. {RELATION_TITLES[self.relation]}{unit}"
         else:
-            assert self.delta_unit is not None  # an RPE result carries its pair spacing (see rpe)
+            assert self.delta_unit is not None  # an RPE result carries its pair spacing (see rpe_by_relation)
             text = (f"RPE w.r.t. {RELATION_TITLES[self.relation]}{unit} for delta = {self.delta:g} "
                     f"({DELTA_UNITS[self.delta_unit]}) using {'all' if self.all_pairs else 'consecutive'} pairs"
                     + (", pairs from the reference" if self.pairs_from_reference else ", pairs from the estimate"))
@@ -168,7 +168,7 @@ def _align(ref_m: Trajectory, est_m: Trajectory, align: str, align_origin: bool,
     return alignment
 
 
-def ape(
+def ape_by_relation(
     ref: Trajectory,
     est: Trajectory,
     relation: str = "trans_part",
@@ -299,7 +299,7 @@ def rpe_pairs(poses: np.ndarray, delta: float, delta_unit: str, rel_tol: float =
     return pairs
 
 
-def rpe(
+def rpe_by_relation(
     ref: Trajectory,
     est: Trajectory,
     relation: str = "trans_part",

@@ -20,7 +20,7 @@ _LAZY = {
     "TopicInfo": ".reader",
     "open_log": ".reader",
     "FORMATS": ".trajectory_files",
-    "detect_format": ".trajectory_files",
+    "detect_trajectory_format": ".trajectory_files",
     "read_euroc": ".trajectory_files",
     "read_kitti": ".trajectory_files",
     "read_kitti_times": ".trajectory_files",

@@ -125,7 +125,7 @@ def has_header(store, msgtype: str) -> bool:
     return bool(fields) and fields[0][0] == "header"
 
 
-def header_stamp(msg, has_header: bool, is_tf: bool, log_time: int) -> int:
+def message_stamp(msg, has_header: bool, is_tf: bool, log_time: int) -> int:
     if has_header:
         st = msg.header.stamp
         s = st.sec * 1_000_000_000 + st.nanosec
@@ -149,7 +149,7 @@ def deserialised(path, records, deser, use_header: bool):
             msg = deser(data, msgtype)
         except (SerdeError, KeyError, ValueError) as e:
             raise deser_error(path, topic, e) from None
-        stamp = header_stamp(msg, has_hdr, is_tf, t) if use_header else t
+        stamp = message_stamp(msg, has_hdr, is_tf, t) if use_header else t
         yield LogMessage(topic, msgtype, stamp, t, msg)
 
 
@@ -176,7 +176,7 @@ def deser_error(path, topic, e):
     return CorruptLogError(f"message on topic {topic!r} cannot be decoded ({e})", path)
 
 
-def one_line(e) -> str:
+def error_text(e) -> str:
     return " ".join(str(e).split()) or type(e).__name__
 
 
@@ -185,7 +185,7 @@ def unreadable(path, e: Exception, last_log_time: int | None) -> CorruptLogError
     where = (f"after log time {stamp_text(last_log_time)}" if last_log_time is not None
              else "before its first readable message")
     kind = type(e).__name__
-    text = one_line(e)
+    text = error_text(e)
     detail = text if kind in text or kind in ("ReaderError",) else f"{kind}: {text}"
     return CorruptLogError(f"damaged data in the log {where}; it cannot be read further ({detail})", path)
 

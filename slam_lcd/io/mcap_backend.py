@@ -18,8 +18,8 @@ from .log_backend import (
     TopicInfo,
     build_typestore,
     deserialised,
+    error_text,
     has_header,
-    one_line,
     unreadable,
     with_raw_copies,
 )
@@ -102,7 +102,7 @@ class McapStreamBackend:
                 summary = self.mreader.get_summary()
             except Exception as e:  # the mcap library raises many kinds of errors on bad bytes
                 self.fh.close()
-                raise CorruptLogError(f"cannot open MCAP file ({one_line(e)})", path) from None
+                raise CorruptLogError(f"cannot open MCAP file ({error_text(e)})", path) from None
             if summary is None:
                 self.fh.close()
                 raise CorruptLogError("MCAP file has no summary section", path)

@@ -19,13 +19,13 @@ from .log_backend import LogBackend, LogContents, LogMessage, RawMessage, TopicI
 from .mcap_backend import MCAP_MAGIC, open_mcap
 from .rosbags_backend import RosbagsBackend
 
-__all__ = ["LogMessage", "LogReader", "RawMessage", "TopicInfo", "detect_format", "open_log"]
+__all__ = ["LogMessage", "LogReader", "RawMessage", "TopicInfo", "detect_log_format", "open_log"]
 
 ROSBAG1_MAGIC = b"#ROSBAG V2.0\n"
 SQLITE_MAGIC = b"SQLite format 3\x00"
 
 
-def detect_format(path: Path) -> tuple[str, str]:
+def detect_log_format(path: Path) -> tuple[str, str]:
     """(format, storage) of a log from its leading bytes: ('rosbag1'|'rosbag2'|'mcap', storage)."""
     if not path.exists():
         raise FileMissingError("no such file or directory", path)
@@ -71,7 +71,7 @@ class LogReader:
         if stamp_source not in ("header", "log_time"):
             raise ValueError(f"stamp_source must be 'header' or 'log_time', not {stamp_source!r}")
         self.stamp_source = stamp_source
-        self.format, self.storage = detect_format(self.path)
+        self.format, self.storage = detect_log_format(self.path)
         self._backend: LogBackend | None = None
         self._contents = LogContents()
 

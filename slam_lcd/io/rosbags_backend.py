@@ -13,8 +13,8 @@ from .log_backend import (
     TopicInfo,
     build_typestore,
     deserialised,
+    error_text,
     has_header,
-    one_line,
     unreadable,
     with_raw_copies,
 )
@@ -42,9 +42,9 @@ class RosbagsBackend:
             self.bag = Reader1(path) if self.ros1 else Reader2(path)
             self.bag.open()
         except self.errors as e:
-            raise CorruptLogError(f"cannot open {fmt} log ({one_line(e)})", path) from None
+            raise CorruptLogError(f"cannot open {fmt} log ({error_text(e)})", path) from None
         except (KeyError, ValueError, TypeError, OSError, IndexError) as e:
-            raise CorruptLogError(f"cannot open {fmt} log ({type(e).__name__}: {one_line(e)})", path) from None
+            raise CorruptLogError(f"cannot open {fmt} log ({type(e).__name__}: {error_text(e)})", path) from None
         conns = list(self.bag.connections)
         store = build_typestore(conns, ros1_store() if self.ros1 else ros2_store(), path)
         self.contents = c = LogContents(typestore=store)

@@ -48,7 +48,7 @@ log = logging.getLogger(__name__)
 
 __all__ = [
     "FORMATS",
-    "detect_format",
+    "detect_trajectory_format",
     "read_euroc",
     "read_kitti",
     "read_kitti_times",
@@ -337,7 +337,7 @@ def write_euroc(path: str | Path, traj: Trajectory) -> None:
 # ----------------------------------------------------------------------------- dispatch
 
 
-def detect_format(path: str | Path) -> str:
+def detect_trajectory_format(path: str | Path) -> str:
     """Guess 'tum' | 'kitti' | 'euroc' from the extension, else from the first data line."""
     path = Path(path)
     suffix = path.suffix.lower()
@@ -372,7 +372,7 @@ def detect_format(path: str | Path) -> str:
 def read_trajectory(path: str | Path, fmt: str | None = None, *, times_path: str | Path | None = None,
                     file_rotations: bool = False) -> Trajectory:
     """Read a TUM / KITTI / EuRoC file; ``fmt=None`` detects the format (``file_rotations``: see :func:`read_kitti`)."""
-    fmt = detect_format(path) if fmt is None else fmt.lower()
+    fmt = detect_trajectory_format(path) if fmt is None else fmt.lower()
     if fmt == "tum":
         return read_tum(path)
     if fmt == "kitti":

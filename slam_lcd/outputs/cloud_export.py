@@ -33,7 +33,7 @@ log = logging.getLogger(__name__)
 STAMP_TOLERANCE_NS = 1_000_000  # TUM files keep stamps to the microsecond or so: a keyframe's messages within 1 ms
 
 
-def read_run(run_dir: Path, odometry: bool = False) -> tuple[dict, np.ndarray, np.ndarray]:
+def read_run_poses(run_dir: Path, odometry: bool = False) -> tuple[dict, np.ndarray, np.ndarray]:
     """``(report, keyframe stamps, keyframe poses)`` of a run folder (typed errors naming the file)."""
     from ..io.trajectory_files import read_trajectory  # lazy: scipy, like the others in this module
 
@@ -151,7 +151,7 @@ def export_map(run_dir, out, conf: MapCloudConfig | None = None, *, odometry: bo
     """
     run_dir, out = Path(run_dir), Path(out)
     cloud_suffix(out)
-    report, stamps, poses = read_run(run_dir, odometry)
+    report, stamps, poses = read_run_poses(run_dir, odometry)
     sensor = report["map_cloud"]["sensor"]
     log_path = Path(log_path) if log_path is not None else Path(report["input"]["log"])
     if not log_path.exists():

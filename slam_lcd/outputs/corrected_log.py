@@ -131,10 +131,10 @@ def _root(frame: str, parents: dict[str, str]) -> str:
     return frame
 
 
-def plan_frames(run_conf, log_frames: dict, parents: dict[str, str]) -> TfPlan:
+def plan_frames(run_conf, log_frame_ids: dict, parents: dict[str, str]) -> TfPlan:
     """The frames and added transforms for a log whose TF tree is ``parents``."""
-    odom = run_conf.mcap_odom_frame or log_frames.get("odom") or "odom"
-    body = run_conf.mcap_body_frame or log_frames.get("body") or "base_link"
+    odom = run_conf.mcap_odom_frame or log_frame_ids.get("odom") or "odom"
+    body = run_conf.mcap_body_frame or log_frame_ids.get("body") or "base_link"
     known = set(parents) | set(parents.values()) | {odom, body}
     notes = []
     map_frame = run_conf.mcap_map_frame
@@ -149,7 +149,7 @@ def plan_frames(run_conf, log_frames: dict, parents: dict[str, str]) -> TfPlan:
         plan = TfPlan(map_frame, odom, body, odom, corrected_body, False, body not in parents)
     else:
         plan = TfPlan(map_frame, odom, body, map_frame, body, True, body not in parents)
-    gt = log_frames.get("gt")
+    gt = log_frame_ids.get("gt")
     if gt:
         plan.gt_frame = gt
         tree = dict(parents)
@@ -202,14 +202,14 @@ def _add_sessions(add, layer: SessionLayer, plan: TfPlan, s0: int) -> None:
 
 
 def write_corrected_log(path: Path, *, odom: Trajectory, corrected: Trajectory, kf_ids: list[int],
-                        kf_corrected: Trajectory, loops: list[tuple[int, int, int]], log_frames: dict, run_conf,
+                        kf_corrected: Trajectory, loops: list[tuple[int, int, int]], log_frame_ids: dict, run_conf,
                         copy_from: Path, copy_topics: list[str], gt_alignment=None, gt_poses: Trajectory | None = None,
                         io_conf=None, spooled=None, sessions: SessionLayer | None = None, cloud=None,
                         cloud_topic: str = CLOUD_TOPIC) -> TfPlan:
     """Write ``path`` (see the module docstring). ``loops``: ``(query_id, match_id, stamp_ns)`` of accepted loops.
 
     ``gt_poses``: a ground truth read from a file (it is not in the log), written on
-    :data:`GT_TOPIC` in frame ``log_frames['gt']`` and tied to the tree like a log's.
+    :data:`GT_TOPIC` in frame ``log_frame_ids['gt']`` and tied to the tree like a log's.
     ``spooled``: a complete :class:`~slam_lcd.io.raw_spool.RawSpool` of the copied topics (the run's
     pass kept them): read instead of decompressing the log again. ``sessions``: a map's sessions
     (``corrected`` and ``kf_corrected`` are then in the map frame, ``gt_alignment`` the map's).
@@ -224,7 +224,7 @@ def write_corrected_log(path: Path, *, odom: Trajectory, corrected: Trajectory, 
         chosen = copied_topics(copy_topics)
         if spooled is not None and not (spooled.complete and set(spooled.wanted) == set(chosen)):
             spooled = None  # an interrupted pass (or other topics): read the log
-        plan = plan_frames(run_conf, log_frames, log_tf_parents(reader, chosen, spooled))
+        plan = plan_frames(run_conf, log_frame_ids, log_tf_parents(reader, chosen, spooled))
         for note in plan.notes:
             log.info("corrected.mcap: %s", note)
         own: list[tuple[int, int, str, Any]] = []  # (stamp, order, topic, message)
@@ -256,7 +256,7 @@ def write_corrected_log(path: Path, *, odom: Trajectory, corrected: Trajectory, 
                     (inv(T_gt_c), s0, plan.corrected_frame, plan.gt_frame))
             add(s0, "/tf_static", M.tf_message([link]))
         if gt_poses is not None:  # ground truth from a file: written here so that it can be overlaid
-            assert plan.gt_frame is not None  # its frame is log_frames['gt'] (see the docstring)
+            assert plan.gt_frame is not None  # its frame is log_frame_ids['gt'] (see the docstring)
             gt_msgs = M.pose_stamped_msgs(gt_poses.poses, gt_poses.stamps, plan.gt_frame) if len(gt_poses) else []
             for s, msg in zip(gt_poses.stamps.tolist(), gt_msgs, strict=True):
                 add(s, GT_TOPIC, msg)

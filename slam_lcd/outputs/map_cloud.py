@@ -152,7 +152,7 @@ def _diff(sharp: dict, key: str) -> float | None:
     return None if a is None or b is None else float(a - b)
 
 
-def summary_line(facts: dict) -> str:
+def cloud_summary_line(facts: dict) -> str:
     """One line for the run's summary: the map's size and how its sharpness changed."""
     if not facts.get("built"):
         return f"map cloud: not built ({facts.get('reason')})"

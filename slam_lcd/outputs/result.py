@@ -105,9 +105,9 @@ class RunResult:
             if self.ate_before is not None:
                 lines.append(f"ATE ({self.alignment}): {self._ate_text(self.ate_after)}")
         if self.map_cloud is not None:
-            from .map_cloud import summary_line  # lazy: OpenCV
+            from .map_cloud import cloud_summary_line  # lazy: OpenCV
 
-            lines.append(summary_line(self.map_cloud))
+            lines.append(cloud_summary_line(self.map_cloud))
         lines.append(f"time: {self.wall_s:.1f} s wall for {self.log_duration_s:.1f} s of log"
                      + (" (interrupted: partial result)" if self.interrupted else ""))
         return lines

@@ -319,7 +319,7 @@ def _write_mcap_and_plots(pipe, out_dir, result, gt, mcap_source, copy_topics, s
                                              result.map["inter_session_loops"])
         write_corrected_log(out_dir / "corrected.mcap", odom=odom, corrected=corrected,
                             kf_ids=[k.id for k in pipe.keyframes], kf_corrected=kf_corr, loops=accepted,
-                            log_frames=frames, run_conf=cfg.run, copy_from=mcap_source,
+                            log_frame_ids=frames, run_conf=cfg.run, copy_from=mcap_source,
                             copy_topics=copy_topics or [], io_conf=cfg.io, gt_poses=gt_file,
                             gt_alignment=alignment, spooled=spool, sessions=layer,
                             cloud=cloud, cloud_topic=cfg.map_cloud.mcap_topic)

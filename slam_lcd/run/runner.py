@@ -55,7 +55,7 @@ from .sources import (
     calibration_of,
     cloud_sensor,
     ground_truth_tf,
-    log_frames,
+    log_frame_ids,
     make_pipeline,
     map_cloud_builder,
     no_keyframe_reason,
@@ -129,7 +129,7 @@ def run_log(
             first = check_first_messages(reader, topics)
             check_image_sizes(reader, topics, first, calibrated, calibration)
             result.topics = {k: v for k, v in vars(topics).items() if v}
-            result.frames = log_frames(first, topics)
+            result.frames = log_frame_ids(first, topics)
             result.gt_source = (f"file {gt_file}" if gt_file is not None else
                                 f"topic {topics.gt}" if topics.gt else None)
             gt_from_tf = ground_truth_tf(reader, topics)

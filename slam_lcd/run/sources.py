@@ -101,7 +101,7 @@ def calibrated_camera(calibration, topics: Topics, log_path):
     return cam
 
 
-def log_frames(first: dict, topics: Topics) -> dict:
+def log_frame_ids(first: dict, topics: Topics) -> dict:
     """The odometry's frame_id and child_frame_id and the ground truth's frame_id (from their first messages)."""
     frames = {}
     m = first.get(topics.odom) if topics.odom else None

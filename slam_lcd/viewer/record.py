@@ -83,11 +83,11 @@ def log_run(rec, run: RunFolder, *, frusta: bool = True) -> None:
             rec.send_columns(f"ate/{kind}", indexes=[rr.TimeColumn(TIMELINE, timestamp=seconds(stamps))],
                              columns=rr.Scalars.columns(scalars=np.asarray(errors, float)))
     log_run_loops(rec, run)
-    text = [f"# {run.root.name}", "", summary_line(run.report)] + [f"- {n}" for n in run.notes]
+    text = [f"# {run.root.name}", "", run_summary_line(run.report)] + [f"- {n}" for n in run.notes]
     rec.log("info", rr.TextDocument("\n".join(text), media_type=rr.MediaType.MARKDOWN), static=True)
 
 
-def summary_line(report: dict) -> str:
+def run_summary_line(report: dict) -> str:
     h = report.get("headline") or {}
     ate = (f"; ATE {h['ate_before_m']:.3f} m -> {h['ate_after_m']:.3f} m"
            if h.get("ate_before_m") is not None and h.get("ate_after_m") is not None else "")

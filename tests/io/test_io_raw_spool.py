@@ -76,7 +76,7 @@ def test_corrected_mcap_from_the_spool_equals_the_copy_read_from_the_log(report_
 
     def write(name, spooled):
         write_corrected_log(tmp_path / name, odom=odom, corrected=corr, kf_ids=list(range(len(kf))),
-                            kf_corrected=kf, loops=[], log_frames=frames, run_conf=cfg.run, copy_from=log,
+                            kf_corrected=kf, loops=[], log_frame_ids=frames, run_conf=cfg.run, copy_from=log,
                             copy_topics=copy, spooled=spooled)
         with open(tmp_path / name, "rb") as fh:
             return [(c.topic, m.log_time, bytes(m.data))

@@ -15,7 +15,7 @@ from slam_lcd.errors import (
     UnsupportedFormatError,
 )
 from slam_lcd.io.trajectory_files import (
-    detect_format,
+    detect_trajectory_format,
     ns_to_seconds_text,
     read_euroc,
     read_kitti,
@@ -90,7 +90,7 @@ def test_read_tum_real_files_match_independent_parsers(traj_dir, name):
     evo_traj = file_interface.read_tum_trajectory_file(str(path))
     assert evo_traj.num_poses == len(traj)
     np.testing.assert_allclose(traj.poses, np.asarray(evo_traj.poses_se3), atol=1e-9)
-    assert detect_format(path) == "tum"
+    assert detect_trajectory_format(path) == "tum"
 
 
 def test_known_first_stamps(traj_dir):
@@ -115,7 +115,7 @@ def test_read_kitti_real_files(traj_dir):
         np.testing.assert_array_equal(traj.stamps, np.arange(4541) * 10**9)
         evo_path = file_interface.read_kitti_poses_file(str(path))
         np.testing.assert_array_equal(traj.positions, evo_path.positions_xyz)
-        assert detect_format(path) == "kitti"
+        assert detect_trajectory_format(path) == "kitti"
 
 
 def test_read_kitti_with_times(traj_dir):
@@ -144,7 +144,7 @@ def test_read_euroc_groundtruth_with_extra_columns(traj_dir):
     q_file = np.array([0.789985, -0.205376, 0.554528, 0.161996])
     q_file /= np.linalg.norm(q_file)
     assert np.allclose(q, q_file, atol=1e-9) or np.allclose(q, -q_file, atol=1e-9)
-    assert detect_format(path) == "euroc"
+    assert detect_trajectory_format(path) == "euroc"
 
 
 def test_read_trajectory_dispatch(traj_dir):
@@ -187,7 +187,7 @@ def test_round_trip_real_files_through_every_format(traj_dir, tmp_path, name, fm
         np.testing.assert_array_equal(back.stamps, src.stamps)
         np.testing.assert_allclose(back.poses, src.poses, atol=1e-9, rtol=0)
         # auto-detection recognises what we wrote
-        assert detect_format(out) == target
+        assert detect_trajectory_format(out) == target
 
 
 def test_tum_writer_exact_stamp_text(tmp_path):

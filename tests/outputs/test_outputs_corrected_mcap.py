@@ -86,7 +86,7 @@ def test_map_to_odom_correction_when_odom_has_no_parent(report_run, tmp_path):
     cfg = load_config("default")
     frames = {"odom": "odom", "body": "base_link", "gt": "world"}
     plan = write_corrected_log(tmp_path / "c.mcap", odom=odom, corrected=corr, kf_ids=list(range(len(kf))),
-                               kf_corrected=kf, loops=loops, log_frames=frames, run_conf=cfg.run, copy_from=log,
+                               kf_corrected=kf, loops=loops, log_frame_ids=frames, run_conf=cfg.run, copy_from=log,
                                copy_topics=["/odom", "/ground_truth/pose", "/camera/image_raw"],
                                gt_alignment=align)
     assert plan.publish_map_odom and plan.link_gt
@@ -118,7 +118,7 @@ def test_ground_truth_file_tied_under_an_odom_that_has_a_parent(report_run, tmp_
     gt = Trajectory(np.array([t for t, _ in gt_msgs], np.int64), np.array([_pose(m.pose) for _, m in gt_msgs]))
     align = ate(gt, corr, "se3", t_max_diff=0.02).alignment
     plan = write_corrected_log(tmp_path / "c.mcap", odom=odom, corrected=corr, kf_ids=list(range(len(kf))),
-                               kf_corrected=kf, loops=[], log_frames={"odom": "odom", "body": "base_link",
+                               kf_corrected=kf, loops=[], log_frame_ids={"odom": "odom", "body": "base_link",
                                                                      "gt": GT_FILE_FRAME},
                                run_conf=load_config("default").run, copy_from=log,
                                copy_topics=["/tf_static", "/odom"], gt_alignment=align, gt_poses=gt)
