@@ -7,7 +7,7 @@ them into a :class:`~.voxel_grid.VoxelGrid` with the poses given (odometry or co
 ``export-map`` goes the same way, so that it gives the run's ``map.ply`` point for point when its
 settings are the run's.
 
-Keyframes it cannot use are skipped and counted by reason; each reason is said once (a log
+Keyframes it cannot use are skipped and counted by reason; each reason is logged once (a log
 warning naming the source), never an error: the map is a view of the run, not part of it.
 """
 from __future__ import annotations
@@ -135,8 +135,8 @@ class MapCloudBuilder:
         return self.skips.counts
 
     def add_keyframe(self, kf: Keyframe) -> bool:
-        """Keep the keyframe's points. In the caller's thread: False (counted, said once) when it has none to
-        give; with a thread of its own: True once handed over (False after a failure there)."""
+        """Keep the keyframe's points. In the caller's thread: False (counted, one warning per reason) when it
+        has none to give; with a thread of its own: True once handed over (False after a failure there)."""
         t0 = time.perf_counter()
         try:
             if self._queue is None:
@@ -173,7 +173,7 @@ class MapCloudBuilder:
                     self._take(kf)
                 else:
                     self.skips.add(self.failed, later=True)
-            except Exception as e:  # the map is a view of the run: said once, never raised into it
+            except Exception as e:  # the map is a view of the run: one warning, never raised into the run
                 self.failed = f"failed from keyframe {kf.id} on ({e.__class__.__name__}: {e})"
                 self.skips.add(self.failed, later=True)
             finally:

@@ -61,7 +61,7 @@ class KeyframeAlbum:
     def __call__(self, kf) -> None:
         """Keep keyframe ``kf`` (the pipeline calls this before it drops the keyframe's image).
 
-        A write error stops the album (said once, at output time): pictures are a nicety,
+        A write error stops the album (one warning, at output time): pictures are a nicety,
         the run goes on."""
         if kf.image is None or kf.features is None or self.failed is not None:
             return

@@ -211,7 +211,8 @@ class Pipeline:
             with self.timer("backend"):
                 self.graph.add_keyframe(kf.id, kf.stamp, kf.T_world_body, kf.covariance_since_last)
         finally:
-            if len(self.graph) > len(self.keyframes):  # the graph took it: so does the list
+            # if the pose graph took this keyframe (even when interrupted just after), the list keeps it too
+            if len(self.graph) > len(self.keyframes):
                 self.keyframes.append(kf)
         t1 = time.perf_counter()
         accepted = []
@@ -257,7 +258,7 @@ class Pipeline:
         try:
             with self.timer("keyframe_sink"):
                 sink(kf)
-        except Exception as e:  # pictures are a nicety: never cost the run (said once)
+        except Exception as e:  # pictures are optional: a failure logs one warning and the run goes on
             log.warning("keyframe %d not kept for the loop pictures (%s); no more are kept", kf.id, e)
             self.keyframe_sink = None
 
@@ -265,7 +266,7 @@ class Pipeline:
         try:
             with self.timer("map_cloud"):
                 self.map_cloud.add_keyframe(kf)
-        except Exception as e:  # the map is a view of the run: never cost the run (said once)
+        except Exception as e:  # the map cloud is optional: a failure logs one warning and the run goes on
             log.warning("keyframe %d not added to the map cloud (%s); no more are added", kf.id, e)
             self.map_cloud.close()
             self.map_cloud = None
@@ -274,7 +275,7 @@ class Pipeline:
         """Loop detection for a keyframe already in the graph; an interrupt inside it drops its candidates."""
         self.detector.last_part_seconds = {}
         if self._detector_stale:
-            if not self._stale_warned:  # said once, when a keyframe actually goes without detection
+            if not self._stale_warned:  # warn once, when a keyframe actually goes without loop detection
                 self._stale_warned = True
                 log.warning("no loop detection from keyframe %d on: an earlier interrupt inside the loop "
                             "detector left its database incomplete", kf.id)

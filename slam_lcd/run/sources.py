@@ -153,8 +153,8 @@ def visual_odometry(log_path, topics: Topics, cfg, calibrated=None, right_topic:
 
 
 def stereo_frames(reader, right: str, calibrated, rectifier, vo_odometry):
-    """The pairing of left and right images that gives the loop poses stereo points, or None (said)
-    when the baseline of the pair is unknown."""
+    """The pairing of left and right images that gives the loop poses stereo points, or None (with a
+    warning that says why) when the baseline of the pair is unknown."""
     if rectifier is not None:
         baseline = rectifier.camera.baseline
     else:

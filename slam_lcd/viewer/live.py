@@ -10,7 +10,7 @@ run's outputs are written, :meth:`LiveRecorder.finish` adds what ``slam-lcd view
 run folder (corrected trajectory, keyframe frusta, loops by the back end's verdict, map cloud,
 ATE over time) to the same recording, and the ``.rrd`` is renamed into place.
 
-Why it never costs the run: an error while logging is said once and logging stops; the album
+Why it never costs the run: an error while logging is reported in one warning and logging stops; the album
 and the run go on.
 """
 from __future__ import annotations
