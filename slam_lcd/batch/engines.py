@@ -85,17 +85,20 @@ class LocalPoolEngine(Engine):
         ex = ProcessPoolExecutor(max_workers=min(self.workers, len(tasks)) or 1, mp_context=ctx,
                                  initializer=pool_worker_init, initargs=(stop, shared.threads, os.getpid()))
         futures = {ex.submit(run_task, t, shared): t for t in tasks}
-        pending = set(futures)
+        # every future whose row has not been handed on yet: a Ctrl-C while one row is handed on
+        # leaves the others that finished in the same wait to the handler below, not lost
+        unreported = set(futures)
         try:
-            while pending:
-                done, pending = wait(pending, return_when=FIRST_COMPLETED)
+            while unreported:
+                done, _ = wait(unreported, return_when=FIRST_COMPLETED)
                 for f in done:
+                    unreported.discard(f)
                     on_row(_future_row(f, futures[f]))
         except KeyboardInterrupt:
             stop.set()  # workers: running logs get one SIGINT each, tasks not started do not run
-            for f in pending:
+            for f in unreported:
                 f.cancel()
-            for f in pending:
+            for f in unreported:
                 if not f.cancelled():
                     on_row(_future_row(f, futures[f]))
             raise

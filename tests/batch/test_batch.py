@@ -210,6 +210,24 @@ def _check_interrupted(res, out: Path, cfg, logs: Path) -> None:
     assert "Interrupted (Ctrl-C)" in (out / "summary.md").read_text()
 
 
+def test_ctrl_c_on_the_first_of_two_logs_finished_together_keeps_both(batch_inputs, tmp_path, monkeypatch):
+    """Two logs that finish within one wait of the pool, a Ctrl-C while the first row is handed on: the
+    second log's finished set is reported ``ok``, not lost as ``cancelled`` beside its complete folder."""
+    import concurrent.futures as cf
+
+    from slam_lcd.batch import run_batch
+
+    real_wait = cf.wait
+    monkeypatch.setattr(cf, "wait", lambda fs, return_when=None: real_wait(fs, return_when=cf.ALL_COMPLETED))
+    logs, cfg = batch_inputs
+    out = tmp_path / "out"
+    names = GOOD[:2]
+    res = run_batch([log_path(logs, n) for n in names], out, cfg, workers=2, progress=False,
+                    on_row=_interrupt_after_first())
+    assert res.interrupted
+    assert [r["status"] for r in res.rows] == ["ok", "ok"], [(r["name"], r["status"]) for r in res.rows]
+
+
 def test_ctrl_c_on_local_pool_keeps_finished_logs(batch_inputs, tmp_path):
     from slam_lcd.batch import run_batch
 
