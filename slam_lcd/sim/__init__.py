@@ -26,7 +26,7 @@ from .loops import (
     write_loop_pairs,
 )
 from .odometry import OdometryNoise, end_drift, simulate_odometry
-from .render import render
+from .renderer import render
 from .rig import T_body_camera, T_left_right, demo_camera
 from .sessions import SESSIONS, SessionPreset, session_preset, session_start_ns, world_frame
 from .surfaces import demo_surfaces, world_surfaces

@@ -45,7 +45,7 @@ from .demo_writers import demo_io_conf, write_demo_folder, write_demo_log
 from .image_noise import NOISE_BANK, add_noise, noise_bank
 from .loops import gt_loop_pairs, write_loop_pairs
 from .odometry import end_drift, simulate_odometry
-from .render import render
+from .renderer import render
 from .sessions import session_preset, session_start_ns, world_frame
 from .trajectory import KINDS, START_AT, START_NS, make_path, path_trajectory, sample_stamps
 

@@ -41,7 +41,7 @@ from ..types import CameraModel
 from . import rig
 from .image_noise import NOISE_BANK, add_noise
 from .kinect import KINECT_V1, KinectDepthModel, depth_mm
-from .render import render
+from .renderer import render
 
 LAYOUTS = ("demo", "euroc", "tum", "kitti")
 
