@@ -20,7 +20,7 @@ import numpy as np
 from slam_lcd.eval.align import umeyama
 from slam_lcd.frontend import FrontendConfig, RgbdOdometry, StereoOdometry
 from slam_lcd.geometry import inv, rotation_angle, se3_log
-from slam_lcd.sim.render import render
+from slam_lcd.sim.renderer import render
 from slam_lcd.sim.rig import STEREO_BASELINE, T_body_camera, T_left_right, demo_camera
 from slam_lcd.sim.trajectory import make_trajectory
 from slam_lcd.sim.world import build_world

@@ -18,11 +18,9 @@ import math
 from pathlib import Path
 
 from ..errors import InputError
-from ..eval import align_mode_from_flags
-from ..eval.errors import AlignmentError, AssociationError
-from ..eval.relations import APE_RELATIONS, RPE_RELATIONS, ape_by_relation, rpe_by_relation
+from ..eval.relation_names import APE_RELATIONS, RPE_RELATIONS
 from ..files.atomic import write_text
-from ..io.trajectory_files import FORMATS
+from ..io.trajectory_formats import FORMATS
 from .util import check_outputs, write_guard
 
 DELTA_UNIT_NAMES = {"f": "f", "frames": "f", "m": "m", "d": "d", "deg": "d", "r": "r", "rad": "r"}
@@ -130,6 +128,8 @@ def _check_args(args) -> None:
 @contextlib.contextmanager
 def _naming_both(args):
     """Association and alignment errors concern both trajectories: name both files."""
+    from ..eval.errors import AlignmentError, AssociationError
+
     try:
         yield
     except (AssociationError, AlignmentError) as e:
@@ -145,6 +145,8 @@ def _short(spec: str) -> str:
 
 
 def run(args) -> int:
+    from ..eval.align import align_mode_from_flags
+    from ..eval.relations import ape_by_relation, rpe_by_relation
     from ..sensors.trajectories import load_trajectory_source
 
     _check_args(args)

@@ -17,14 +17,14 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import numpy as np
-
 from ..config import save_config, validate_config
 from ..errors import InputError
 from ..files.atomic import write_text
 from .run import add_alias, add_config_args, config_from_args
 
 if TYPE_CHECKING:
+    import numpy as np
+
     from ..io.image_folder import Frame
 
 log = logging.getLogger(__name__)
@@ -196,6 +196,8 @@ def _gt_from_trajectory(path, stamps, args) -> tuple[np.ndarray, np.ndarray]:
 
     Poses are associated to the frames by nearest stamp (within 50 ms).
     """
+    import numpy as np  # here: the parser loads this module for every command, numpy only for this
+
     from ..eval.loop_detection import loops_from_poses
     from ..io.trajectory_files import read_trajectory
 

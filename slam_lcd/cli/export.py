@@ -9,7 +9,7 @@ The output is written atomically and never onto the input.
 from __future__ import annotations
 
 from ..errors import InputError
-from ..io.trajectory_files import FORMATS, write_trajectory
+from ..io.trajectory_formats import FORMATS
 from .run import add_alias
 from .util import check_outputs, write_guard
 
@@ -47,6 +47,7 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
+    from ..io.trajectory_files import write_trajectory
     from ..sensors.trajectories import load_trajectory_source
 
     if args.out and args.out_opt and args.out != args.out_opt:

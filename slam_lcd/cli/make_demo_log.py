@@ -4,8 +4,6 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..errors import InputError
-from ..sim import make_demo_log
-from ..sim.demo_log import loops_path_for
 from ..sim.sessions import SESSIONS
 from .util import check_outputs, parse_size, write_guard
 
@@ -96,6 +94,7 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from ..io.writers import format_for_path
+    from ..sim.demo_log import loops_path_for, make_demo_log
     from ..sim.layouts import camchain_path_for
 
     w, h = args.size

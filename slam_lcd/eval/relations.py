@@ -34,9 +34,8 @@ from ..types import Trajectory
 from .align import Alignment, fit_alignment
 from .associate import associate
 from .errors import AlignmentError, AssociationError
+from .relation_names import APE_RELATIONS, RPE_RELATIONS
 
-APE_RELATIONS = ("full", "trans_part", "rot_part", "angle_deg", "angle_rad", "point_distance")
-RPE_RELATIONS = (*APE_RELATIONS, "point_distance_error_ratio")
 RELATION_UNITS = {"full": "", "trans_part": "m", "rot_part": "", "angle_deg": "deg", "angle_rad": "rad",
                   "point_distance": "m", "point_distance_error_ratio": "%"}
 RELATION_TITLES = {  # evo's PoseRelation values (used in titles and saved results)

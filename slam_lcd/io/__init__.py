@@ -19,7 +19,7 @@ _LAZY = {
     "RawMessage": ".reader",
     "TopicInfo": ".reader",
     "open_log": ".reader",
-    "FORMATS": ".trajectory_files",
+    "FORMATS": ".trajectory_formats",
     "detect_trajectory_format": ".trajectory_files",
     "read_euroc": ".trajectory_files",
     "read_kitti": ".trajectory_files",

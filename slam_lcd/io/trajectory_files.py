@@ -43,6 +43,7 @@ from ..files.atomic import atomic_write
 from ..geometry import nearest_rotation, quat_to_rot, rot_to_quat
 from ..geometry import rot_to_quat as rotation_to_quat  # noqa: F401  (public name kept for callers)
 from ..types import Trajectory
+from .trajectory_formats import FORMATS
 
 log = logging.getLogger(__name__)
 
@@ -60,7 +61,6 @@ __all__ = [
     "write_tum",
 ]
 
-FORMATS = ("tum", "kitti", "euroc")
 _EXTENSIONS = {".tum": "tum", ".kitti": "kitti", ".csv": "euroc"}
 _QUAT_MIN_NORM = 1e-6
 # quaternions written with 4 decimals are off unit length by ~1e-4; more than this is a broken file

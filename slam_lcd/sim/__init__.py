@@ -6,7 +6,7 @@ written as real log files. Public API:
 
 - :func:`build_world` / :class:`DemoWorld`: textured planes (corridors around two blocks), in an
   appearance state (``day``, ``night``, ``moved``, ``renovated``: :mod:`slam_lcd.sim.appearance`);
-- :func:`render`: pinhole view -> (uint8 image, float32 metric depth);
+- :func:`render` (in :mod:`.renderer`): pinhole view -> (uint8 image, float32 metric depth);
 - :func:`demo_camera`, :func:`T_body_camera`: the sensor rig;
 - :func:`make_trajectory` / :func:`make_path`: laps around block A or a figure eight;
 - :func:`simulate_odometry`: drifting odometry with honest covariance;
@@ -15,29 +15,46 @@ written as real log files. Public API:
 - :data:`SESSIONS` / :func:`session_preset`: the world recorded as several sessions;
 - :func:`make_demo_log`: everything written as MCAP / rosbag2 / ROS1 bag / folder;
 - :func:`world_surfaces` / :func:`demo_surfaces`: the world's planes as rectangles (the map cloud's truth).
-"""
-from .demo_log import DemoLogInfo, loops_path_for, make_demo_log
-from .loops import (
-    gt_cross_pairs,
-    gt_loop_pairs,
-    keyframe_indices,
-    read_loop_pairs,
-    shared_place_fraction,
-    write_loop_pairs,
-)
-from .odometry import OdometryNoise, end_drift, simulate_odometry
-from .render import render
-from .rig import T_body_camera, T_left_right, demo_camera
-from .sessions import SESSIONS, SessionPreset, session_preset, session_start_ns, world_frame
-from .surfaces import demo_surfaces, world_surfaces
-from .trajectory import DemoPath, make_path, make_trajectory
-from .world import DemoWorld, Plane, build_world
 
-__all__ = [
-    "DemoLogInfo", "DemoPath", "DemoWorld", "OdometryNoise", "Plane", "SESSIONS", "SessionPreset", "T_body_camera",
-    "demo_surfaces", "world_surfaces",
-    "T_left_right", "build_world", "demo_camera", "end_drift", "gt_cross_pairs", "gt_loop_pairs", "keyframe_indices",
-    "loops_path_for", "make_demo_log", "make_path", "make_trajectory", "read_loop_pairs", "render",
-    "session_preset", "session_start_ns", "shared_place_fraction", "simulate_odometry", "world_frame",
-    "write_loop_pairs",
-]
+Names are imported on first use (PEP 562), as in the other packages: the command line reads the
+session presets (:mod:`.sessions`) without loading the renderer, OpenCV, numpy or scipy.
+"""
+from __future__ import annotations
+
+from ..runtime.lazy_names import lazy_getattr
+
+_LAZY = {
+    "DemoLogInfo": ".demo_info",
+    "loops_path_for": ".demo_log",
+    "make_demo_log": ".demo_log",
+    "gt_cross_pairs": ".loops",
+    "gt_loop_pairs": ".loops",
+    "keyframe_indices": ".loops",
+    "read_loop_pairs": ".loops",
+    "shared_place_fraction": ".loops",
+    "write_loop_pairs": ".loops",
+    "end_drift": ".odometry",
+    "OdometryNoise": ".odometry",
+    "simulate_odometry": ".odometry",
+    "render": ".renderer",
+    "demo_camera": ".rig",
+    "T_body_camera": ".rig",
+    "T_left_right": ".rig",
+    "session_preset": ".sessions",
+    "session_start_ns": ".sessions",
+    "SessionPreset": ".sessions",
+    "SESSIONS": ".sessions",
+    "world_frame": ".sessions",
+    "demo_surfaces": ".surfaces",
+    "world_surfaces": ".surfaces",
+    "DemoPath": ".trajectory",
+    "make_path": ".trajectory",
+    "make_trajectory": ".trajectory",
+    "build_world": ".world",
+    "DemoWorld": ".world",
+    "Plane": ".world",
+}
+
+__all__ = [*_LAZY]
+
+__getattr__ = lazy_getattr(__name__, _LAZY, globals())

@@ -21,11 +21,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .world_seeds import LOOKALIKE_SEED as LOOKALIKE_SEED  # public here too: the ranges this module places
+from .world_seeds import OTHER_PLACE_SEED as OTHER_PLACE_SEED
+
 HEIGHT = 3.0  # wall height (m)
 OUTER = (0.0, 0.0, 25.0, 14.0)  # x0, y0, x1, y1 of the outer walls
 BLOCKS = ((3.0, 3.0, 11.0, 11.0), (14.0, 3.0, 22.0, 11.0))  # solid blocks A and B
-OTHER_PLACE_SEED = 1000  # world seeds from here to LOOKALIKE_SEED are another building on the same corridors
-LOOKALIKE_SEED = 2000  # world seeds from here on are the demo building with a look-alike corridor
 # the look-alike corridor: the west corridor beside block A (x0, y0, x1, y1) stands again, shifted
 # this far east (x, y; metres), as the east corridor beside block B
 LOOKALIKE_P1 = (0.0, 3.0, 3.0, 11.0)

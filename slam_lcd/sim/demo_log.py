@@ -37,6 +37,8 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError
+from ..runtime.progress import progress_bar
+from . import layouts as L
 from . import rig
 from .appearance import check_appearance
 from .demo_info import DemoLogInfo
@@ -45,7 +47,7 @@ from .demo_writers import demo_io_conf, write_demo_folder, write_demo_log
 from .image_noise import NOISE_BANK, add_noise, noise_bank
 from .loops import gt_loop_pairs, write_loop_pairs
 from .odometry import end_drift, simulate_odometry
-from .render import render
+from .renderer import render
 from .sessions import session_preset, session_start_ns, world_frame
 from .trajectory import KINDS, START_AT, START_NS, make_path, path_trajectory, sample_stamps
 
@@ -258,8 +260,6 @@ def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int |
 
     if kind not in KINDS:
         raise InputError(f"unknown trajectory kind {kind!r}; use one of {', '.join(KINDS)}")
-    from . import layouts as L  # lazy: this module is loaded while the command line is built (--session)
-
     if layout not in L.LAYOUTS:
         raise InputError(f"unknown demo-log layout {layout!r}; use one of {', '.join(L.LAYOUTS)}")
     cam_rate, gt_rate = L.rates(layout)
@@ -282,8 +282,6 @@ def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int |
     frames_iter = render_frames(sc, color=color, depth=depth, stereo=stereo, seed=seed, workers=workers,
                                 render_one=render_one)
     if progress:
-        from ..runtime.progress import progress_bar  # lazy: like layouts above
-
         frames_iter = progress_bar(frames_iter, total=len(sc.cam_stamps), unit="frame", desc="rendering")
     try:
         if fmt == "folder":

@@ -25,7 +25,7 @@ from .demo_scenario import DemoScenario
 
 def write_demo_log(out, fmt, sc: DemoScenario, frames_iter, *, depth, stereo, compressed, color, io_conf):
     """The demo topics as a ``fmt`` log at ``out``, in time order (camera first at equal stamps)."""
-    from ..io import message_builders as M  # lazy: rosbags (sim loads with the command line)
+    from ..io import message_builders as M  # lazy: rosbags, which the folder format does without
     from ..io.writers import open_writer
 
     conf = demo_io_conf(io_conf)

@@ -18,7 +18,7 @@ from .. import __version__
 from ..features import FeatureCache
 from ..features.weights import cache_dir
 from ..types import CameraModel, Keyframe, Trajectory
-from .render import render
+from .renderer import render
 from .rig import T_body_camera, T_left_right, demo_camera
 from .trajectory import make_trajectory
 from .world import build_world

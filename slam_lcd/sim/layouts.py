@@ -41,7 +41,7 @@ from ..types import CameraModel
 from . import rig
 from .image_noise import NOISE_BANK, add_noise
 from .kinect import KINECT_V1, KinectDepthModel, depth_mm
-from .render import render
+from .renderer import render
 
 LAYOUTS = ("demo", "euroc", "tum", "kitti")
 
@@ -197,7 +197,7 @@ def T_kinect_optical() -> np.ndarray:
 # ----------------------------------------------------------------------------- writing
 def write_layout_log(out, fmt, layout: str, sc, frames_iter, *, conf, er: EurocRig | None) -> dict:
     """Write the frames and ground truth of ``sc`` as ``layout`` lays out its bags; returns {topic: (type, count)}."""
-    from ..io import message_builders as M  # lazy: rosbags (sim loads with the command line)
+    from ..io import message_builders as M  # lazy: rosbags, which a plain demo log and the folder format do without
     from ..io.writers import open_writer
 
     types: dict[str, str] = {}

@@ -1,6 +1,6 @@
 """The look-alike world: the demo building with its west corridor repeated as the east corridor.
 
-World seeds from :data:`~slam_lcd.sim.building.LOOKALIKE_SEED` on build the demo building
+World seeds from :data:`~slam_lcd.sim.world_seeds.LOOKALIKE_SEED` on build the demo building
 (textures and lamp states from the seed, as below 1000) and make the east corridor beside
 block B (P2: x 22-25 m, y 3-11 m) a copy of the west corridor beside block A (P1: x 0-3 m,
 y 3-11 m) shifted 22 m east:

@@ -30,11 +30,11 @@ world in its ``day`` appearance; ``appearance=`` (``night``, ``moved``, ``renova
 :mod:`slam_lcd.sim.appearance`) records it in another. Every field is only a default: explicit
 arguments override it.
 
-World seeds 1000-1999 (:data:`slam_lcd.sim.building.OTHER_PLACE_SEED` on) are another
+World seeds 1000-1999 (:data:`slam_lcd.sim.world_seeds.OTHER_PLACE_SEED` on) are another
 building on the demo corridors: lamps, floor and ceiling grids, wall materials, decal
 sites, pillars and corner panels stand elsewhere, so session 4 shares neither textures nor
 the 3-D places of its keypoints with sessions 1-3 (below 1000 only textures change).
-World seeds from 2000 on (:data:`slam_lcd.sim.building.LOOKALIKE_SEED`) are the demo building
+World seeds from 2000 on (:data:`slam_lcd.sim.world_seeds.LOOKALIKE_SEED`) are the demo building
 with its west corridor beside block A (P1) repeated as the east corridor beside block B (P2),
 :mod:`slam_lcd.sim.lookalike`: sessions 6-8 record it. Session 6 drives through P1 and never
 P2, session 7 through P2 and never P1, both north through the middle corridor; session 8, to
@@ -45,9 +45,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ..errors import InputError
-from . import rig
-from .building import LOOKALIKE_SEED
-from .trajectory import START_NS
+from .world_seeds import LOOKALIKE_SEED
 
 DAY_NS = 86_400 * 1_000_000_000
 
@@ -99,9 +97,13 @@ def session_preset(session: int) -> SessionPreset:
 
 def session_start_ns(session: int) -> int:
     """First stamp of a session: ``session`` days after the plain demo log's."""
+    from .trajectory import START_NS  # lazy: numpy, which the presets do without (the command line reads them)
+
     return START_NS + int(session) * DAY_NS
 
 
 def world_frame(world_seed: int) -> str:
     """Frame of a session's ground truth: ``world`` for world 0, ``world_<seed>`` for another world."""
+    from . import rig  # lazy: numpy, which the presets do without (the command line reads them)
+
     return rig.WORLD_FRAME if int(world_seed) == 0 else f"{rig.WORLD_FRAME}_{int(world_seed)}"

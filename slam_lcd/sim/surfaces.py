@@ -29,7 +29,7 @@ def moved(r: Rectangles, T: np.ndarray) -> Rectangles:
 def demo_surfaces(seed: int = 0) -> tuple[str, dict[str, Rectangles]]:
     """``(name, {ground-truth frame: surfaces in it})`` as ``OutputOptions(surfaces=...)`` takes them: the demo
     logs' ground truth is in ``world``, the EuRoC layout's in a shifted, turned ``leica`` frame."""
-    from .layouts import T_LEICA_WORLD  # lazy: the sim package, this module with it, loads with the command line
+    from .layouts import T_LEICA_WORLD  # lazy: scipy (the layouts' geometry), which the surfaces do without
 
     r = world_surfaces(seed)
     return f"demo world {int(seed)}", {"world": r, "leica": moved(r, T_LEICA_WORLD)}

@@ -278,7 +278,7 @@ def build_world(seed: int = 0, appearance: str = "day") -> DemoWorld:
     """Build (and cache) the demo world for ``seed`` in an appearance state; ~1 s, ~100 MB of textures.
 
     Seeds from :data:`OTHER_PLACE_SEED` on build another building on the same corridors,
-    seeds from :data:`~slam_lcd.sim.building.LOOKALIKE_SEED` on the demo building with a
+    seeds from :data:`~slam_lcd.sim.world_seeds.LOOKALIKE_SEED` on the demo building with a
     look-alike corridor (see :func:`building` and :mod:`slam_lcd.sim.lookalike`).
     ``appearance``: ``day`` (the world as the seed paints it), ``night``, ``moved`` or
     ``renovated`` (:mod:`slam_lcd.sim.appearance`)."""

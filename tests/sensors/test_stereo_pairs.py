@@ -12,7 +12,7 @@ from slam_lcd.lcd.geometry import keyframe_points3d
 from slam_lcd.sensors.rectify import stereo_rectifier
 from slam_lcd.sensors.stereo_pairs import StereoFrames
 from slam_lcd.sim import rig
-from slam_lcd.sim.render import render
+from slam_lcd.sim.renderer import render
 from slam_lcd.sim.trajectory import START_NS, make_path, path_trajectory
 from slam_lcd.sim.world import build_world
 from slam_lcd.types import CameraModel, Features, Keyframe

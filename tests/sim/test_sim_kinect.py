@@ -84,7 +84,7 @@ def test_exact_depth_flag(tmp_path, capsys):
     assert "Kinect" not in capsys.readouterr().out
     from slam_lcd.sim.demo_log import _scenario
     from slam_lcd.sim.layouts import rates
-    from slam_lcd.sim.render import render  # exact: the rendered depth in millimetres
+    from slam_lcd.sim.renderer import render  # exact: the rendered depth in millimetres
 
     sc = _scenario(3, 0, "laps", 2.0, 160, 120, *rates("tum"), False)
     _, dep = render(sc.world, sc.camera, sc.gt_cam.poses[0] @ sc.T_bc, epoch=float(sc.laps[0]), color=True)
