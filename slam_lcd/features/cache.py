@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ..files.atomic import atomic_path
+from ..files.npz import save_npz
 from ..types import Features
 from .extract import Extractor
 from .weights import cache_dir
@@ -123,14 +124,13 @@ class FeatureCache:
         p = self.path(log, topic, stamp)
         with atomic_path(p) as tmp:
             with open(tmp, "wb") as fh:
-                np.savez(
-                    fh,
-                    keypoints=feats.keypoints,
-                    scores=feats.scores,
-                    descriptors=feats.descriptors,
-                    image_size=np.array(feats.image_size, np.int64),
-                    kind=np.array(feats.kind),
-                )
+                save_npz(fh, {
+                    "keypoints": feats.keypoints,
+                    "scores": feats.scores,
+                    "descriptors": feats.descriptors,
+                    "image_size": np.array(feats.image_size, np.int64),
+                    "kind": np.array(feats.kind),
+                })
         return p
 
     def extract(self, log: str | Path, topic: str, stamp: int, image: np.ndarray) -> Features:

@@ -101,7 +101,9 @@ STORED = frozenset({"keypoints", "descriptors", "scales", "points3d", "centres_q
 
 
 def _write_npz(path: Path, arrays: dict[str, np.ndarray]) -> dict:
-    """Write arrays to ``path`` (a fresh name), fsync; returns its manifest entry."""
+    """Write arrays to ``path`` (a fresh name), fsync; returns its manifest entry. An interrupt held back
+    while the archive is written (:mod:`slam_lcd.files.npz`) is raised after it, and the ``finally``
+    removes the file."""
     tmp = path.with_name(f".{path.name}.tmp")
     try:
         with open(tmp, "wb") as fh:

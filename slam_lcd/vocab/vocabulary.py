@@ -17,6 +17,7 @@ import numpy as np
 
 from ..errors import InputError, VocabularyError
 from ..files.atomic import atomic_write
+from ..files.npz import save_npz
 from ..runtime.thread_limits import blas_limit
 from .config import VocabConfig
 from .descriptors import as_unit_vectors, descriptor_kind
@@ -101,7 +102,7 @@ class Vocabulary:
             arrays[f"centres_{lvl}"] = c
             arrays[f"parents_{lvl}"] = p.astype(np.int32)
         with atomic_write(path, "wb") as fh:
-            np.savez(fh, **arrays)
+            save_npz(fh, arrays)
 
     @classmethod
     def load(cls, path: str | Path) -> Vocabulary:

@@ -655,3 +655,29 @@ def test_a_reader_racing_a_writers_commit_reads_a_whole_map(world, mapdir, monke
     monkeypatch.setattr(store, "read_graph", racing)
     m2 = Map.open(mapdir)
     assert m2.session_names == ["s1", "s2"] and len(calls) == 2, calls
+
+
+def test_an_interrupt_inside_the_archive_writer_stays_an_interrupt(tmp_path, monkeypatch):
+    """A Ctrl-C that lands while zipfile closes a member of a map file is raised as KeyboardInterrupt once the
+    file is complete (not zipfile's ValueError about an open writing handle), and the half-written file goes."""
+    import zipfile
+
+    from slam_lcd.map import store
+
+    real_close = zipfile._ZipWriteFile.close
+    fired = []
+
+    def close(self):
+        if not fired:
+            fired.append(True)
+            os.kill(os.getpid(), signal.SIGINT)
+        return real_close(self)
+
+    monkeypatch.setattr(zipfile._ZipWriteFile, "close", close)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)  # what the command line runs with
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            store._write_npz(tmp_path / "a.npz", {"poses": np.zeros((4, 4, 4)), "ids": np.arange(4)})
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert fired and list(tmp_path.iterdir()) == []
