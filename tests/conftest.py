@@ -11,6 +11,7 @@ import pytest
 from support.map_logs import visits
 from support.offline import offline_env
 from support.paths import REPO
+from support.slow_files import SLOW_FILES
 
 
 def pytest_configure(config):
@@ -29,6 +30,14 @@ def pytest_configure(config):
 
     torch.set_num_threads(1)
     threadpool_limits(1)
+
+
+
+
+def pytest_collection_modifyitems(session, config, items):
+    """The slow files first (``SLOW_FILES``); the others keep their order."""
+    rank = {name: i for i, name in enumerate(SLOW_FILES)}
+    items.sort(key=lambda item: rank.get(item.nodeid.split("::")[0].removeprefix("tests/"), len(rank)))
 
 
 def shared_root() -> Path | None:

@@ -3,6 +3,7 @@ of the folders that cut across packages (CONTRIBUTING.md, "Tests")."""
 from __future__ import annotations
 
 from support.paths import REPO
+from support.slow_files import SLOW_FILES
 
 TESTS = REPO / "tests"
 ACROSS = {"base", "e2e", "project", "support"}  # top-level modules, as users run it, the checkout, helpers
@@ -23,3 +24,9 @@ def test_test_files_have_unique_names():
     """pytest imports test files by their base name (tests/ has no __init__.py): two equal names collide."""
     names = [p.name for p in TESTS.rglob("test_*.py")]
     assert len(names) == len(set(names))
+
+
+def test_the_slow_files_named_in_conftest_exist():
+    """tests/conftest.py hands these files (support.slow_files) to the workers first; a renamed one
+    would silently lose its place."""
+    assert [f for f in SLOW_FILES if not (TESTS / f).is_file()] == []
