@@ -43,6 +43,5 @@ def save_npz(fh: BinaryIO, arrays: Mapping[str, Any]) -> None:
     """:func:`numpy.savez` (every member stored) with interrupts held back until the archive is whole.
 
     ``Any``: numpy's stub of savez has ``allow_pickle`` (numpy >= 2.1), a bool that ``**arrays`` could fill."""
-    members: dict[str, Any] = dict(arrays)
     with defer_sigint():
-        np.savez(fh, **members)
+        np.savez(fh, **arrays)

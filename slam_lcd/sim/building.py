@@ -21,8 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .world_seeds import LOOKALIKE_SEED as LOOKALIKE_SEED  # public here too: the ranges this module places
-from .world_seeds import OTHER_PLACE_SEED as OTHER_PLACE_SEED
+from .world_seeds import LOOKALIKE_SEED, OTHER_PLACE_SEED
 
 HEIGHT = 3.0  # wall height (m)
 OUTER = (0.0, 0.0, 25.0, 14.0)  # x0, y0, x1, y1 of the outer walls

@@ -42,8 +42,8 @@ from . import lookalike
 from . import textures as tx
 from .appearance import Look, check_appearance
 from .building import BLOCKS, HEIGHT, OUTER, Building, building, wall_ends
-from .building import OTHER_PLACE_SEED as OTHER_PLACE_SEED  # public here too: where the world's seeds split
 from .lighting import DAY, Light, bake, mips
+from .world_seeds import OTHER_PLACE_SEED as OTHER_PLACE_SEED  # public here too: where the world's seeds split
 
 WALL_RES = 160.0  # texels per metre on walls and panels (6 mm texels)
 FLOOR_RES = 80.0

@@ -11,7 +11,6 @@ import json
 import zipfile
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -90,8 +89,7 @@ class Vocabulary:
     # ----------------------------------------------------------------- files
     def save(self, path: str | Path) -> None:
         """Write an ``.npz`` (no pickled objects) atomically."""
-        # Any: numpy's stub of savez has allow_pickle (numpy >= 2.1), a bool that **arrays could fill for mypy
-        arrays: dict[str, Any] = {
+        arrays: dict[str, np.ndarray] = {
             "format": np.array(FORMAT), "version": np.array(VERSION),
             "n_levels": np.array(self.tree.depth), "idf": self.idf, "word_counts": self.word_counts,
             "word_images": self.word_images, "n_images": np.array(self.n_images),

@@ -7,9 +7,10 @@ import pytest
 from test_sim_render import _body, _orb_inliers
 
 from slam_lcd.sim import SESSIONS, T_body_camera, build_world, demo_camera, gt_cross_pairs, keyframe_indices, render
-from slam_lcd.sim.building import LOOKALIKE_P1, LOOKALIKE_SEED, LOOKALIKE_SHIFT, building
+from slam_lcd.sim.building import LOOKALIKE_P1, LOOKALIKE_SHIFT, building
 from slam_lcd.sim.demo_log import session_scenario
 from slam_lcd.sim.lookalike import to_p1
+from slam_lcd.sim.world_seeds import LOOKALIKE_SEED
 from slam_lcd.types import Trajectory
 
 TBC = T_body_camera()
