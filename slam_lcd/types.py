@@ -101,6 +101,8 @@ class Keyframe:
     features: Features | None = None
     landmarks: np.ndarray | None = None  # (N, 3) camera-frame points per keypoint (NaN where unknown)
     colour: np.ndarray | None = None  # the colour image (RGB uint8) when the camera has colour: the map cloud's colours
+    # the odometry broke before this keyframe (tracking lost): it opens a new segment of the pose graph
+    segment_start: bool = False
 
 
 @dataclass

@@ -18,6 +18,13 @@ class BackendConfig:
     # Prior that anchors the first keyframe (gauge freedom of the pose graph).
     prior_sigma_rot: float = ranged(1e-4, "(0, inf)")
     prior_sigma_trans: float = ranged(1e-4, "(0, inf)")
+    # Weak prior on the first keyframe of each segment after a tracking loss (slam_lcd.backend.segments):
+    # fixes the segment's gauge without pulling a joined segment (a loop's information is 1e4-1e6 x larger);
+    # 10 m / 1 rad keeps iSAM2's Cholesky factorisation well conditioned (100 m / 3 rad does not).
+    segment_prior_sigma_rot: float = ranged(1.0, "(0, inf)")
+    segment_prior_sigma_trans: float = ranged(10.0, "(0, inf)")
+    # Two segments no accepted loop connects are joined by at least this many mutually consistent loops.
+    segment_join_min_loops: int = ranged(2, "[1, inf)")
     # Odometry noise used when a keyframe comes without a 6x6 covariance (per keyframe step).
     odom_sigma_rot: float = ranged(0.01, "(0, inf)")
     odom_sigma_trans: float = ranged(0.05, "(0, inf)")

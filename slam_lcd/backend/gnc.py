@@ -14,6 +14,8 @@ from dataclasses import dataclass
 import gtsam
 import numpy as np
 
+from .poses import lm_params
+
 
 @dataclass
 class GncResult:
@@ -24,12 +26,12 @@ class GncResult:
 
 def gnc_loop_weights(known: gtsam.NonlinearFactorGraph, loops: Sequence, initial: gtsam.Values, *,
                      inlier_probability: float = 0.99, max_iterations: int = 100,
-                     gaussian_loops: Sequence | None = None) -> GncResult:
+                     gaussian_loops: Sequence | None = None, qr: bool = False) -> GncResult:
     """GNC-TLS over ``known`` (all known inliers) + ``loops``; weights of the loop factors.
 
     ``gaussian_loops`` (same length as ``loops``): the loops without robust kernel, for the
     residual figures (default: ``loops``). A ``known`` graph may contain null slots (removed
-    iSAM2 factors); they are skipped.
+    iSAM2 factors); they are skipped. ``qr``: QR factorisation (:func:`.poses.lm_params`).
     """
     graph = gtsam.NonlinearFactorGraph()
     for i in range(known.size()):
@@ -39,7 +41,7 @@ def gnc_loop_weights(known: gtsam.NonlinearFactorGraph, loops: Sequence, initial
     n_known = graph.size()
     for f in loops:
         graph.push_back(f)
-    params = gtsam.GncLMParams()
+    params = gtsam.GncLMParams(lm_params(qr)) if qr else gtsam.GncLMParams()
     params.setLossType(gtsam.GncLossType.TLS)
     params.setKnownInliers(list(range(n_known)))
     if max_iterations != 100:  # GTSAM prints a warning when it is changed

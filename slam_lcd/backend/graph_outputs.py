@@ -9,6 +9,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import gtsam
 import numpy as np
 
 from ..types import Trajectory
@@ -17,8 +18,6 @@ from .poses import values_to_array
 from .records import ACCEPTED
 
 if TYPE_CHECKING:
-    import gtsam
-
     from .gate import ChainRelatives
     from .records import LoopEntry
 
@@ -48,6 +47,16 @@ class GraphOutputs:
         if self._key_fn is None and not self._user_graph:
             return values_to_array(values, len(self._ids))
         return np.array([values.atPose3(k).matrix() for k in self._keys]).reshape(-1, 4, 4)
+
+    def current_values(self) -> gtsam.Values:
+        return self._values()
+
+    def odometry_values(self) -> gtsam.Values:
+        """The keyframes' odometry poses as GTSAM Values (keys as in the graph)."""
+        v = gtsam.Values()
+        for k, key in enumerate(self._keys):
+            v.insert(key, gtsam.Pose3(self._chain.pose(k)))
+        return v
 
     def odometry_array(self) -> np.ndarray:
         return np.array([self._chain.pose(k) for k in range(len(self._chain))])

@@ -1,24 +1,24 @@
 """Incremental pose graph: iSAM2 bookkeeping for keyframes and loops, on our graph or a user's.
 
 This module keeps iSAM2 and the Python-side lists in step; the decisions live in modules
-usable without a ``PoseGraph``: :mod:`.gate`: accept/reject one new loop (chi-square against the estimate, PCM pairwise
-  tests), behind the small :class:`~slam_lcd.backend.gate.LoopGate` protocol; :mod:`.gnc`:
-  the batch GNC (TLS) re-check of the loop factors (its weights made verdicts: :mod:`.gnc_verdicts`);
-  :mod:`.loop_factors`: loop closures as ``BetweenFactorPose3``
-  with robust kernels.
+usable without a ``PoseGraph``: :mod:`.gate` (accept/reject one new loop: chi-square against the
+estimate, PCM pairwise tests), :mod:`.gnc` (the batch GNC re-check; verdicts: :mod:`.gnc_verdicts`),
+:mod:`.loop_factors` (robust ``BetweenFactorPose3``), :mod:`.segments` (tracking-loss segments).
 
 Two ways to run:
 - **own graph** (default): one ``Pose3`` per keyframe, key = insertion index (or ``key(kf_id)``),
   a prior on the first, odometry ``BetweenFactorPose3`` between consecutive keyframes; the
   gate's relative covariances come from the odometry chain (:class:`.gate.ChainRelatives`).
+  After a tracking loss (``segment_start``) a keyframe opens a new segment with a weak prior
+  instead of an odometry step; loops join segments (:mod:`.segments`).
 - **a user's graph**: ``PoseGraph(isam=their_isam2, key=lambda kf_id: X(kf_id),
   add_odometry=False)``. The user adds their own values and factors (IMU, GPS, odometry ...)
   to their iSAM2; :meth:`add_keyframe` only registers a keyframe id; loops go through the
   gate with relative covariances from iSAM2's marginals (:class:`.relatives.MarginalRelatives`)
   and the GNC re-check weighs, removes and restores only the loop factors added here.
 
-GNC re-checks: every ``gnc_every_n_loops`` gated loops, at most every ``gnc_every_fraction`` x
-the loops so far (constant cost per keyframe on long runs: docs/backend.md), and in ``finalize``.
+GNC re-checks: every ``gnc_every_n_loops`` gated loops, spaced by ``gnc_every_fraction`` of the loops
+so far (constant cost per keyframe: docs/backend.md), and in ``finalize``.
 
 Interrupts (Ctrl-C, or an error inside a step): the bookkeeping follows iSAM2, never runs
 ahead of it; a loop that never reached iSAM2 is dropped as if it had not been offered, and a
@@ -43,17 +43,19 @@ from .gate import ChainRelatives, GateLoop, LoopGate, default_gate
 from .gnc import gnc_loop_weights
 from .gnc_verdicts import gnc_changes, record_gnc_verdicts
 from .graph_outputs import GraphOutputs
+from .graph_segments import GraphSegments
 from .loop_factors import robust_kernel, valid_information
-from .poses import check_pose, isam2_params, values_to_array
+from .poses import check_pose, isam2_params, levenberg_marquardt, values_to_array
 from .records import ACCEPTED, REJECTED, LoopEntry, LoopRecord
 from .relatives import MarginalRelatives
+from .segments import Segments, break_covariance
 
 __all__ = ["ACCEPTED", "REJECTED", "LoopRecord", "PoseGraph", "isam2_params", "robust_kernel", "values_to_array"]
 
 log = logging.getLogger(__name__)
 
 
-class PoseGraph(GraphOutputs):
+class PoseGraph(GraphOutputs, GraphSegments):
     """Keyframe pose graph kept optimised by iSAM2 (see module docstring).
 
     ``isam``: a user's ``gtsam.ISAM2`` to put loops into (None: our own). ``key``: keyframe
@@ -68,8 +70,7 @@ class PoseGraph(GraphOutputs):
         self.conf = conf or BackendConfig()
         c = self.conf
         self.add_odometry = (isam is None) if add_odometry is None else bool(add_odometry)
-        self._user_graph = not self.add_odometry
-        self._key_fn = key
+        self._user_graph, self._key_fn = not self.add_odometry, key
         self.gate = gate if gate is not None else default_gate(c)
         self._kernel = robust_kernel(c.loop_kernel, c.loop_kernel_width)
         self._isam = isam if isam is not None else gtsam.ISAM2(isam2_params(c))
@@ -77,6 +78,8 @@ class PoseGraph(GraphOutputs):
         self._keys: list[int] = []  # GTSAM key per insertion position
         self._index: dict[int, int] = {}
         self._stamps: list[int] = []
+        self._segments = Segments()
+        self._qr = c.isam2_factorization == "qr"  # QR from the first tracking-loss segment on (_use_qr)
         self._chain = ChainRelatives(lambda k: self._isam.calculateEstimatePose3(self._keys[k]).matrix())
         self._relatives = (MarginalRelatives(lambda k: self._keys[k], isam=self._isam) if self._user_graph
                            else self._chain)
@@ -108,8 +111,13 @@ class PoseGraph(GraphOutputs):
         """GTSAM key of a keyframe that was added."""
         return self._keys[self._index[int(kf_id)]]
 
-    def add_keyframe(self, kf_id: int, stamp_ns: int, T_world_body_odom=None, cov_since_last=None) -> None:
+    def add_keyframe(self, kf_id: int, stamp_ns: int, T_world_body_odom=None, cov_since_last=None, *,
+                     segment_start: bool = False) -> None:
         """Add a keyframe with its odometry pose; the step from the previous one becomes a factor.
+
+        ``segment_start``: the odometry broke before this keyframe (tracking lost): it opens a new
+        segment, anchored by a weak prior where the odometry continues, with no step from the
+        previous keyframe (``cov_since_last`` is not read).
 
         On a user's graph (``add_odometry=False``) this only registers the id (and the pose,
         when given, for :meth:`odometry_array`); the user's iSAM2 must hold its key before a
@@ -123,7 +131,7 @@ class PoseGraph(GraphOutputs):
         if self._user_graph:
             T = check_pose(T_world_body_odom, f"keyframe {kf_id}") if T_world_body_odom is not None else np.eye(4)
             with defer_sigint():
-                self._register(kf_id, key, stamp_ns, T, np.zeros((6, 6)))
+                self._register(kf_id, key, stamp_ns, T, np.zeros((6, 6)), segment_start)
             return
         if T_world_body_odom is None:
             raise InputError(f"keyframe {kf_id}: an odometry pose is needed when the pose graph adds odometry")
@@ -137,6 +145,13 @@ class PoseGraph(GraphOutputs):
             sig = np.r_[[c.prior_sigma_rot] * 3, [c.prior_sigma_trans] * 3]
             graph.add(gtsam.PriorFactorPose3(key, gtsam.Pose3(T), gtsam.noiseModel.Diagonal.Sigmas(sig)))
             values.insert(key, gtsam.Pose3(T))
+        elif segment_start:  # where the previous segment's correction carries the odometry on, weakly
+            self._use_qr()
+            step = inv(self._chain.pose(k - 1)) @ T
+            cov = break_covariance(c.segment_prior_sigma_rot, c.segment_prior_sigma_trans)
+            at = self._isam.calculateEstimatePose3(self._keys[-1]).compose(gtsam.Pose3(step))
+            graph.add(gtsam.PriorFactorPose3(key, at, gtsam.noiseModel.Gaussian.Covariance(cov)))
+            values.insert(key, at)
         else:
             step = inv(self._chain.pose(k - 1)) @ T
             ok = c.use_odometry_covariance and valid_information(cov_since_last)  # SPD test fits covariances too
@@ -152,10 +167,12 @@ class PoseGraph(GraphOutputs):
             self._base.push_back(graph)
             if k and cov is not None:  # (every keyframe after the first has its odometry step)
                 self._base_edges.append(G2oEdge(k - 1, k, step, np.linalg.inv(cov)))
-            self._register(kf_id, key, stamp_ns, T, prefix)
+            self._register(kf_id, key, stamp_ns, T, prefix, segment_start)
         self.update_times.append(time.perf_counter() - t0)
 
-    def _register(self, kf_id: int, key: int, stamp_ns: int, T: np.ndarray, prefix: np.ndarray) -> None:
+    def _register(self, kf_id: int, key: int, stamp_ns: int, T: np.ndarray, prefix: np.ndarray,
+                  segment_start: bool) -> None:
+        self._segments.add(segment_start)
         self._chain.append(T, prefix)
         self._ids.append(kf_id)
         self._keys.append(key)
@@ -210,7 +227,7 @@ class PoseGraph(GraphOutputs):
         ok = False
         done = False
         try:
-            d = self.gate.check(lp.gate, self._relatives, [o.gate for o in self._loops[:-1]])
+            d = self._join_check(lp) or self.gate.check(lp.gate, self._relatives, [o.gate for o in self._loops[:-1]])
             lp.gate.chi2 = d.chi2
             rec.chi2_gate, rec.chi2_threshold = d.chi2, d.threshold
             rec.pairwise_checked, rec.pairwise_inconsistent = d.pairwise_checked, d.pairwise_inconsistent
@@ -307,15 +324,6 @@ class PoseGraph(GraphOutputs):
         return (loops == "all" or (loops == "accepted" and lp.record.verdict == ACCEPTED)
                 or (loops == "candidates" and (lp.passed_gate or lp.record.stage == "pairwise")))
 
-    def current_values(self) -> gtsam.Values:
-        return self._values()
-
-    def odometry_values(self) -> gtsam.Values:
-        v = gtsam.Values()
-        for k, key in enumerate(self._keys):
-            v.insert(key, gtsam.Pose3(self._chain.pose(k)))
-        return v
-
     def gnc_recheck(self) -> list[LoopRecord]:
         """Batch GNC (TLS) over the known factors + candidate loops; sync iSAM2 with its verdicts.
 
@@ -333,7 +341,7 @@ class PoseGraph(GraphOutputs):
         loops = [lp.factor(lp.gaussian) for lp in cands]
         res = gnc_loop_weights(self.known_factors(), loops, self._isam.calculateEstimate(),
                                inlier_probability=self.conf.gnc_inlier_probability,
-                               max_iterations=self.conf.gnc_max_iterations)
+                               max_iterations=self.conf.gnc_max_iterations, qr=self._qr)
         # decide first, then change iSAM2 and the records together (an interrupt in between
         # leaves the records as iSAM2 is)
         stats, add, remove = gnc_changes(cands, res.weights, res.residual_chi2, self.conf.gnc_outlier_weight)
@@ -374,11 +382,7 @@ class PoseGraph(GraphOutputs):
         """Levenberg-Marquardt on prior + odometry + accepted loops (Gaussian), from iSAM2's estimate."""
         t0 = time.perf_counter()
         graph, _ = self.batch_graph("accepted", robust=False)
-        params = gtsam.LevenbergMarquardtParams()
-        params.setRelativeErrorTol(1e-9)
-        params.setAbsoluteErrorTol(1e-9)
-        params.setMaxIterations(100)
-        values = gtsam.LevenbergMarquardtOptimizer(graph, self._isam.calculateEstimate(), params).optimize()
+        values = levenberg_marquardt(graph, self._isam.calculateEstimate(), qr=self._qr)
         self.final_solve_seconds = time.perf_counter() - t0
         return values
 

@@ -19,12 +19,31 @@ def check_pose(T, what: str) -> np.ndarray:
     return project_to_se3(T)  # remove round-off so GTSAM gets an exact rotation
 
 
-def isam2_params(conf: BackendConfig) -> gtsam.ISAM2Params:
+def isam2_params(conf: BackendConfig, qr: bool = False) -> gtsam.ISAM2Params:
+    """iSAM2 parameters of the config; ``qr`` forces QR factorisation."""
     p = gtsam.ISAM2Params()
     p.setRelinearizeThreshold(conf.isam2_relinearize_threshold)
     p.relinearizeSkip = int(conf.isam2_relinearize_skip)
-    p.setFactorization("QR" if conf.isam2_factorization == "qr" else "CHOLESKY")
+    p.setFactorization("QR" if qr or conf.isam2_factorization == "qr" else "CHOLESKY")
     return p
+
+
+def lm_params(qr: bool = False) -> gtsam.LevenbergMarquardtParams:
+    """Levenberg-Marquardt parameters; ``qr``: QR factorisation (a graph with weak segment priors, see
+    :mod:`.segments`: Cholesky squares its condition number)."""
+    params = gtsam.LevenbergMarquardtParams()
+    if qr:
+        params.setLinearSolverType("MULTIFRONTAL_QR")
+    return params
+
+
+def levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, initial: gtsam.Values, qr: bool = False) -> gtsam.Values:
+    """Batch Levenberg-Marquardt to tight tolerances (the final solve of a written graph)."""
+    params = lm_params(qr)
+    params.setRelativeErrorTol(1e-9)
+    params.setAbsoluteErrorTol(1e-9)
+    params.setMaxIterations(100)
+    return gtsam.LevenbergMarquardtOptimizer(graph, initial, params).optimize()
 
 
 

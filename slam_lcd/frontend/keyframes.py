@@ -120,14 +120,15 @@ class KeyframeSelector:
         kf = Keyframe(id=len(self.keyframes), stamp=int(p.stamp), T_world_body=p.T.copy(), image=p.image,
                       camera=self.camera, T_body_camera=self.T_body_camera.copy(), depth=p.depth,
                       right_image=p.right_image, covariance_since_last=cov_since, features=p.features,
-                      colour=p.colour)
+                      colour=p.colour, segment_start=reason == "segment-break")
         if self.keep_images:
             self.keyframes.append(kf)
         else:  # only the newest keyframe is compared with: older ones need no features
             if self.keyframes:
                 self.keyframes[-1].features = None
             self.keyframes.append(Keyframe(id=kf.id, stamp=kf.stamp, T_world_body=kf.T_world_body, features=kf.features,
-                                           covariance_since_last=kf.covariance_since_last))
+                                           covariance_since_last=kf.covariance_since_last,
+                                           segment_start=kf.segment_start))
         self.reasons.append(reason)
         p.is_keyframe = True
         return kf

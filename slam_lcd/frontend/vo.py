@@ -8,10 +8,11 @@ drops or the camera has moved enough, so drift only grows keyframe to keyframe.
 
 Tracking loss is explicit. A frame that cannot be tracked is reported ``lost`` and gets
 no pose. The next frame is tried against the same keyframe (recovery, the same segment);
-if that fails too, a new segment starts at the last good pose with a large-noise link
-(``vo_lost_sigma_*``) added to its covariance, and the frame is flagged
-``segment_start`` so the keyframe selector and the back end see the break. The
-trajectory never jumps silently.
+if that fails too, a new segment starts at the last good pose, its covariance starting again
+from zero (the segment's own frame), and the frame is flagged ``segment_start`` so the
+keyframe selector and the back end see the break: the pose graph anchors the segment on its
+own and only loops join it to the others (:mod:`slam_lcd.backend.segments`). The trajectory
+never jumps silently.
 """
 from __future__ import annotations
 
@@ -116,11 +117,6 @@ class _FrameToKeyframeOdometry:
         raise NotImplementedError
 
     # -- helpers ------------------------------------------------------------
-    def _lost_covariance(self) -> np.ndarray:
-        c = self.conf
-        r = np.radians(c.vo_lost_sigma_rot_deg)
-        return np.diag([r * r] * 3 + [c.vo_lost_sigma_trans**2] * 3)
-
     def _body(self, T_world_cam: np.ndarray) -> np.ndarray:
         return T_world_cam @ self.T_cb
 
@@ -177,7 +173,7 @@ class _FrameToKeyframeOdometry:
             # second failure in a row: start a new segment here (if this frame has 3-D structure)
             assert self.last_T_world_cam is not None and self.last_cov is not None  # set with the first reference
             T_wc = self.last_T_world_cam
-            cov = compose_covariance(self.last_cov, np.eye(4), self._lost_covariance())
+            cov = np.zeros((6, 6))  # the new segment's own frame (the pose graph anchors it on its own)
             n3d = self._make_ref(feats, gray, aux, T_wc, cov, stamp_ns)
             if n3d < conf.vo_min_inliers:
                 return self._emit(VoFrame(stamp_ns, "lost", self.segment, n_matches=n_matches,

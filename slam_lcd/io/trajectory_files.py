@@ -219,31 +219,32 @@ def _check_writable(traj: Trajectory, path: Path) -> None:
         bad = int(np.flatnonzero(~np.isfinite(traj.poses).reshape(len(traj), -1).all(axis=1))[0])
         raise InvalidPoseError(f"pose {bad} contains NaN or inf; refusing to write it", path)
 
-
 # ----------------------------------------------------------------------------- TUM
 
 
 def read_tum(path: str | Path) -> Trajectory:
     """Read a TUM file (``t tx ty tz qx qy qz qw``; comments ``#`` allowed)."""
-    path = Path(path)
-    lines, rows = _collect(path, 8, "'t tx ty tz qx qy qz qw' (TUM)")
+    p = Path(path)
+    lines, rows = _collect(p, 8, "'t tx ty tz qx qy qz qw' (TUM)")
     if not rows:
-        raise TrajectoryFormatError("no poses in file", path)
-    values = _float_matrix([r[1:] for r in rows], lines, path)
-    stamps = [_seconds_to_ns(r[0], path, ln) for ln, r in zip(lines, rows, strict=True)]
-    poses = _poses_from_quats(values[:, 0:3], values[:, 3:7], lines, path)
-    return _finish(stamps, poses, lines, path)
+        raise TrajectoryFormatError("no poses in file", p)
+    values = _float_matrix([r[1:] for r in rows], lines, p)
+    stamps = [_seconds_to_ns(r[0], p, ln) for ln, r in zip(lines, rows, strict=True)]
+    return _finish(stamps, _poses_from_quats(values[:, 0:3], values[:, 3:7], lines, p), lines, p)
 
 
-def write_tum(path: str | Path, traj: Trajectory) -> None:
-    """Write ``t tx ty tz qx qy qz qw`` lines (stamps as exact decimal seconds), atomically."""
-    path = Path(path)
+def write_tum(path: str | Path, traj: Trajectory, notes: dict[int, str] | None = None) -> None:
+    """Write ``t tx ty tz qx qy qz qw`` lines (exact decimal seconds), atomically; ``notes``: ``# text`` lines
+    before the poses of those indices (TUM readers skip them)."""
+    path, notes = Path(path), notes or {}
     _check_writable(traj, path)
-    quats = rot_to_quat(traj.poses[:, :3, :3])
+    rows = zip(traj.stamps.tolist(), traj.poses[:, :3, 3].tolist(), rot_to_quat(traj.poses[:, :3, :3]).tolist(),
+               strict=True)
     with atomic_write(path, "w", encoding="utf-8") as fh:
         fh.write("# timestamp tx ty tz qx qy qz qw\n")
-        for stamp, t, q in zip(traj.stamps.tolist(), traj.poses[:, :3, 3].tolist(), quats.tolist(), strict=True):
-            fh.write(" ".join([ns_to_seconds_text(stamp), *map(repr, t), *map(repr, q)]) + "\n")
+        for i, (stamp, t, q) in enumerate(rows):
+            fh.write((f"# {notes[i]}\n" if i in notes else "")
+                     + " ".join([ns_to_seconds_text(stamp), *map(repr, t), *map(repr, q)]) + "\n")
 
 
 # ----------------------------------------------------------------------------- KITTI

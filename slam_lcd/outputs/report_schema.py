@@ -57,6 +57,24 @@ _MAP_CLOUD = {  # the map as a point cloud (slam_lcd.outputs.map_cloud); absent/
                   "properties": {"odometry": _TRUTH, "corrected": _TRUTH, "ratio_after_before": _NUM_OR_NULL}},
     },
 }
+_INT = {"type": "integer", "minimum": 0}
+_SEGMENTS = {  # tracking-loss segments (slam_lcd.outputs.segments); null: no keyframe
+    "type": ["object", "null"], "required": ["count", "components", "segments", "ate"],
+    "properties": {
+        "count": _INT, "ate": {"enum": ["one alignment", "per component, each aligned on its own"]},
+        "segments": {"type": "array", "items": {
+            "type": "object", "required": ["segment", "component", "keyframes", "first_keyframe", "last_keyframe",
+                                           "first_stamp_ns", "last_stamp_ns", "joining_loops"],
+            "properties": {k: _INT for k in ("segment", "component", "keyframes", "first_keyframe", "last_keyframe",
+                                             "first_stamp_ns", "last_stamp_ns", "joining_loops")}}},
+        "components": {"type": "array", "items": {
+            "type": "object", "required": ["component", "segments", "keyframes", "joining_loops"],
+            "properties": {"component": _INT, "segments": {"type": "array", "items": _INT}, "keyframes": _INT,
+                           "joining_loops": _INT, "joined": {"type": "boolean"}, "poses": _INT,
+                           "ate_before_m": _NUM_OR_NULL, "ate_after_m": _NUM_OR_NULL,
+                           "not_measured": {"type": "string"}}}},
+    },
+}
 REPORT_SCHEMA: dict[str, Any] = {
     "$schema": "https://json-schema.org/draft/2020-12/schema",
     "title": "slam-lcd run report",
@@ -99,6 +117,7 @@ REPORT_SCHEMA: dict[str, Any] = {
         "outputs": {"type": "array", "items": {"type": "string"}},
         "config": {"type": "object"},
         "map_cloud": _MAP_CLOUD,
+        "segments": _SEGMENTS,
         # what to read first; "frame": "map" for a run into a map (corrected.tum, the loops and the ATE are the
         # map's), "session" otherwise
         "headline": {"type": "object", "required": ["frame", "loops_accepted", "ate_before_m", "ate_after_m"],

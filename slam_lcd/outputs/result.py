@@ -50,6 +50,8 @@ class RunResult:
     map_cloud: dict | None = None
     # the sensor the cloud was built from (kind, topics, camera, mounting, rectification): export-map rebuilds it
     map_cloud_sensor: dict | None = field(default=None, repr=False)
+    # tracking-loss segments of the pose graph (slam_lcd.outputs.segments.segment_facts), None: no keyframe
+    segments: dict | None = None
     # the ground truth the run evaluated against (a Trajectory), or None; what a viewer of the run reuses
     ground_truth: Trajectory | None = field(default=None, repr=False)
 
@@ -104,6 +106,10 @@ class RunResult:
                             if self.false_loops_accepted is not None else ""))
             if self.ate_before is not None:
                 lines.append(f"ATE ({self.alignment}): {self._ate_text(self.ate_after)}")
+        if self.segments is not None and self.segments["count"] > 1:
+            from .segments import segments_line  # lazy: numpy and the evaluation
+
+            lines.append(segments_line(self.segments["segments"], self.segments["components"]))
         if self.map_cloud is not None:
             from .map_cloud import cloud_summary_line  # lazy: OpenCV
 

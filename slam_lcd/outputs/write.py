@@ -35,6 +35,7 @@ from .map_outputs import (
 from .output_set import PARTIAL_MARKER, OutputSet
 from .report import report_facts, write_report
 from .result import RunResult
+from .segments import SEGMENTS_FILE, segment_facts, tum_notes, write_segments_csv
 
 log = logging.getLogger(__name__)
 
@@ -42,7 +43,7 @@ log = logging.getLogger(__name__)
 # a run into a map: corrected.tum and keyframes_corrected.tum are in the map frame, these the session's own
 SESSION_FRAME_FILES = ("corrected_session.tum", "keyframes_corrected_session.tum")
 RUN_OUTPUTS = ("config.yaml", "odometry.tum", "corrected.tum", "keyframes_corrected.tum", *SESSION_FRAME_FILES,
-               "graph.g2o", "loops.csv",
+               "graph.g2o", "loops.csv", SEGMENTS_FILE,
                "corrected.mcap", "trajectory.png", "ate_over_time.png", "report.json", "report.md", "report.html",
                LOOPS_DIR, MAP_DIR, *LOCALIZATION_FILES, *MAP_CLOUD_FILES)
 
@@ -138,12 +139,16 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
         corrected, kf_corr = current_in_map_frame(pipe, pipe.map, result.map["current_session"])
         files = [("odometry.tum", odom), ("corrected.tum", corrected), ("keyframes_corrected.tum", kf_corr),
                  (SESSION_FRAME_FILES[0], corrected_session), (SESSION_FRAME_FILES[1], kf_session)]
+    seg_rows = [r.as_dict() for r in pipe.graph.segment_rows()]
     for name, traj in files:
         if len(traj) == 0 and skipped is not None:
             skipped.append(f"{name}: not written (no poses yet)")
             continue
-        write_tum(out_dir / name, traj)
+        write_tum(out_dir / name, traj, tum_notes(traj, seg_rows))
         outputs.append(name)
+    if len(seg_rows) > 1:  # tracking was lost: which poses belong to which segment (docs/outputs.md)
+        write_segments_csv(out_dir / SEGMENTS_FILE, seg_rows)
+        outputs.append(SEGMENTS_FILE)
     if pipe.keyframes or skipped is None:
         pipe.graph.write_g2o(out_dir / "graph.g2o")
         outputs.append("graph.g2o")
@@ -198,6 +203,8 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
         result.ate_before, result.ate_after = ate_before.rmse, ate_after.rmse
         result.alignment = result.alignment or cfg.eval.align  # the runner may add a note (position-only ground truth)
         result.false_loops_accepted = count_false_accepted(rows, cfg.run.loop_true_max_distance)
+    result.segments = segment_facts(seg_rows, gt if ate_before is not None else None, odom, corrected, cfg.eval,
+                                    result)
 
     # ---- the map as a point cloud, before and after the correction (corrected.mcap carries it)
     cloud = None

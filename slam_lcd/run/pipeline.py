@@ -43,6 +43,7 @@ from ..runtime.thread_limits import limited_threads
 from ..types import CameraModel, Keyframe, LoopClosure, Trajectory
 from .extract_ahead import ExtractionPool
 from .frame_queue import FrameQueue, WaitingFrame
+from .odometry_breaks import OdometryBreaks
 
 log = logging.getLogger(__name__)
 
@@ -104,7 +105,7 @@ class Pipeline:
         # when the log carries depth, a frame waits for its depth image (or for the next frame):
         # message order at equal stamps differs between log formats, the result must not
         self.expect_depth = bool(expect_depth)
-        self._segment_from: int | None = None  # stamp of an odometry break not yet handed to a keyframe
+        self.breaks = OdometryBreaks()  # tracking lost: which frame opens a segment, which have no pose
         self._finalized = False
         self._detector_stale = self._stale_warned = False  # an interrupt inside the detector: no more detection
         # keyframes handed in, made by the selector but not handed in, waiting for features / loops
@@ -140,11 +141,10 @@ class Pipeline:
                      *, segment_start: bool = False) -> list[LoopClosure]:
         """One odometry sample; returns the loops found on frames this sample released.
 
-        ``segment_start=True`` marks a break in the odometry (e.g. visual tracking lost): the
-        next keyframe is linked to the previous one by a large-noise factor, never by the jump.
+        ``segment_start=True``: the odometry broke here (tracking lost); the next keyframe opens a new segment.
         """
         if segment_start:
-            self._segment_from = int(stamp_ns)
+            self.breaks.add(stamp_ns)
         self._odom.add(stamp_ns, T_world_body, covariance)
         return self._release(final=False)
 
@@ -209,7 +209,8 @@ class Pipeline:
         t0 = time.perf_counter()
         try:
             with self.timer("backend"):
-                self.graph.add_keyframe(kf.id, kf.stamp, kf.T_world_body, kf.covariance_since_last)
+                self.graph.add_keyframe(kf.id, kf.stamp, kf.T_world_body, kf.covariance_since_last,
+                                        segment_start=kf.segment_start)
         finally:
             # if the pose graph took this keyframe (even when interrupted just after), the list keeps it too
             if len(self.graph) > len(self.keyframes):
@@ -325,13 +326,14 @@ class Pipeline:
         return out
 
     def _process(self, f: WaitingFrame) -> list[LoopClosure]:
+        if self.breaks.inside(f.stamp, self._odom.stamps):  # no odometry pose there
+            self.breaks.frames_inside += 1
+            return []
         T, cov = self._odom.at(f.stamp)
         features = None
         if self.config.run.keyframe_on_overlap and self.config.frontend.kf_min_overlap > 0:
             features = self._extract(f.stamp, f.image)
-        brk = self._segment_from is not None and f.stamp >= self._segment_from
-        if brk:
-            self._segment_from = None
+        brk = self.breaks.opens_segment(f.stamp)
         with self.timer("keyframe_selection"):
             made = self.selector.push(f.stamp, T, cov, image=f.image, features=features,
                                       depth=f.depth, right_image=f.right_image, segment_start=brk,

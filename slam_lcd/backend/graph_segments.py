@@ -1,0 +1,66 @@
+"""The tracking-loss segments of a :class:`~slam_lcd.backend.pose_graph.PoseGraph` (see :mod:`.segments`).
+
+A mixin, as :class:`~.graph_outputs.GraphOutputs` is: it reads the graph's lists and iSAM2.
+"""
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import gtsam
+
+from ..runtime.interrupts import defer_sigint
+from .gate import LoopGate, Relatives, chi2_quantile
+from .poses import isam2_params
+from .segments import SegmentRow, Segments, accepted_pairs, join_check
+
+if TYPE_CHECKING:
+    from .config import BackendConfig
+    from .records import LoopEntry
+
+
+class GraphSegments:
+    # set by PoseGraph (annotations only: no class attribute is created)
+    conf: BackendConfig
+    gate: LoopGate
+    _isam: gtsam.ISAM2
+    _qr: bool
+    _user_graph: bool
+    _base: gtsam.NonlinearFactorGraph
+    _loops: list[LoopEntry]
+    _segments: Segments
+    _relatives: Relatives
+    _ids: list[int]
+    _stamps: list[int]
+
+    def _loop_noise(self, lp: LoopEntry):  # PoseGraph's
+        raise NotImplementedError
+
+    def _use_qr(self) -> None:
+        """From the first segment on, iSAM2 (and the batch solves) factorise by QR: a weak segment prior beside
+        precise odometry makes a system that Cholesky, squaring its condition number, declares indeterminate."""
+        if self._qr:
+            return
+        isam = gtsam.ISAM2(isam2_params(self.conf, qr=True))
+        held = [lp for lp in self._loops if lp.isam_index is not None]
+        graph = gtsam.NonlinearFactorGraph(self._base)
+        for lp in held:
+            graph.add(lp.factor(self._loop_noise(lp)))
+        with defer_sigint():
+            res = isam.update(graph, self._isam.calculateEstimate())
+            slots = list(res.getNewFactorsIndices())[self._base.size():]
+            for lp, idx in zip(held, slots, strict=True):
+                lp.isam_index = int(idx)
+            self._isam, self._qr = isam, True
+
+    def _join_check(self, lp: LoopEntry):
+        """The verdict on a loop between two components no accepted loop connects yet (None: not such a loop)."""
+        if self._user_graph:
+            return None
+        threshold = getattr(self.gate, "threshold", None) or chi2_quantile(self.conf.gate_chi2_probability)
+        return join_check(self._segments, self._loops, lp, self._relatives, threshold,
+                          self.conf.segment_join_min_loops)
+
+    def segment_rows(self) -> list[SegmentRow]:
+        """One row per tracking-loss segment: keyframes, stamps, component, joining loops (:mod:`.segments`)."""
+        return self._segments.rows(self._ids, self._stamps, accepted_pairs(self._loops)) if self._ids else []
+
