@@ -91,8 +91,8 @@ def register(sub) -> None:
                         "loop_pairs.csv inside OUT with --format folder)")
     g = p.add_argument_group(
         "bad stretches", "stretches of the failures real logs have, for testing the pipeline's robustness "
-        "(docs/sim.md). Times are seconds from the log's first camera frame (the clock before any --stamp-jump); "
-        "a stretch holds START <= t < START + SECONDS; each option may be repeated")
+        "(docs/sim_stretches.md). Times are seconds from the log's first camera frame (the clock before any "
+        "--stamp-jump); a stretch holds START <= t < START + SECONDS; each option may be repeated")
     g.add_argument("--blur", action="append", type=stretch_arg("--blur"), default=None, metavar="START:SECONDS[:PX]",
                    help="motion blur of the camera images (left and right): a line PX pixels long at 640 px image "
                         "width (scaled with --size) along the image motion, horizontal when the view hardly moves "

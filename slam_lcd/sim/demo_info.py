@@ -57,7 +57,7 @@ class DemoLogInfo:
         if self.appearance != "day":
             lines.append(f"appearance: {self.appearance} (docs/sim_sessions.md)")
         if self.stretches:
-            lines.append(f"bad stretches: {', '.join(self.stretches)} (docs/sim.md)")
+            lines.append(f"bad stretches: {', '.join(self.stretches)} (docs/sim_stretches.md)")
         lines += [
             (f"odometry end drift {self.drift.get('end_error_m', float('nan')):.2f} m = "
              f"{self.drift.get('drift_percent', float('nan')):.2f} % of the path "

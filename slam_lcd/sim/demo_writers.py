@@ -157,6 +157,6 @@ def write_demo_folder(out: Path, sc: DemoScenario, frames_iter, *, color, depth,
                          if sc.odom_at_start else "drifting base_link pose in 'odom' (= 'world' at the first stamp)"),
         }
         if stretches:
-            meta["stretches"] = list(stretches)  # make-demo-log's bad stretches (docs/sim.md)
+            meta["stretches"] = list(stretches)  # make-demo-log's bad stretches (docs/sim_stretches.md)
         (tmp / "camera.yaml").write_text(yaml.safe_dump(meta, sort_keys=False), encoding="utf-8")
     return counts

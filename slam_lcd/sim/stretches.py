@@ -81,7 +81,10 @@ def plan_stretches(st: Stretches, sc: DemoScenario) -> StretchPlan:
     for s in st.blur:
         assert s.px is not None  # Stretches.check
         blur_px = np.where(_inside(cam_rel, (s,)), np.maximum(blur_px, s.px * sc.camera.width / BLUR_WIDTH), blur_px)
-    return StretchPlan(written=~_inside(cam_rel, st.drop_frames), source=source, blur_px=blur_px,
+    written = ~_inside(cam_rel, st.drop_frames)
+    if not written.any():
+        raise InputError(f"--drop-frames drops all {n} camera frames; a log needs one at least")
+    return StretchPlan(written=written, source=source, blur_px=blur_px,
                        dark=_inside(cam_rel, st.dark), odom_written=~_inside(odo_rel, st.odom_dropout),
                        cam_shift=_shift(cam_rel, st.stamp_jump), odo_shift=_shift(odo_rel, st.stamp_jump))
 

@@ -12,7 +12,7 @@ import pytest
 from slam_lcd.cli.main import main
 from slam_lcd.io import open_log
 from slam_lcd.io.decode import decode_image, decode_pose
-from slam_lcd.sim import make_demo_log, read_loop_pairs
+from slam_lcd.sim import gt_loop_pairs, make_demo_log
 from slam_lcd.sim.demo_log import session_scenario
 from slam_lcd.sim.stretch_spec import Stretch, Stretches
 from slam_lcd.sim.stretches import image_motion_angle, motion_blur, motion_kernel
@@ -199,11 +199,11 @@ def test_a_stretch_after_the_last_frame_leaves_the_plain_bytes(tmp_path, logs):
 def test_loop_pairs_leave_out_dropped_and_frozen_frames(tmp_path):
     """A log long enough to close a loop (2 Hz, 100 frames: one lap and more): the pairs file's
     indices are the log's image sequence, its stamps the log's, and no dropped or frozen frame is in it."""
-    kw = dict(frames=100, width=64, height=48, depth=False, camera_rate=2.0)
-    plain = make_demo_log(tmp_path / "p.mcap", **kw)
+    kw = dict(frames=100, width=64, height=48, camera_rate=2.0)
+    world = session_scenario(None, **kw)  # the plain log's frames, nothing rendered
+    p_pairs = gt_loop_pairs(world.gt_cam, T_body_camera=world.T_bc)
     st = Stretches(drop_frames=(Stretch(44.0, 2.0),), freeze=(Stretch(5.0, 3.0),), stamp_jump=(Stretch(30.0, 7.0),))
-    bad = make_demo_log(tmp_path / "b.mcap", stretches=st, **kw)
-    p_pairs = read_loop_pairs(plain.loop_pairs_path)
+    bad = make_demo_log(tmp_path / "b.mcap", stretches=st, depth=False, **kw)
     assert len(p_pairs) > 20 and bad.frames == 96
     with open_log(bad.path) as r:
         stamps = [m.stamp for m in r.messages(topics=["/camera/image_raw"])]
@@ -217,9 +217,10 @@ def test_loop_pairs_leave_out_dropped_and_frozen_frames(tmp_path):
             w = s - jump if s - t0 >= 30 * S + jump else s
             assert w not in frozen and not (t0 + 44 * S <= w < t0 + 46 * S)
     # the plain pairs of frames kept, renumbered: all there
-    world = [t0 + k * S // 2 for k in range(100)]
-    written = [k for k, s in enumerate(world) if not (t0 + 44 * S <= s < t0 + 46 * S)]
-    kept = [k for k in written if world[k] not in frozen]
+    assert world.cam_stamps[0] == t0 and np.all(np.diff(world.cam_stamps) == S // 2)
+    clock = [t0 + k * S // 2 for k in range(100)]
+    written = [k for k, s in enumerate(clock) if not (t0 + 44 * S <= s < t0 + 46 * S)]
+    kept = [k for k in written if clock[k] not in frozen]
     want = {(written.index(q), written.index(m)) for q, m in p_pairs.tolist() if q in kept and m in kept}
     assert {(int(r[0]), int(r[1])) for r in rows} == want
 
@@ -282,6 +283,7 @@ def test_folder_format_drops_odometry_lines_and_lists_the_stretches(tmp_path):
     (["--layout", "tum", "--odom-dropout", "1:1"], "--odom-dropout: layout tum writes no odometry"),
     (["--layout", "kitti", "--odom-zero-covariance"], "--odom-zero-covariance: layout kitti writes no odometry"),
     (["--format", "folder", "--odom-zero-covariance"], "--odom-zero-covariance: the folder format"),
+    (["--drop-frames", "0:1", "--drop-frames", "0.3:5"], "--drop-frames drops all 5 camera frames"),
 ])
 def test_bad_values_are_one_line_errors(tmp_path, capsys, argv, says):
     out = tmp_path / ("d" if "folder" in argv else "d.mcap")
