@@ -5,6 +5,7 @@ from pathlib import Path
 
 from ..errors import InputError
 from ..sim.sessions import SESSIONS
+from ..sim.stretch_spec import BLUR_PX, Stretches, stretch_arg
 from .util import check_outputs, parse_size, write_guard
 
 
@@ -88,6 +89,36 @@ def register(sub) -> None:
     p.add_argument("--loops-csv", default=None,
                    help="where to write the ground-truth loop pairs (default: <name>_loops.csv beside OUT; "
                         "loop_pairs.csv inside OUT with --format folder)")
+    g = p.add_argument_group(
+        "bad stretches", "stretches of the failures real logs have, for testing the pipeline's robustness "
+        "(docs/sim_stretches.md). Times are seconds from the log's first camera frame (the clock before any "
+        "--stamp-jump); a stretch holds START <= t < START + SECONDS; each option may be repeated")
+    g.add_argument("--blur", action="append", type=stretch_arg("--blur"), default=None, metavar="START:SECONDS[:PX]",
+                   help="motion blur of the camera images (left and right): a line PX pixels long at 640 px image "
+                        "width (scaled with --size) along the image motion, horizontal when the view hardly moves "
+                        f"(PX default {BLUR_PX:g}); depth unchanged (default: none)")
+    g.add_argument("--dark", action="append", type=stretch_arg("--dark"), default=None, metavar="START:SECONDS",
+                   help="lights off: the camera images (left and right) near black, with the sensor noise; depth "
+                        "(an active sensor) unchanged (default: none)")
+    g.add_argument("--drop-frames", action="append", type=stretch_arg("--drop-frames"), default=None,
+                   metavar="START:SECONDS",
+                   help="no image, depth, right image or camera_info messages; odometry, TF and ground truth go on "
+                        "(default: none)")
+    g.add_argument("--freeze", action="append", type=stretch_arg("--freeze"), default=None, metavar="START:SECONDS",
+                   help="frozen camera: every frame repeats the image, depth and right image of the stretch's first "
+                        "frame, with its own new stamp (default: none)")
+    g.add_argument("--stamp-jump", action="append", type=stretch_arg("--stamp-jump"), default=None,
+                   metavar="AT:SECONDS",
+                   help="the recording's clock jumps forward: every message stamped at or after AT (all topics, "
+                        "header stamps and log times, ground truth included) is stamped SECONDS later; the motion "
+                        "is continuous (default: none)")
+    g.add_argument("--odom-dropout", action="append", type=stretch_arg("--odom-dropout"), default=None,
+                   metavar="START:SECONDS",
+                   help="no odometry messages; after the gap the odometry goes on from where the drifting odometry "
+                        "is (no reset); --layout demo only (default: none)")
+    g.add_argument("--odom-zero-covariance", action="store_true",
+                   help="odometry messages with all-zero pose and twist covariances, as many ROS drivers publish; "
+                        "--layout demo, not --format folder (default: the propagated covariances)")
     p.late_positional = "out"  # OUT may follow the options (see cli.util.one_line_errors)
     p.set_defaults(func=run)
 
@@ -119,6 +150,13 @@ def run(args) -> int:
                              loops_csv=args.loops_csv, progress=not args.no_progress, layout=args.layout,
                              depth_noise=not args.exact_depth, session=args.session, world_seed=args.world_seed,
                              start_at=args.start_at, lighting=args.lighting, exposure=args.exposure,
-                             appearance=args.appearance)
+                             appearance=args.appearance, stretches=_stretches(args))
     print(info.summary())
     return 0
+
+
+def _stretches(args) -> Stretches:
+    return Stretches(blur=tuple(args.blur or ()), dark=tuple(args.dark or ()),
+                     drop_frames=tuple(args.drop_frames or ()), freeze=tuple(args.freeze or ()),
+                     stamp_jump=tuple(args.stamp_jump or ()), odom_dropout=tuple(args.odom_dropout or ()),
+                     odom_zero_covariance=bool(args.odom_zero_covariance))

@@ -42,6 +42,7 @@ class DemoLogInfo:
     exposure: float = 1.0
     odom_at_start: bool = False  # odometry in its own frame (identity at the first stamp)
     appearance: str = "day"  # the world's appearance state (slam_lcd.sim.appearance)
+    stretches: list[str] = field(default_factory=list)  # bad stretches injected, as flags ('--dark 5:2')
 
     def summary(self) -> str:
         lines = [
@@ -55,6 +56,8 @@ class DemoLogInfo:
                          f"{self.exposure:g}; odometry in its own frame (identity at the first stamp)")
         if self.appearance != "day":
             lines.append(f"appearance: {self.appearance} (docs/sim_sessions.md)")
+        if self.stretches:
+            lines.append(f"bad stretches: {', '.join(self.stretches)} (docs/sim_stretches.md)")
         lines += [
             (f"odometry end drift {self.drift.get('end_error_m', float('nan')):.2f} m = "
              f"{self.drift.get('drift_percent', float('nan')):.2f} % of the path "

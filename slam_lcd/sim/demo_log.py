@@ -49,6 +49,8 @@ from .loops import gt_loop_pairs, write_loop_pairs
 from .odometry import end_drift, simulate_odometry
 from .renderer import render
 from .sessions import session_preset, session_start_ns, world_frame
+from .stretch_spec import Stretches
+from .stretches import check_stretches, log_loop_pairs, log_scenario, plan_stretches, stretch_renderer
 from .trajectory import KINDS, START_AT, START_NS, make_path, path_trajectory, sample_stamps
 
 log = logging.getLogger(__name__)
@@ -171,7 +173,7 @@ def _render_one(sc: DemoScenario, i: int, bank: np.ndarray, *, color: bool, dept
 
 def render_frames(sc: DemoScenario, *, color: bool, depth: bool, stereo: bool, seed: int, workers: int = 1,
                   render_one=None):
-    """Yield ``(index, image, depth | None, right | None)`` for every camera frame, in order.
+    """Yield ``(index, image, depth | None, right | None)`` for every camera frame the log holds, in order.
 
     With ``workers >= 1`` frames are rendered ahead in that many threads (OpenCV and numpy
     release the GIL) while the caller serialises and compresses; the output is identical
@@ -185,9 +187,10 @@ def render_frames(sc: DemoScenario, *, color: bool, depth: bool, stereo: bool, s
     if render_one is None:
         def render_one(i, bank):
             return _render_one(sc, i, bank, **flags)
-    n = len(sc.cam_stamps)
+    frames = sc.written_frames()
+    n = len(frames)
     if workers < 1 or n < 8:
-        for i in range(n):
+        for i in frames:
             yield render_one(i, bank)
         return
     from collections import deque
@@ -200,7 +203,7 @@ def render_frames(sc: DemoScenario, *, color: bool, depth: bool, stereo: bool, s
         try:
             while nxt < n or pending:
                 while nxt < n and len(pending) < ahead:
-                    pending.append(pool.submit(render_one, nxt, bank))
+                    pending.append(pool.submit(render_one, frames[nxt], bank))
                     nxt += 1
                 yield pending.popleft().result()
         finally:
@@ -222,7 +225,8 @@ def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int |
                   io_conf=None, workers: int | None = None, hfov_deg: float = 70.0,
                   layout: str = "demo", depth_noise: bool = True, session: int | None = None,
                   world_seed: int | None = None, start_at: float | None = None, lighting: float | None = None,
-                  exposure: float | None = None, appearance: str | None = None) -> DemoLogInfo:
+                  exposure: float | None = None, appearance: str | None = None,
+                  stretches: Stretches | None = None) -> DemoLogInfo:
     """Render the demo world along a trajectory and write it as ``fmt`` at ``out``.
 
     ``frames`` None means ``laps`` laps (default 2 laps of block A: ~850 frames at 10 Hz);
@@ -246,6 +250,8 @@ def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int |
     ``exposure`` 1 (global gain of the renderer), ``appearance`` ``day``: the world as its seed
     paints it; ``night``, ``moved`` or ``renovated`` change what the camera sees
     (:mod:`slam_lcd.sim.appearance`; a session's preset is ``day``).
+    ``stretches``: bad stretches put into the log (blur, darkness, dropped or frozen frames, stamp
+    jumps, odometry gaps or zero covariances: :mod:`slam_lcd.sim.stretches`); none: the plain log.
     Returns a :class:`DemoLogInfo`.
     """
     t_start = time.perf_counter()
@@ -269,9 +275,16 @@ def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int |
         if fmt == "folder":
             raise InputError(f"layout {layout} is a log layout: write it as mcap, rosbag2 or rosbag1, not a folder")
         stereo, depth, color, compressed = layout in ("euroc", "kitti"), layout == "tum", layout == "tum", False
+    st = stretches or None  # an empty Stretches is the plain log
+    if st is not None:
+        check_stretches(st, layout=layout, fmt=fmt)
     sc = _scenario(frames, seed, kind, laps, width, height, camera_rate, odom_rate, stereo, hfov_deg,
                    world_seed=world_seed, start_at=start_at, lighting=lighting, exposure=exposure, start_ns=start_ns,
                    odom_at_start=odom_at_start, world_frame=gt_frame, appearance=r["appearance"])
+    world_sc, plan = sc, None  # world_sc: the world's clock and every frame; sc: what the log records
+    if st is not None:
+        plan = plan_stretches(st, sc)
+        sc = log_scenario(sc, plan, st)
     if workers is None:
         workers = 1 if (os.cpu_count() or 1) >= 2 else 0
     er = L.euroc_rig(sc.camera, sc.T_bc) if layout == "euroc" else None
@@ -279,13 +292,19 @@ def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int |
     if layout != "demo":
         def render_one(i, bank):
             return L.frame_renderer(layout, sc, bank, er, seed=seed, depth_noise=depth_noise)(i)
+    if plan is not None:
+        if render_one is None:
+            def render_one(i, bank):
+                return _render_one(sc, i, bank, color=color, depth=depth, stereo=stereo)
+        render_one = stretch_renderer(render_one, sc, plan)
     frames_iter = render_frames(sc, color=color, depth=depth, stereo=stereo, seed=seed, workers=workers,
                                 render_one=render_one)
     if progress:
-        frames_iter = progress_bar(frames_iter, total=len(sc.cam_stamps), unit="frame", desc="rendering")
+        frames_iter = progress_bar(frames_iter, total=len(sc.written_frames()), unit="frame", desc="rendering")
     try:
         if fmt == "folder":
-            counts = write_demo_folder(out, sc, frames_iter, color=color, depth=depth, stereo=stereo)
+            counts = write_demo_folder(out, sc, frames_iter, color=color, depth=depth, stereo=stereo,
+                                       stretches=st.flags() if st is not None else ())
         elif layout != "demo":
             counts = L.write_layout_log(out, fmt, layout, sc, frames_iter, conf=demo_io_conf(io_conf), er=er)
         else:
@@ -298,22 +317,26 @@ def make_demo_log(out, fmt: str = "mcap", frames: int | None = None, seed: int |
     if er is not None:
         calib_path = L.camchain_path_for(out)
         L.write_camchain(calib_path, er)
-    pairs = gt_loop_pairs(sc.gt_cam, T_body_camera=sc.T_bc)
+    pairs = gt_loop_pairs(world_sc.gt_cam, T_body_camera=sc.T_bc)
+    gt_frames = sc.gt_cam
+    if plan is not None:
+        gt_frames, pairs = log_loop_pairs(pairs, sc, plan)
     if loops_csv is not None:
         lp = Path(loops_csv)
     else:
         lp = out / "loop_pairs.csv" if fmt == "folder" else loops_path_for(out)
-    write_loop_pairs(lp, sc.gt_cam, pairs, T_body_camera=sc.T_bc)
-    duration = (sc.cam_stamps[-1] - sc.cam_stamps[0]) * 1e-9
+    write_loop_pairs(lp, gt_frames, pairs, T_body_camera=sc.T_bc)
+    written = sc.written_frames()
+    duration = (sc.cam_stamps[written[-1]] - sc.cam_stamps[written[0]]) * 1e-9 if written else 0.0
     topics = {}
     for t, (typ, n) in counts.items():
         topics[t] = {"type": typ, "count": n, "rate_hz": (n - 1) / duration if n > 1 and duration > 0 else 0.0}
-    return DemoLogInfo(path=out, format=fmt, frames=len(sc.cam_stamps), duration_s=float(duration),
+    return DemoLogInfo(path=out, format=fmt, frames=len(written), duration_s=float(duration),
                        path_length_m=sc.gt_odo.path_length(), topics=topics, loop_pairs_path=lp,
-                       n_loop_pairs=len(pairs), drift=end_drift(sc.gt_odo, sc.odom), camera=sc.camera,
+                       n_loop_pairs=len(pairs), drift=end_drift(world_sc.gt_odo, world_sc.odom), camera=sc.camera,
                        T_body_camera=sc.T_bc, wall_s=time.perf_counter() - t_start, seed=seed, kind=kind,
                        layout=layout, calibration_path=calib_path,
                        depth_model=L.depth_model(layout, depth_noise), session=session, world_seed=sc.world_seed,
                        world_frame=sc.world_frame, lighting=float(lighting), exposure=float(exposure),
                        start_at=float(make_path_start(kind, start_at)), odom_at_start=odom_at_start,
-                       appearance=sc.appearance)
+                       appearance=sc.appearance, stretches=st.flags() if st is not None else [])

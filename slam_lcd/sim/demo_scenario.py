@@ -30,6 +30,17 @@ class DemoScenario:
     world_frame: str = rig.WORLD_FRAME  # frame of the ground truth
     odom_at_start: bool = False  # the odometry starts at the identity (its own frame), not at the world pose
     appearance: str = "day"  # the world's appearance state (slam_lcd.sim.appearance)
+    cam_written: np.ndarray | None = None  # bool per camera frame: written (None: all; slam_lcd.sim.stretches)
+    odom_written: np.ndarray | None = None  # bool per odometry sample: written (None: all)
+
+    def written_frames(self) -> list[int]:
+        """Indices of the camera frames the log holds, in order."""
+        if self.cam_written is None:
+            return list(range(len(self.cam_stamps)))
+        return [int(i) for i in np.flatnonzero(self.cam_written)]
+
+    def odom_is_written(self, i: int) -> bool:
+        return self.odom_written is None or bool(self.odom_written[i])
 
     @property
     def world(self):

@@ -60,7 +60,7 @@ def write_demo_log(out, fmt, sc: DemoScenario, frames_iter, *, depth, stereo, co
             statics.append((sc.T_bc @ rig.T_left_right(rig.STEREO_BASELINE), t0, rig.BODY_FRAME, right_frame))
         put(w, "/tf_static", M.tf_message(statics), t0)
         # merge camera frames and odometry samples in time order (camera first at equal stamps)
-        events = ([(int(s), 0, i) for i, s in enumerate(sc.cam_stamps)]
+        events = ([(int(sc.cam_stamps[i]), 0, i) for i in sc.written_frames()]
                   + [(int(s), 1, i) for i, s in enumerate(sc.odo_stamps)])
         events.sort()
         frames_iter = iter(frames_iter)
@@ -74,8 +74,9 @@ def write_demo_log(out, fmt, sc: DemoScenario, frames_iter, *, depth, stereo, co
                 if right is not None:
                     put_camera(w, "/camera/right", right_cam, right, stamp, right_frame)
             else:
-                put(w, "/odom",
-                    M.odometry_msg(odo.poses[i], odo.covariances[i], stamp, rig.ODOM_FRAME, rig.BODY_FRAME), stamp)
+                if sc.odom_is_written(i):
+                    put(w, "/odom", M.odometry_msg(odo.poses[i], odo.covariances[i], stamp, rig.ODOM_FRAME,
+                                                   rig.BODY_FRAME), stamp)
                 put(w, "/ground_truth/pose", M.pose_stamped_msg(gt.poses[i], stamp, sc.world_frame), stamp)
         counts = dict(w.counts)
     return {t: (types[t], n) for t, n in counts.items()}
@@ -100,8 +101,10 @@ def _write_tum(path: Path, traj: Trajectory) -> None:
     write_tum(path, traj)
 
 
-def write_demo_folder(out: Path, sc: DemoScenario, frames_iter, *, color, depth, stereo):
-    """PNG images, image lists, TUM trajectories and ``camera.yaml``, written atomically (whole or absent)."""
+def write_demo_folder(out: Path, sc: DemoScenario, frames_iter, *, color, depth, stereo, stretches=()):
+    """PNG images, image lists, TUM trajectories and ``camera.yaml``, written atomically (whole or absent).
+
+    ``stretches``: the bad stretches injected (``['--blur 2:1:15', ...]``), listed in ``camera.yaml``."""
     import yaml
 
     counts: dict[str, tuple[str, int]] = {}
@@ -134,19 +137,26 @@ def write_demo_folder(out: Path, sc: DemoScenario, frames_iter, *, color, depth,
             (tmp / f"{key}.txt").write_text(text, encoding="utf-8")
             counts[f"{key}/"] = ("png", len(names))
         _write_tum(tmp / "groundtruth.txt", sc.gt_odo)
-        _write_tum(tmp / "odometry.txt", sc.odom)
+        odom = sc.odom
+        if sc.odom_written is not None:  # --odom-dropout
+            odom = Trajectory(stamps=odom.stamps[sc.odom_written], poses=odom.poses[sc.odom_written],
+                              frame_id=odom.frame_id, child_frame_id=odom.child_frame_id)
+        _write_tum(tmp / "odometry.txt", odom)
         counts["groundtruth.txt"] = ("tum", len(sc.gt_odo))
-        counts["odometry.txt"] = ("tum", len(sc.odom))
+        counts["odometry.txt"] = ("tum", len(odom))
         cam = sc.camera
         meta = {
             "width": cam.width, "height": cam.height, "fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy,
             "distortion_model": "none", "baseline_m": cam.baseline if stereo else None,
             "depth_scale": 1000.0,  # depth PNG value / depth_scale = metres (0 = no depth)
             "T_body_camera": [[float(v) for v in row] for row in sc.T_bc],
-            "frame_rate_hz": float(1e9 / (sc.cam_stamps[1] - sc.cam_stamps[0])) if len(sc.cam_stamps) > 1 else None,
+            # the median period: a --stamp-jump between two frames is not the rate
+            "frame_rate_hz": float(1e9 / np.median(np.diff(sc.cam_stamps))) if len(sc.cam_stamps) > 1 else None,
             "groundtruth": f"base_link pose in '{sc.world_frame}' (TUM: t x y z qx qy qz qw)",
             "odometry": ("drifting base_link pose in 'odom' (the start pose: identity at the first stamp)"
                          if sc.odom_at_start else "drifting base_link pose in 'odom' (= 'world' at the first stamp)"),
         }
+        if stretches:
+            meta["stretches"] = list(stretches)  # make-demo-log's bad stretches (docs/sim_stretches.md)
         (tmp / "camera.yaml").write_text(yaml.safe_dump(meta, sort_keys=False), encoding="utf-8")
     return counts

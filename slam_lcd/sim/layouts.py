@@ -216,7 +216,7 @@ def write_layout_log(out, fmt, layout: str, sc, frames_iter, *, conf, er: EurocR
             put(w, "/tf_static", M.tf_message([(sc.T_bc, t0, rig.BODY_FRAME, KITTI_LEFT),
                                                (sc.T_bc @ rig.T_left_right(rig.STEREO_BASELINE), t0, rig.BODY_FRAME,
                                                 KITTI_RIGHT)]), t0)
-        events = sorted([(int(s), 0, i) for i, s in enumerate(sc.cam_stamps)] +
+        events = sorted([(int(sc.cam_stamps[i]), 0, i) for i in sc.written_frames()] +
                         [(int(s), 1, i) for i, s in enumerate(sc.odo_stamps)])
         frames_iter = iter(frames_iter)
         T_ko_inv = inv(T_kinect_optical())
