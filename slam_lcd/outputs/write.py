@@ -203,8 +203,9 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
         result.ate_before, result.ate_after = ate_before.rmse, ate_after.rmse
         result.alignment = result.alignment or cfg.eval.align  # the runner may add a note (position-only ground truth)
         result.false_loops_accepted = count_false_accepted(rows, cfg.run.loop_true_max_distance)
-    result.segments = segment_facts(seg_rows, gt if ate_before is not None else None, odom, corrected, cfg.eval,
-                                    result)
+    # a run into a map keeps the map's one alignment (its joint graph links a session's segments itself)
+    per_component = ate_before is not None and corrected_session is None
+    result.segments = segment_facts(seg_rows, gt if per_component else None, odom, corrected, cfg.eval, result)
 
     # ---- the map as a point cloud, before and after the correction (corrected.mcap carries it)
     cloud = None

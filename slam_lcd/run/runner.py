@@ -178,7 +178,7 @@ def run_log(
             notes.append(f"The back end's final re-check (GNC) was interrupted ({signal_name()}) and skipped.")
             result.interrupted = True
         if not result.interrupted and not pipe.keyframes:
-            raise PipelineError(no_keyframe_reason(pipe, topics, result.n_frames), log_path)
+            raise PipelineError(no_keyframe_reason(pipe, topics, result.n_frames, vo_odometry), log_path)
         if gt_traj is None:
             gt_traj = gt_traj_from_log
         if gt_traj is None:

@@ -194,9 +194,15 @@ def cloud_sensor(pipe, topics: Topics, stereo, calibration) -> dict:
             "camera": camera_facts(pipe.camera, pipe.T_body_camera)}
 
 
-def no_keyframe_reason(pipe, topics: Topics, n_frames: int) -> str:
-    """Why a run made no keyframe: the frames and the odometry source's span did not overlap."""
+def no_keyframe_reason(pipe, topics: Topics, n_frames: int, vo=None) -> str:
+    """Why a run made no keyframe: the built-in VO tracked no frame (``vo``: its LogVo), or the frames and the
+    odometry source's span did not overlap."""
     odom = pipe.odometry_trajectory()
+    if vo is not None and len(odom) == 0 and vo.result.frames:
+        first = vo.result.frames[0]
+        return (f"the built-in visual odometry tracked none of the {len(vo.result.frames)} frames of {topics.image} "
+                f"(first frame: {first.reason or first.status}): the images are unusable as a whole (dark, blank or "
+                "without depth); nothing to correct")
     span = (f"odometry from {stamp_text(odom.stamps[0])} to {stamp_text(odom.stamps[-1])}" if len(odom)
             else "no odometry sample")
     source = topics.odom or "the visual odometry"
