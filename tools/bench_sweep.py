@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
 import re
 import subprocess
 import sys
@@ -30,6 +29,8 @@ import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+
+from slam_lcd.runtime.machine import machine_line
 
 PRESETS = {"demo": None, "euroc": "euroc", "tum": "tum-rgbd", "kitti": "kitti"}
 # the 2-lap demo's bad stretches, at the strength the checks name (seconds from the first frame; the log is ~85 s)
@@ -175,16 +176,6 @@ def checks(rows: list[dict], all_cases: list[Case]) -> list[tuple[str, bool]]:
     return out
 
 
-def cpu_name() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="three short cases (CI)")
@@ -207,7 +198,7 @@ def main(argv=None) -> int:
             print(f"{c.name}: exit {r['exit']}, {r['losses']} losses, ATE {_fmt(r.get('ate_before'), '.3f')} -> "
                   f"{_fmt(r.get('ate_after'), '.3f')}, {r['wall_s']:.0f} s", flush=True)
     text = table(rows)
-    print(f"\nCPU: {cpu_name()}, {len(rows)} cases\n\n{text}\n")
+    print(f"\n{machine_line()}; {len(rows)} cases\n\n{text}\n")
     if a.markdown:
         a.markdown.write_text(text + "\n")
     results = checks(rows, all_cases)
