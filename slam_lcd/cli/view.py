@@ -2,7 +2,8 @@
 
 Nothing is run again: the recording is made from the folder's files (slam_lcd.viewer). Without
 ``--save`` or ``--web`` the native viewer opens (it needs a display). Needs the ``viewer`` extra
-(``pip install 'slam-lcd[viewer]'``); without it, one line saying so and exit status 2.
+(``pip install 'slam-lcd[viewer]'``); without it, one line saying so and exit status 2, after the
+folder and the flags are checked (a wrong folder is named as such first).
 """
 from __future__ import annotations
 
@@ -31,7 +32,7 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ..viewer import targets
+    from ..viewer import require_rerun, targets
     from ..viewer.view import plan
 
     if args.port is not None and not args.web:
@@ -43,15 +44,17 @@ def run(args) -> int:
         targets.check_rrd_target(args.save, p.inputs)
     elif not args.web:
         targets.check_display()  # refused with one line, before anything is logged
+    require_rerun()  # the input is good: only now is the missing extra the thing to report
+    layout = p.layout()
     print(p.summary)
     if args.save is not None:
-        out = targets.save(args.save, p.build, p.blueprint, p.name)
+        out = targets.save(args.save, p.build, layout, p.name)
         print(f"wrote {out} ({out.stat().st_size / 1e6:.1f} MB)")
     if args.web:
-        rec, url = targets.serve_web(p.build, p.blueprint, p.name, args.port)
+        rec, url = targets.serve_web(p.build, layout, p.name, args.port)
         print(f"web viewer: {url}  (Ctrl-C stops it)", flush=True)
         targets.wait_for_interrupt()
         targets.close(rec)
     elif args.save is None:
-        targets.spawn(p.build, p.blueprint, p.name)
+        targets.spawn(p.build, layout, p.name)
     return 0

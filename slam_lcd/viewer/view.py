@@ -1,7 +1,9 @@
 """`slam-lcd view`: a recording built from a run folder or a map folder (and a localisation), then shown or saved.
 
 Why everything is read and every path checked before a stream opens: bad input is one line and
-exit status 2 with nothing written (no ``.rrd``, no viewer window, no server).
+exit status 2 with nothing written (no ``.rrd``, no viewer window, no server). Reading the folders
+needs no rerun; the layout (a Rerun blueprint) is made only when asked for, so a wrong folder is
+reported as such whether or not the ``viewer`` extra is installed.
 """
 from __future__ import annotations
 
@@ -10,7 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import InputError
-from . import record, require_rerun
+from . import record
 from .folders import folder_kind, read_localization, read_map, read_run
 from .layout import blueprint
 
@@ -19,14 +21,13 @@ from .layout import blueprint
 class Plan:
     name: str  # the recording's name (the folder's)
     build: Callable  # build(rec): logs everything
-    blueprint: object
+    layout: Callable[[], object]  # layout(): the first view (a Rerun blueprint; needs rerun)
     inputs: dict  # what each input is -> its path (no output may land on them)
     summary: str
 
 
 def plan(folder: str | Path, localization: str | Path | None = None) -> Plan:
     """Read ``folder`` (a run or a map; ``localization``: a ``localize`` output folder, with a map only)."""
-    require_rerun()
     folder = Path(folder)
     kind = folder_kind(folder)
     inputs: dict = {f"the {kind} folder": folder}
@@ -36,7 +37,7 @@ def plan(folder: str | Path, localization: str | Path | None = None) -> Plan:
         run = read_run(folder)
         n_acc = sum(r.get("backend_verdict") == "accepted" for r in run.loops)
         return Plan(folder.name or str(folder), lambda rec: record.log_run(rec, run),
-                    blueprint(images=False, ate=bool(run.ate)), inputs,
+                    lambda: blueprint(images=False, ate=bool(run.ate)), inputs,
                     f"{folder}: run, {len(run.keyframes)} keyframes, {len(run.loops)} loops ({n_acc} accepted), "
                     f"{sum(len(c) for c in run.clouds.values())} map points"
                     + "".join(f"; {n}" for n in run.notes))
@@ -50,6 +51,6 @@ def plan(folder: str | Path, localization: str | Path | None = None) -> Plan:
         if loc is not None:
             record.log_localization(rec, loc)
 
-    return Plan(folder.name or str(folder), build, blueprint(images=False, ate=False, map_folder=True), inputs,
+    return Plan(folder.name or str(folder), build, lambda: blueprint(images=False, ate=False, map_folder=True), inputs,
                 f"{folder}: map, {len(m.sessions)} sessions ({', '.join(s.name for s in m.sessions)}), "
                 f"{len(m.loops)} loops" + (f"; localisation {loc.name}" if loc is not None else ""))
