@@ -288,7 +288,8 @@ def load_config(source: str | Path | None = None, overrides: list[str] | tuple[s
             text = preset_text(str(source))
         else:
             if not path.is_file():
-                raise FileMissingError("configuration file not found", path)
+                raise FileMissingError(f"configuration file not found (--config): give a YAML file or a preset name "
+                                       f"({', '.join(preset_names())})", path)
             try:
                 text = path.read_text(encoding="utf-8")
             except UnicodeDecodeError as e:
