@@ -14,10 +14,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import __version__
 from ..features import FeatureCache
 from ..features.weights import cache_dir
 from ..types import CameraModel, Keyframe, Trajectory
+from ..version import __version__
 from .renderer import render
 from .rig import T_body_camera, T_left_right, demo_camera
 from .trajectory import make_trajectory
