@@ -7,7 +7,11 @@ folder and the flags are checked (a wrong folder is named as such first).
 """
 from __future__ import annotations
 
+import logging
+
 from ..errors import InputError
+
+log = logging.getLogger(__name__)
 
 
 def register(sub) -> None:
@@ -25,6 +29,9 @@ def register(sub) -> None:
                         "(default: the native viewer, which needs a display)")
     p.add_argument("--port", type=int, default=None, metavar="N",
                    help="port of the web viewer with --web (default: 9090)")
+    p.add_argument("--log", default=None, metavar="PATH",
+                   help="with a run folder: the log the run read, where it is now, for the keyframe images (and a "
+                        "ground truth read from the log) (default: the path report.json names)")
     p.add_argument("--localization", default=None, metavar="DIR",
                    help="with a map folder: also show this `slam-lcd localize` output folder in the map frame "
                         "(default: none)")
@@ -39,13 +46,15 @@ def run(args) -> int:
         raise InputError("--port is the web viewer's: give it with --web")
     if args.port is not None and not 0 < args.port < 65536:
         raise InputError(f"--port {args.port} is not a port number (1-65535)")
-    p = plan(args.folder, args.localization)
+    p = plan(args.folder, args.localization, args.log)
     if args.save is not None:
         targets.check_rrd_target(args.save, p.inputs)
     elif not args.web:
         targets.check_display()  # refused with one line, before anything is logged
     require_rerun()  # the input is good: only now is the missing extra the thing to report
     layout = p.layout()
+    for line in p.warnings:
+        log.warning("%s", line)
     print(p.summary)
     if args.save is not None:
         out = targets.save(args.save, p.build, layout, p.name)
