@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from .runtime import moved_modules
 from .runtime.lazy_names import lazy_getattr
+from .version import __version__  # the package face re-exports it (slam_lcd.__version__)
 
 moved_modules.install()  # the old paths of moved modules (slam_lcd.pipeline, slam_lcd.runner, ...)
 
@@ -29,8 +30,6 @@ if TYPE_CHECKING:
     from .run.pipeline import Pipeline
     from .run.runner import run_log
     from .types import CameraModel, Features, Keyframe, LoopCandidate, LoopClosure, Rectangles, Stamp, Trajectory
-
-__version__ = "0.1.0"
 
 _EXPORTS = {
     "Pipeline": ".run.pipeline",

@@ -44,13 +44,19 @@ class TruncatedLogError(CorruptLogError):
 
 
 class TopicNotFoundError(InputError):
-    """A requested topic is not in the log; ``available`` lists the ones that are."""
+    """A requested topic is not in the log; ``available`` lists the ones that are.
 
-    def __init__(self, topic: str, available, path=None):
+    ``flag``: the flag that named the topic (``--image-topic``), said beside it; ``hint``: how to
+    supply what the topic would have given (``--calib FILE`` for a missing CameraInfo), said last.
+    """
+
+    def __init__(self, topic: str, available, path=None, *, flag: str | None = None, hint: str | None = None):
         self.topic = topic
         self.available = sorted(available)
         shown = ", ".join(self.available) if self.available else "(none)"
-        super().__init__(f"topic {topic!r} not found; available topics: {shown}", path)
+        given = f" ({flag})" if flag else ""
+        super().__init__(f"topic {topic!r}{given} not found; available topics: {shown}"
+                         + (f"; {hint}" if hint else ""), path)
 
 
 class MessageEncodingError(InputError):

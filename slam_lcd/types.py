@@ -4,7 +4,8 @@ Conventions (used everywhere in slam-lcd):
 - a stamp is an ``int`` of nanoseconds;
 - a pose is a 4x4 float64 homogeneous matrix ``T_a_b`` that maps points from frame b to
   frame a; a bare "pose" is ``T_world_body``;
-- gtsam.Pose3 appears only inside :mod:`slam_lcd.backend`.
+- gtsam appears only inside :mod:`slam_lcd.backend` and :mod:`slam_lcd.loop_factor` (one loop as a
+  factor; GTSAM imported inside its functions).
 """
 from __future__ import annotations
 
@@ -12,6 +13,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+
+from .loop_factor import between_factor
 
 Stamp = int
 
@@ -130,10 +133,8 @@ class LoopClosure:
         Noise: Gaussian from ``information`` (right perturbation of ``T_match_query``, tangent
         order ``[rx ry rz tx ty tz]``, body frames), wrapped in a robust kernel when ``kernel``
         names one ('huber', 'cauchy', 'dcs', 'geman_mcclure') or is a GTSAM mEstimator.
-        See :func:`slam_lcd.backend.loop_factors.between_factor` (GTSAM is imported there).
+        See :func:`slam_lcd.loop_factor.between_factor` (GTSAM is imported inside it).
         """
-        from .backend.loop_factors import between_factor  # lazy: GTSAM (every stage imports this module)
-
         return between_factor(self, key_match, key_query, kernel=kernel, kernel_width=kernel_width)
 
 

@@ -42,8 +42,8 @@ def main(argv=None) -> int:
         for line in rep.detail_lines():
             print("   " + line)
         return 0
-    from slam_lcd.eval.nees import demo_loop_nees
     from slam_lcd.features import FeaturesConfig, load_extractor
+    from slam_lcd.sim.keyframes import demo_loop_nees
 
     w, h = (int(x) for x in args.size.split("x"))
     ex = load_extractor(FeaturesConfig(kind="superpoint"), weights=args.weights, device="cpu")

@@ -1,16 +1,9 @@
-"""Loop closures as GTSAM factors for any graph (the plugin's output side).
+"""Loop closures as GTSAM factors for any graph (the plugin's output side): many closures as one
+graph, a closure between camera frames, closures as g2o edges.
 
-Convention, stated once: a :class:`~slam_lcd.types.LoopClosure` carries ``T_match_query``,
-the pose of the query keyframe's **body** frame in the match keyframe's body frame (maps
-query-body points into the match body frame). Its ``information`` is the 6x6 inverse
-covariance of the right perturbation ``T_match_query * Exp(xi)``, ``xi`` in GTSAM's
-``Pose3`` tangent order ``[rx ry rz tx ty tz]`` (radians, metres). That is exactly what
-``gtsam.BetweenFactorPose3(key_match, key_query, Pose3(T_match_query), noise)`` measures, so
-the factor is that one with a Gaussian (optionally robust) noise model from the information.
-
-Body vs camera: the detector converts the camera-frame PnP solution into body frames with
-each keyframe's ``T_body_camera``; a user whose graph holds camera poses passes
-``T_body_camera = I`` on their keyframes (or converts with :func:`camera_frame_closure`).
+One loop's factor, its noise model and the robust kernels live in :mod:`slam_lcd.loop_factor`
+(a base module, so that :meth:`slam_lcd.types.LoopClosure.between_factor` imports nothing
+above it); they are re-exported here, where the back end and plugin users import them.
 """
 from __future__ import annotations
 
@@ -21,69 +14,12 @@ import numpy as np
 
 from ..errors import InputError
 from ..geometry import adjoint, inv
+from ..loop_factor import KERNELS as KERNELS  # re-exported: the back end's and users' names
+from ..loop_factor import between_factor as between_factor
+from ..loop_factor import loop_noise as loop_noise
+from ..loop_factor import robust_kernel as robust_kernel
+from ..loop_factor import valid_information as valid_information
 from .g2o import G2oEdge
-
-KERNELS = ("none", "huber", "cauchy", "dcs", "geman_mcclure")
-
-
-def robust_kernel(kind: str, width: float):
-    """The mEstimator for a kernel name (None for 'none'); ``width`` on the whitened error."""
-    M = gtsam.noiseModel.mEstimator
-    if kind == "none":
-        return None
-    if kind == "huber":
-        return M.Huber.Create(width)
-    if kind == "cauchy":
-        return M.Cauchy.Create(width)
-    if kind == "dcs":
-        return M.DCS.Create(width)
-    if kind == "geman_mcclure":
-        return M.GemanMcClure.Create(width)
-    raise InputError(f"unknown robust kernel {kind!r} ({', '.join(KERNELS)})")
-
-
-def valid_information(M) -> bool:
-    """A finite, symmetric, positive definite 6x6 matrix."""
-    if M is None:
-        return False
-    M = np.asarray(M, dtype=np.float64)
-    if M.shape != (6, 6) or not np.all(np.isfinite(M)) or not np.allclose(M, M.T, rtol=1e-6, atol=1e-9):
-        return False
-    try:
-        np.linalg.cholesky(M)
-    except np.linalg.LinAlgError:
-        return False
-    return True
-
-
-def loop_noise(information, kernel=None, kernel_width: float = 3.0):
-    """Gaussian noise model from a 6x6 information matrix, wrapped in a robust kernel when one is named.
-
-    ``kernel``: None / 'none', a kernel name (see :data:`KERNELS`) or a ``gtsam.noiseModel.mEstimator``.
-    """
-    if not valid_information(information):
-        raise InputError("loop information is missing or not a symmetric positive definite 6x6 matrix")
-    info = np.asarray(information, dtype=np.float64)
-    gaussian = gtsam.noiseModel.Gaussian.Information(0.5 * (info + info.T))
-    if kernel is None or (isinstance(kernel, str) and kernel == "none"):
-        return gaussian
-    m = robust_kernel(kernel, kernel_width) if isinstance(kernel, str) else kernel
-    return gtsam.noiseModel.Robust.Create(m, gaussian)
-
-
-def between_factor(closure, key_match: int, key_query: int, *, kernel=None,
-                   kernel_width: float = 3.0) -> gtsam.BetweenFactorPose3:
-    """``BetweenFactorPose3(key_match, key_query, T_match_query)`` with the closure's information.
-
-    Keys are any GTSAM keys (``gtsam.symbol('x', i)``, ``X(i)``, plain ints). Raises
-    :class:`~slam_lcd.errors.InputError` for a closure without a finite pose or a positive
-    definite information matrix (a failed pose estimate must not become a factor).
-    """
-    T = np.asarray(closure.T_match_query, dtype=np.float64)
-    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
-        raise InputError(f"loop {closure.match_id}->{closure.query_id} has no metric pose (T_match_query)")
-    noise = loop_noise(closure.information, kernel, kernel_width)
-    return gtsam.BetweenFactorPose3(int(key_match), int(key_query), gtsam.Pose3(T), noise)
 
 
 def between_factors(closures: Iterable, key: Callable[[int], int], *, kernel=None,

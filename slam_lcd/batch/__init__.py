@@ -5,8 +5,8 @@
 ``summary.csv``, ``summary.md`` and ``ate_before_after.png`` into ``out_dir`` beside one
 output folder per log. See docs/batch.md.
 
-Names are imported lazily (PEP 562): the configuration imports this package's ``config``
-module, which must not pull in the runner (and torch) with it.
+Names are imported lazily (PEP 562): importing :class:`BatchConfig` (the configuration's
+``batch`` section) must not pull in the runner (and torch) with it.
 """
 from __future__ import annotations
 

@@ -164,7 +164,8 @@ def run_batch(
     if gt_dir is not None and gt_topic is not None:
         raise InputError("give --gt-topic or --gt-dir, not both")
     if vocab is not None and not Path(vocab).is_file():
-        raise FileMissingError("vocabulary file not found (--vocab)", vocab)
+        raise FileMissingError("vocabulary file not found (--vocab): train one with `slam-lcd vocab train`, or "
+                               "leave --vocab out for the online vocabulary", vocab)
     entries = discover_logs(logs)
     inputs: dict[str, str | Path | None] = {f"log {e.name}": e.path for e in entries}
     inputs.update({"--gt-dir": gt_dir, "--vocab": vocab, **(input_paths or {})})

@@ -16,7 +16,6 @@ import logging
 import sys
 import warnings
 
-from .. import __version__
 from ..errors import SlamLcdError
 from ..files.atomic import user_path
 from ..runtime.interrupts import (
@@ -28,6 +27,7 @@ from ..runtime.interrupts import (
     signal_name,
     status_of,
 )
+from ..version import __version__
 from .util import one_line_errors, subparsers_of
 
 # module name in slam_lcd.cli -> registered subcommands

@@ -101,7 +101,7 @@ def iter_source_images(source: Path, topic: str | None, every: int = 1, max_imag
     from ..sensors.topics import IMAGE_TYPES
 
     with open_log(source) as reader:
-        (name,) = reader.resolve_topics([topic])
+        (name,) = reader.resolve_topics([topic], flag="--image-topic")
         msgtype = reader.topics[name].msgtype
         if msgtype not in IMAGE_TYPES:
             raise InputError(f"--image-topic {name} carries {msgtype}, not a camera image", source)

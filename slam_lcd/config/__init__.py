@@ -1,6 +1,7 @@
 """Run configuration: typed dataclasses, YAML presets, ``--set section.key=value`` overrides.
 
-Each stage owns its section (``slam_lcd/<stage>/config.py``); this module composes them.
+Each stage owns its section (``slam_lcd/<stage>/config.py``; the batch driver's, which sits above the
+stages, is kept here: :mod:`.batch_section`); this module composes them.
 Unknown keys are errors, values are type-checked and range-checked (each key's range is
 declared beside its field: ``ranged(default, "[0, 100]")``, :mod:`slam_lcd.value_range`), and
 :func:`save_config` writes the resolved configuration next to a run's outputs.
@@ -19,7 +20,6 @@ from typing import Any, Literal
 import yaml
 
 from ..backend.config import BackendConfig
-from ..batch.config import BatchConfig
 from ..cloud.config import MapCloudConfig
 from ..errors import ConfigError, FileMissingError
 from ..eval.config import EvalConfig
@@ -32,6 +32,7 @@ from ..map.config import MapConfig
 from ..sensors.config import SensorsConfig
 from ..value_range import describe, in_range, numeric_ranges, ordered_keys, ranged
 from ..vocab.config import VocabConfig
+from .batch_section import BatchConfig
 
 # presets are package data (slam_lcd/data/configs/*.yaml): found through importlib.resources,
 # so they are there in a wheel install as in a source checkout
@@ -288,7 +289,8 @@ def load_config(source: str | Path | None = None, overrides: list[str] | tuple[s
             text = preset_text(str(source))
         else:
             if not path.is_file():
-                raise FileMissingError("configuration file not found", path)
+                raise FileMissingError(f"configuration file not found (--config): give a YAML file or a preset name "
+                                       f"({', '.join(preset_names())})", path)
             try:
                 text = path.read_text(encoding="utf-8")
             except UnicodeDecodeError as e:

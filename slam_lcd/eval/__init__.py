@@ -1,7 +1,8 @@
 """slam_lcd.eval: trajectory evaluation (association, alignment: the one Umeyama, ATE, RPE, plots) and loop
 evaluation (precision-recall and recall measures: :mod:`.loop_detection`; NEES of loop information: :mod:`.nees`).
-May import: numpy, matplotlib (plots, on demand), the base modules and files; lcd for its loop records, sim (on
-demand) for the NEES demo; never io (files are read by io and sensors).
+May import: numpy, matplotlib (plots, on demand), the base modules and files; lcd for its loop records; never
+io (files are read by io and sensors) nor sim (the NEES of the demo world's loops is
+:func:`slam_lcd.sim.keyframes.demo_loop_nees`).
 
 A pure library: functions take :class:`slam_lcd.types.Trajectory` objects (or a detector's records) and
 return result dataclasses; reading trajectory files lives in :mod:`slam_lcd.io.trajectory_files`, figures in

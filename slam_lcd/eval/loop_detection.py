@@ -45,7 +45,7 @@ def load_loop_matrix(path: str | Path, names: Sequence[str]) -> np.ndarray:
     """
     path = Path(path)
     if not path.is_file():
-        raise FileMissingError("ground-truth file not found", path)
+        raise FileMissingError("ground-truth file not found (--gt)", path)
     n = len(names)
     suffix = path.suffix.lower()
     if suffix in IMAGE_SUFFIXES:

@@ -79,18 +79,6 @@ def report(closures, gt_poses: dict) -> NeesReport:
     return NeesReport(np.array(ne), np.array(er) if er else z, np.array(sg) if sg else z, np.array(inl))
 
 
-def demo_loop_nees(extractor, *, sensor: str = "rgbd", laps: float = 2.0, width: int = 320, height: int = 240,
-                   conf=None, frames=None) -> NeesReport:
-    """Run the loop detector on demo-world keyframes (:func:`slam_lcd.sim.keyframes.demo_keyframes`); NEES of its loops.
-
-    ``frames``: already rendered :class:`~slam_lcd.sim.keyframes.DemoKeyframes` (a test's session fixture).
-    """
-    from ..sim.keyframes import demo_keyframes  # lazy: the demo world, on demand
-
-    dk = frames or demo_keyframes(extractor, laps=laps, width=width, height=height, sensor=sensor)
-    return detector_nees(run_detector(dk, extractor, conf), dk)
-
-
 def run_detector(frames, extractor, conf=None):
     """A :class:`~slam_lcd.lcd.LoopDetector` fed with every keyframe of ``frames`` (demo settings)."""
     from ..lcd.detector import LoopDetector  # lazy: OpenCV

@@ -109,13 +109,16 @@ def resolve_weights(
     if path:
         p = Path(path).expanduser()
         if not p.is_file():
-            raise WeightsError("SuperPoint weights file not found (given with --weights / features.weights)", p)
+            raise WeightsError("SuperPoint weights file not found (given with --weights / features.weights): leave "
+                               "them out for the cached or downloaded weights, or use the ORB baseline: "
+                               "--features orb", p)
         return p
     env = os.environ.get(ENV_WEIGHTS)
     if env:
         p = Path(env).expanduser()
         if not p.is_file():
-            raise WeightsError(f"SuperPoint weights file named by ${ENV_WEIGHTS} not found", p)
+            raise WeightsError(f"SuperPoint weights file named by ${ENV_WEIGHTS} not found: unset it for the "
+                               "cached or downloaded weights, or use the ORB baseline: --features orb", p)
         return p
     target = cache_dir(cache) / WEIGHTS_NAME
     if target.is_file():

@@ -132,8 +132,10 @@ class LogReader:
     def duration_ns(self) -> int:
         return max(0, self.end_ns - self.start_ns) if self.message_count else 0
 
-    def resolve_topics(self, topics: Iterable[str] | str | None) -> list[str]:
-        """Topic names present in the log; a leading '/' may be added or left out. Unknown -> error."""
+    def resolve_topics(self, topics: Iterable[str] | str | None, *, flag: str | None = None,
+                       hint: str | None = None) -> list[str]:
+        """Topic names present in the log; a leading '/' may be added or left out. Unknown -> error
+        (naming ``flag``, the flag that gave the topics, and ``hint``, how else to supply them)."""
         if topics is None:
             return list(self._contents.topics)
         if isinstance(topics, str):
@@ -147,7 +149,7 @@ class LogReader:
             if alt in self._contents.topics:
                 out.append(alt)
             else:
-                raise TopicNotFoundError(t, self._contents.topics, self.path)
+                raise TopicNotFoundError(t, self._contents.topics, self.path, flag=flag, hint=hint)
         return list(dict.fromkeys(out))  # each topic once, in the order given
 
     def topics_of_type(self, *msgtypes: str) -> list[str]:

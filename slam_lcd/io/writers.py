@@ -22,11 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import __version__
 from ..errors import InputError, InvalidPoseError, UnsupportedFormatError
 from ..files.atomic import guard_not_input
 from ..runtime.interrupts import defer_sigint, finish
 from ..types import Trajectory
+from ..version import __version__
 from . import message_builders as M
 from .config import IOConfig
 from .reader import open_log

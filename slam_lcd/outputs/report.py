@@ -11,13 +11,13 @@ import json
 import shlex
 from pathlib import Path
 
-from .. import __version__
 from ..backend.pose_graph import ACCEPTED
 from ..config import config_to_dict
 from ..eval.metrics import ratio_or_none
 from ..files.atomic import write_text
 from ..map.summary import localisation_lines, summary_lines
 from ..sensors.ground_truth import POSITION_ONLY_REASON
+from ..version import __version__
 from .map_cloud import cloud_lines
 from .report_schema import REPORT_SCHEMA_VERSION
 from .result import RunResult

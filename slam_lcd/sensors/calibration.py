@@ -105,6 +105,28 @@ def load_calibration(paths) -> Calibration:
     return calib
 
 
+def missing_camera_info_hint(log_path: str | Path, image_topic: str) -> str:
+    """What to give when a log has no CameraInfo for ``image_topic``: ``--calib FILE``, naming the
+    calibration beside the log when there is one (``camchain-<log>.yaml`` as ``make-demo-log`` writes
+    it, a single ``camchain*.yaml``, or EuRoC's ``cam0/sensor.yaml`` of an ASL folder)."""
+    log_path = Path(log_path)
+    folder = log_path.parent
+    chains = sorted(folder.glob("camchain*.yaml"))
+    own = folder / f"camchain-{log_path.stem}.yaml"
+    beside: list[Path] = [own] if own.is_file() else chains if len(chains) == 1 else []
+    if not beside:
+        asl = [folder / d / "cam0" / "sensor.yaml" for d in ("", "mav0")]
+        cam0 = next((p for p in asl if p.is_file()), None)
+        if cam0 is not None:
+            cam1 = cam0.parent.parent / "cam1" / "sensor.yaml"
+            beside = [cam0] + ([cam1] if cam1.is_file() else [])
+    text = (f"the log has no CameraInfo for {image_topic}: give the camera calibration with --calib FILE "
+            "(a Kalibr camchain.yaml, or EuRoC's cam0/sensor.yaml then cam1/sensor.yaml)")
+    if beside:
+        text += f"; beside the log: {' '.join(f'--calib {p}' for p in beside)}"
+    return text
+
+
 # ---------------------------------------------------------------------------- reading
 def _read_yaml(path: Path):
     if not path.is_file():

@@ -24,7 +24,12 @@ def log_frames(
     frames: list[Frame] = []
     camera = None
     with open_log(path) as reader:
-        topics = [topic] + ([camera_info_topic] if camera_info_topic else [])
+        topics = reader.resolve_topics([topic], flag="--image-topic")
+        if camera_info_topic:
+            camera_info_topic = reader.resolve_topics(
+                [camera_info_topic], flag="--camera-info-topic",
+                hint="leave --camera-info-topic out to take the intrinsics from --focal-factor")[0]
+            topics.append(camera_info_topic)
         for m in reader.messages(topics):
             with at_message(m, reader.path, decoding=False):  # name the log, topic and stamp of a bad message
                 if m.topic == camera_info_topic:

@@ -19,6 +19,7 @@ from ..frontend.vo import RgbdOdometry, StereoOdometry, VoResult
 from ..io import open_log
 from ..io.tf import TfBuffer
 from ..types import CameraModel
+from .calibration import missing_camera_info_hint
 from .messages import at_message, camera_from_camera_info, decode_depth, decode_gray
 from .mounting import camera_mounting
 
@@ -78,9 +79,12 @@ def visual_odometry_from_log(path, conf: FrontendConfig | None = None, *, image_
     info_topic = camera_info_topic or camera_info_topic_of(image_topic)
     with open_log(path) as reader:
         topics = reader.topics
-        for t in (image_topic, aux_topic) + ((info_topic,) if camera is None else ()):
+        for t in (image_topic, aux_topic):
             if t not in topics:
                 raise TopicNotFoundError(t, topics, reader.path)
+        if camera is None and info_topic not in topics:
+            raise TopicNotFoundError(info_topic, topics, reader.path,
+                                     hint=missing_camera_info_hint(reader.path, image_topic))
         given_camera = camera is not None
         cam_frame = None
         for m in (reader.messages([info_topic]) if not given_camera else ()):

@@ -62,7 +62,7 @@ def choose_topics(reader, image_topic=None, odom_topic=None, gt_topic=None, dept
     path = reader.path
     images = [t for t, info in topics.items() if info.msgtype in IMAGE_TYPES]
     if image_topic is not None:
-        image_topic = reader.resolve_topics(image_topic)[0]
+        image_topic = reader.resolve_topics(image_topic, flag="--image-topic")[0]
         _check_type(reader, "--image-topic", image_topic, IMAGE_TYPES, "a camera image")
     else:
         plain = [t for t in images if "depth" not in t.lower() and "right" not in t.lower()]
@@ -75,10 +75,11 @@ def choose_topics(reader, image_topic=None, odom_topic=None, gt_topic=None, dept
             raise PipelineError(f"several image topics {plain}; choose one with --image-topic", path)
         image_topic = plain[0]
     if odom_topic is not None:
-        odom_topic = reader.resolve_topics(odom_topic)[0]
+        odom_topic = reader.resolve_topics(odom_topic, flag="--odom-topic")[0]
         _check_type(reader, "--odom-topic", odom_topic, POSE_TYPES, "odometry")
     else:
-        named_gt = reader.resolve_topics(split_tf_spec(gt_topic)[0])[0] if gt_topic is not None else None
+        named_gt = (reader.resolve_topics(split_tf_spec(gt_topic)[0], flag="--gt-topic")[0]
+                    if gt_topic is not None else None)
         odoms = [t for t, i in topics.items() if i.msgtype in ODOM_TYPES and t != named_gt and not _gt_name(t)]
         odom_topic = odoms[0] if len(odoms) == 1 else None
         if len(odoms) > 1:
@@ -86,7 +87,7 @@ def choose_topics(reader, image_topic=None, odom_topic=None, gt_topic=None, dept
     ns = _ns(image_topic)
     infos = [t for t, i in topics.items() if i.msgtype == CAMINFO_TYPE and _ns(t) == ns]
     if depth_topic is not None:
-        depth_topic = reader.resolve_topics(depth_topic)[0]
+        depth_topic = reader.resolve_topics(depth_topic, flag="--depth-topic")[0]
         _check_type(reader, "--depth-topic", depth_topic, IMAGE_TYPES, "a depth image")
     else:
         depths = [t for t in images if "depth" in t.lower() and (_ns(t) == ns or _ns(_ns(t)) == ns)]
@@ -96,7 +97,7 @@ def choose_topics(reader, image_topic=None, odom_topic=None, gt_topic=None, dept
     gt_frames = None
     if gt_topic is not None:
         gt_topic, parent, child = split_tf_spec(gt_topic)
-        gt_topic = reader.resolve_topics(gt_topic)[0]
+        gt_topic = reader.resolve_topics(gt_topic, flag="--gt-topic")[0]
         if parent is not None:
             assert child is not None  # split_tf_spec gives both frames or neither
             _check_type(reader, "--gt-topic", gt_topic, (TF_TYPE,), "a TF topic for TOPIC:PARENT:CHILD")
@@ -124,7 +125,7 @@ def choose_right_topic(reader, image_topic: str, right_topic: str | None = None,
     """
     topics = reader.topics
     if right_topic is not None:
-        right_topic = reader.resolve_topics(right_topic)[0]
+        right_topic = reader.resolve_topics(right_topic, flag="--right-topic")[0]
         _check_type(reader, "--right-topic", right_topic, IMAGE_TYPES, "a camera image")
         return right_topic
     if calibrated_partner:

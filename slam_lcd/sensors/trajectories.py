@@ -38,7 +38,7 @@ def load_trajectory_source(spec: str, fmt: str | None = None, times_path: str | 
     log_topic = split_log_topic(str(spec))
     if log_topic is None:
         if not Path(spec).exists():
-            raise FileMissingError("trajectory file not found", spec)
+            raise FileMissingError("trajectory file not found (give a trajectory file or LOG:TOPIC)", spec)
         return read_trajectory(spec, fmt, times_path=times_path, file_rotations=file_rotations)
     log, topic = log_topic
     if not Path(log).exists():

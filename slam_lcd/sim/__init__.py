@@ -1,5 +1,6 @@
 """slam_lcd.sim: the built-in demo world: rendered scenes, trajectories with loops, simulated odometry, demo logs.
-May import: io (writers), vision.gray and the base modules; only the CLI, the demo and tests import it.
+May import: io (writers), vision, features (the demo keyframes' cache), eval (on demand, the NEES of the
+demo's loops) and the base modules; only the CLI, the demo and tests import it.
 
 A rendered indoor environment with loops, drifting odometry and exact ground truth,
 written as real log files. Public API:

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .. import __version__
 from ..features.weights import cache_dir
+from ..version import __version__
 from . import make_demo_log
 
 

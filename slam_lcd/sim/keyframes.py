@@ -14,10 +14,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import __version__
 from ..features import FeatureCache
 from ..features.weights import cache_dir
 from ..types import CameraModel, Keyframe, Trajectory
+from ..version import __version__
 from .renderer import render
 from .rig import T_body_camera, T_left_right, demo_camera
 from .trajectory import make_trajectory
@@ -59,3 +59,16 @@ def demo_keyframes(extractor, *, laps: float = 2.0, rate_hz: float = 1.0, width:
         kfs.append(Keyframe(kid, stamp, traj.poses[k].copy(), image=img, camera=cam, T_body_camera=T_bc,
                             depth=depth if sensor == "rgbd" else None, right_image=right, features=feats))
     return DemoKeyframes(kfs, traj, cam, T_bc)
+
+
+def demo_loop_nees(extractor, *, sensor: str = "rgbd", laps: float = 2.0, width: int = 320, height: int = 240,
+                   conf=None, frames: DemoKeyframes | None = None):
+    """The loop detector run on demo-world keyframes (:func:`demo_keyframes`): the
+    :class:`~slam_lcd.eval.nees.NeesReport` of its loops.
+
+    ``frames``: already rendered :class:`DemoKeyframes` (a test's session fixture).
+    """
+    from ..eval.nees import detector_nees, run_detector  # lazy: scipy, and OpenCV with the detector
+
+    dk = frames or demo_keyframes(extractor, laps=laps, width=width, height=height, sensor=sensor)
+    return detector_nees(run_detector(dk, extractor, conf), dk)

@@ -7,8 +7,10 @@ library's own (TUM files, ``map.ply``, the map's manifest and graph); ``loops.cs
 against the header the runner writes (:func:`slam_lcd.outputs.loops.loop_columns`).
 
 The run folder holds no keyframe images (the loop pictures' album is removed before the set is
-published), so a run folder gives camera frusta without images; ``slam-lcd run --rerun`` logs
-each keyframe's image and keypoints while it still has them (:mod:`.live`).
+published): ``view`` reads them from the log ``report.json`` names (or ``--log``) at the
+keyframes' stamps (:mod:`.images`); where that log has moved, the frusta are drawn without
+images and ``moved_log`` says so. ``slam-lcd run --rerun`` logs each keyframe's image and
+keypoints while it still has them (:mod:`.live`).
 """
 from __future__ import annotations
 
@@ -50,6 +52,9 @@ class RunFolder:
     camera: dict | None = None  # report.json's map_cloud.sensor.camera (intrinsics, T_body_camera)
     ate: dict = field(default_factory=dict)  # "odometry" / "corrected" -> (stamps ns, errors m)
     notes: list[str] = field(default_factory=list)
+    log: Path | None = None  # the run's log where it is now (report.json's, or --log); None: not found
+    images: dict = field(default_factory=dict)  # keyframe stamp (ns) -> thumbnail (uint8), read from ``log``
+    moved_log: str | None = None  # the one line that says the log is not where report.json says
 
 
 @dataclass
@@ -119,10 +124,13 @@ def read_loops_csv(path: Path) -> list[dict]:
         raise InputError(f"cannot read loops.csv ({e})", path) from None
 
 
-def read_run(root: str | Path, *, ground_truth: bool = True, gt: Trajectory | None = None) -> RunFolder:
+def read_run(root: str | Path, *, ground_truth: bool = True, gt: Trajectory | None = None, images: bool = False,
+             log_path: str | Path | None = None) -> RunFolder:
     """Read run folder ``root`` (typed errors naming the file). ``ground_truth``: read the log's ground
     truth (a topic of the log or a file, as report.json names it) for the ATE over time, when it is there;
-    ``gt``: that ground truth already in hand (the run that just wrote the folder), not read again."""
+    ``gt``: that ground truth already in hand (the run that just wrote the folder), not read again.
+    ``images``: read each keyframe's image from the run's log; ``log_path``: that log, where report.json's
+    path no longer leads (``view --log``)."""
     root = Path(root)
     missing = [n for n in RUN_FILES if not (root / n).is_file()]
     if missing:
@@ -136,28 +144,61 @@ def read_run(root: str | Path, *, ground_truth: bool = True, gt: Trajectory | No
             run.clouds[kind] = read_cloud(root / name)
         elif name in listed:
             raise InputError(f"the run's report lists {name} but the folder lacks it", root / name)
+    _locate_log(run, log_path)
     sensor = (report.get("map_cloud") or {}).get("sensor") or {}
     run.camera = sensor.get("camera") or None
     if run.camera is None:
         run.notes.append("the run recorded no camera model: keyframes are shown as poses without frusta")
     if ground_truth:
         _add_ate(run, gt)
+    if images:
+        _add_images(run)
     return run
 
 
-def _ground_truth(report: dict) -> Trajectory | None:
+def _locate_log(run: RunFolder, given: str | Path | None) -> None:
+    """``run.log``: ``given`` (it must exist), else the log report.json names when it is still there."""
+    if given is not None:
+        if not Path(given).exists():
+            raise FileMissingError("no such log (--log)", given)
+        run.log = Path(given)
+        return
+    named = (run.report.get("input") or {}).get("log")
+    if named and Path(named).exists():
+        run.log = Path(named)
+    elif named:
+        gt_topic = str((run.report.get("input") or {}).get("gt_source") or "").startswith("topic ")
+        what = "its keyframe images and the ATE over time are" if gt_topic else "its keyframe images are"
+        run.moved_log = (f"{named}: the run's log is not there (moved?): {what} not shown; give its place "
+                         "with --log PATH")
+
+
+def _add_images(run: RunFolder) -> None:
+    from .images import read_keyframe_images
+
+    topic = ((run.report.get("input") or {}).get("topics") or {}).get("image")
+    if run.log is None or not topic:
+        return
+    source = ((run.report.get("config") or {}).get("io") or {}).get("stamp_source") or "header"
+    run.images = read_keyframe_images(run.log, topic, run.keyframes.stamps, source)
+    if len(run.images) < len(run.keyframes):
+        run.notes.append(f"{len(run.keyframes) - len(run.images)} of {len(run.keyframes)} keyframes have no image "
+                         f"on {topic} of {run.log} at their stamps")
+
+
+def _ground_truth(run: RunFolder) -> Trajectory | None:
     """The run's ground truth as report.json names it (``file PATH`` / ``topic NAME`` of its log), or None."""
     from ..sensors.trajectories import load_trajectory_source  # lazy: OpenCV
 
-    source = (report.get("input") or {}).get("gt_source") or ""
+    source = (run.report.get("input") or {}).get("gt_source") or ""
     kind, _, name = source.partition(" ")
     if kind == "file":
         return load_trajectory_source(name)
     if kind == "topic":
-        log_path = (report.get("input") or {}).get("log")
-        if not log_path or not Path(log_path).exists():
-            raise FileMissingError("the run's log is not here (its ground truth is not read)", log_path or "?")
-        return load_trajectory_source(f"{log_path}:{name}")
+        if run.log is None:
+            named = (run.report.get("input") or {}).get("log")
+            raise FileMissingError("the run's log is not here (its ground truth is not read)", named or "?")
+        return load_trajectory_source(f"{run.log}:{name}")
     return None
 
 
@@ -165,7 +206,7 @@ def _add_ate(run: RunFolder, gt: Trajectory | None = None) -> None:
     """Per-pose ATE of the odometry and the corrected trajectory, with the run's own evaluation settings."""
     ev = run.report.get("eval") or {}
     try:
-        gt = gt if gt is not None else _ground_truth(run.report)
+        gt = gt if gt is not None else _ground_truth(run)
         if gt is None:
             run.notes.append("no ground truth: no ATE over time")
             return

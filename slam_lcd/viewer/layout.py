@@ -8,17 +8,19 @@ from __future__ import annotations
 
 from . import require_rerun
 
-IMAGE_ORIGIN = "world/live/camera"  # the keyframe images a live run logs (a run folder holds none)
+IMAGE_ORIGIN = "world/live/camera"  # the keyframe images a live run logs (`view` of a run folder: record's)
 
 
-def blueprint(*, images: bool, ate: bool, map_folder: bool = False):
-    """The default layout: 3-D view on the left; on the right the keyframe image (``images``), the ATE
-    over time (``ate``) and the loop table, with the run's notes or the map's summary as tabs."""
+def blueprint(*, images: bool, ate: bool, map_folder: bool = False, image_origin: str = IMAGE_ORIGIN):
+    """The default layout: 3-D view on the left; on the right the keyframe image (``images``, the entity
+    ``image_origin``), the ATE over time (``ate``) and the loop table, with the run's notes or the map's
+    summary as tabs."""
     rr = require_rerun()
     rrb = rr.blueprint
     side = []
     if images:
-        side.append(rrb.Spatial2DView(origin=IMAGE_ORIGIN, name="keyframe image and keypoints"))
+        name = "keyframe image and keypoints" if image_origin == IMAGE_ORIGIN else "keyframe image"
+        side.append(rrb.Spatial2DView(origin=image_origin, name=name))
     if ate:
         side.append(rrb.TimeSeriesView(origin="ate", name="ATE over time (m)"))
     texts = [rrb.TextDocumentView(origin="loops/table", name="loops")]

@@ -4,7 +4,7 @@ The hook is the pipeline's keyframe sink, the one the loop pictures' album alrea
 keyframe passes once, after loop detection, with its image and keypoints still there (they are
 dropped right after), and each loop the detector verifies passes through ``keep_loop``. So a
 live recording holds what a run folder cannot: every keyframe's image (a small JPEG, at most
-:data:`IMAGE_WIDTH` pixels wide) with its keypoints, under ``world/live/camera`` at the odometry
+:data:`~slam_lcd.viewer.images.IMAGE_WIDTH` pixels wide) with its keypoints, under ``world/live/camera`` at the odometry
 pose it had then, and the verified loops as they were found (``world/live/loops``). When the
 run's outputs are written, :meth:`LiveRecorder.finish` adds what ``slam-lcd view`` shows of the
 run folder (corrected trajectory, keyframe frusta, loops by the back end's verdict, map cloud,
@@ -23,14 +23,13 @@ import numpy as np
 from ..errors import SlamLcdError, ViewerMissingError
 from . import INSTALL_HINT, TIMELINE, require_rerun
 from .folders import read_run
+from .images import jpeg, thumbnail
 from .layout import blueprint
 from .record import log_run, seconds
 from .targets import AtomicRrd, check_display, close, new_stream
 
 log = logging.getLogger(__name__)
 
-IMAGE_WIDTH = 160  # the keyframe images are shown small: ~3 kB of JPEG each
-JPEG_QUALITY = 75
 SPAWN = "spawn"
 
 
@@ -86,29 +85,21 @@ class LiveRecorder:
         return _Tee(self, album)
 
     def keyframe(self, kf) -> None:
-        import cv2
-
         rr = require_rerun()
         rec = self.rec
         rec.set_time(TIMELINE, timestamp=seconds([int(kf.stamp)])[0])
         T = np.asarray(kf.T_world_body, float) @ np.asarray(kf.T_body_camera, float)
         self.positions[int(kf.id)] = np.asarray(kf.T_world_body, float)[:3, 3].copy()
-        image = kf.colour if kf.colour is not None else kf.image
-        h, w = image.shape[:2]
-        s = min(1.0, IMAGE_WIDTH / w)
-        small = cv2.resize(image, (max(1, round(w * s)), max(1, round(h * s))), interpolation=cv2.INTER_AREA)
-        if small.dtype != np.uint8:
-            small = np.clip(small * (255.0 if small.max() <= 1.0 else 1.0), 0, 255).astype(np.uint8)
-        bgr = cv2.cvtColor(small, cv2.COLOR_RGB2BGR) if small.ndim == 3 else small
-        ok, jpeg = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
+        small, s = thumbnail(kf.colour if kf.colour is not None else kf.image)
+        data = jpeg(small)
         parts = [rr.Transform3D(translation=T[:3, 3], mat3x3=T[:3, :3])]
         cam = kf.camera
         if cam is not None:
             parts.append(rr.Pinhole(focal_length=[cam.fx * s, cam.fy * s], principal_point=[cam.cx * s, cam.cy * s],
                                     width=small.shape[1], height=small.shape[0], camera_xyz=rr.ViewCoordinates.RDF,
                                     image_plane_distance=0.3))
-        if ok:
-            parts.append(rr.EncodedImage(contents=jpeg.tobytes(), media_type="image/jpeg"))
+        if data is not None:
+            parts.append(rr.EncodedImage(contents=data, media_type="image/jpeg"))
         rec.log("world/live/camera", *parts)
         kp = np.asarray(kf.features.keypoints, np.float32)[:, :2] * s if kf.features is not None else np.zeros((0, 2))
         rec.log("world/live/camera/keypoints", rr.Points2D(kp, colors=[(255, 220, 0)], radii=[1.0]))

@@ -4,8 +4,8 @@ Entity paths (the docs' table, docs/viewer.md, and the tests read them back):
 
 - ``world/odometry``, ``world/corrected``: the trajectories (static line strips);
 - ``world/keyframes``: the corrected keyframe positions (static); ``world/keyframes/camera``: one row
-  per keyframe on the ``stamp`` timeline (the corrected pose, and a Pinhole frustum when the run
-  recorded its camera);
+  per keyframe on the ``stamp`` timeline (the corrected pose, a Pinhole frustum when the run
+  recorded its camera, and the keyframe's image, a thumbnail read from the run's log, when found);
 - ``world/loops/accepted``, ``world/loops/rejected``: one segment per ``loops.csv`` row, query to
   match keyframe, with the row's ids, score, inliers and reason as any-values on the same entity;
   ``loops/events``: a text line per loop at its query stamp; ``loops/table``: a markdown table;
@@ -28,6 +28,7 @@ from ..geometry import interpolate_poses
 from ..io.trajectory_files import read_tum
 from . import TIMELINE, require_rerun
 from .folders import LocalizationFolder, MapFolder, RunFolder
+from .images import jpeg
 
 ACCEPTED_RGB = (40, 200, 80)
 BACKEND_REJECTED_RGB = (230, 50, 50)  # verified by the detector, rejected by the back end
@@ -36,21 +37,28 @@ SESSION_RGB = [(31, 119, 180), (255, 127, 14), (44, 160, 44), (148, 103, 189), (
                (227, 119, 194), (23, 190, 207), (188, 189, 34), (127, 127, 127)]
 TABLE_ROWS = 200  # the markdown table lists at most this many loops (the any-values hold every one)
 FRUSTUM_M = 0.3  # image plane distance of a keyframe frustum
+KEYFRAME_CAMERA = "world/keyframes/camera"
 
 
 def seconds(stamps_ns) -> np.ndarray:
     return np.asarray(stamps_ns, np.int64).astype(np.float64) * 1e-9
 
 
-def log_pinhole_pose(rec, path: str, T_world_camera: np.ndarray, camera: dict | None) -> None:
-    """A camera at ``T_world_camera`` (its frustum when the intrinsics are known)."""
+def log_pinhole_pose(rec, path: str, T_world_camera: np.ndarray, camera: dict | None,
+                     image: np.ndarray | None = None) -> None:
+    """A camera at ``T_world_camera`` (its frustum when the intrinsics are known), with ``image`` (a
+    thumbnail: the frustum is scaled to its width) when given."""
     rr = require_rerun()
     parts = [rr.Transform3D(translation=T_world_camera[:3, 3], mat3x3=T_world_camera[:3, :3])]
     if camera:
-        parts.append(rr.Pinhole(focal_length=[float(camera["fx"]), float(camera["fy"])],
-                                principal_point=[float(camera["cx"]), float(camera["cy"])],
-                                width=int(camera["width"]), height=int(camera["height"]),
+        s = image.shape[1] / float(camera["width"]) if image is not None else 1.0
+        parts.append(rr.Pinhole(focal_length=[float(camera["fx"]) * s, float(camera["fy"]) * s],
+                                principal_point=[float(camera["cx"]) * s, float(camera["cy"]) * s],
+                                width=round(int(camera["width"]) * s), height=round(int(camera["height"]) * s),
                                 camera_xyz=rr.ViewCoordinates.RDF, image_plane_distance=FRUSTUM_M))
+    data = jpeg(image) if image is not None else None
+    if data is not None:
+        parts.append(rr.EncodedImage(contents=data, media_type="image/jpeg"))
     rec.log(path, *parts)
 
 
@@ -73,7 +81,7 @@ def log_run(rec, run: RunFolder, *, frusta: bool = True) -> None:
         T_bc = body_camera(run.camera)
         for i in range(len(kf)):
             rec.set_time(TIMELINE, timestamp=seconds(kf.stamps[i : i + 1])[0])
-            log_pinhole_pose(rec, "world/keyframes/camera", kf.poses[i] @ T_bc, run.camera)
+            log_pinhole_pose(rec, KEYFRAME_CAMERA, kf.poses[i] @ T_bc, run.camera, run.images.get(int(kf.stamps[i])))
         rec.reset_time()
     for kind, cloud in run.clouds.items():
         colours = cloud.colours if kind == "corrected" else np.full_like(cloud.colours, 140)

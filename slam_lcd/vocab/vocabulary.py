@@ -107,7 +107,8 @@ class Vocabulary:
         """Read a file written by :meth:`save`; any other or damaged file raises VocabularyError."""
         path = Path(path)
         if not path.is_file():
-            raise VocabularyError("vocabulary file not found", path)
+            raise VocabularyError("vocabulary file not found: train one with `slam-lcd vocab train`, or leave --vocab "
+                                  "out for the online vocabulary", path)
         with open(path, "rb") as fh:
             if fh.read(4) != b"PK\x03\x04":
                 raise VocabularyError("not a vocabulary: expected a .npz (zip) file", path)

@@ -92,8 +92,8 @@ def test_loop_information_nees_on_the_demo_world(sensor, rgbd_detector, demo_key
     Stereo: the same left images (cached features) with a rendered right image, 3-D points
     from SGBM disparity instead of the depth image.
     """
-    from slam_lcd.eval.nees import CHI2_6_99, demo_loop_nees, detector_nees
-    from slam_lcd.sim.keyframes import demo_keyframes
+    from slam_lcd.eval.nees import CHI2_6_99, detector_nees
+    from slam_lcd.sim.keyframes import demo_keyframes, demo_loop_nees
 
     if sensor == "rgbd":
         rep = detector_nees(rgbd_detector, demo_keyframes_rgbd)

@@ -222,3 +222,20 @@ def test_cli_bad_calibration_is_one_line_exit_2(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and "camchain.yaml" in err[0] and "cam1.T_cn_cnm1" in err[0], err
     assert not (tmp_path / "out").exists()
+
+
+def test_missing_camera_info_hint_names_the_calibration_beside_the_log(tmp_path):
+    from slam_lcd.sensors.calibration import missing_camera_info_hint
+
+    base = ("the log has no CameraInfo for /cam0/image_raw: give the camera calibration with --calib FILE "
+            "(a Kalibr camchain.yaml, or EuRoC's cam0/sensor.yaml then cam1/sensor.yaml)")
+    log = tmp_path / "V1_01_easy.bag"
+    assert missing_camera_info_hint(log, "/cam0/image_raw") == base
+    for cam in ("cam0", "cam1"):  # an ASL folder beside the bag
+        (tmp_path / "mav0" / cam).mkdir(parents=True)
+        (tmp_path / "mav0" / cam / "sensor.yaml").write_text("sensor_type: camera\n", encoding="utf-8")
+    assert missing_camera_info_hint(log, "/cam0/image_raw") == (
+        f"{base}; beside the log: --calib {tmp_path}/mav0/cam0/sensor.yaml --calib {tmp_path}/mav0/cam1/sensor.yaml")
+    (tmp_path / "camchain.yaml").write_text("cam0: {}\n", encoding="utf-8")  # a single camchain comes first
+    want = f"{base}; beside the log: --calib {tmp_path}/camchain.yaml"
+    assert missing_camera_info_hint(log, "/cam0/image_raw") == want

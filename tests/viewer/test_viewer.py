@@ -84,6 +84,61 @@ def test_run_recording_holds_every_keyframe_loop_and_point(run_rrd):
     assert len(rows(ents["/ate/corrected"], "Scalars:scalars")) > len(kf)
 
 
+def test_run_recording_shows_each_keyframes_image_read_from_the_log(run_rrd, report_run):
+    """One thumbnail per keyframe, at the keyframe's stamp, and it is the log's image at that stamp."""
+    import cv2
+
+    from slam_lcd.io import open_log
+    from slam_lcd.io.trajectory_files import read_tum
+    from slam_lcd.sensors.messages import decode_any_image
+    from slam_lcd.viewer.images import thumbnail
+
+    out, _, ents = run_rrd
+    kf = read_tum(out / "keyframes_corrected.tum")
+    blobs = rows(ents["/world/keyframes/camera"], "EncodedImage:blob")
+    assert len([b for b in blobs if b]) == len(kf)
+    first = cv2.imdecode(np.asarray(blobs[0][0], np.uint8), cv2.IMREAD_UNCHANGED)  # a row: [the JPEG's bytes]
+    with open_log(report_run[2]) as reader:
+        m = next(m for m in reader.messages(["/camera/image_raw"]) if abs(m.stamp - int(kf.stamps[0])) < 1_000_000)
+        want = thumbnail(decode_any_image(m))[0]
+    want = cv2.cvtColor(want, cv2.COLOR_RGB2BGR) if want.ndim == 3 else want
+    assert first.shape == want.shape and np.abs(first.astype(float) - want).mean() < 8
+
+
+def test_a_moved_log_is_one_line_and_the_rest_is_drawn(run_rrd, report_run, tmp_path, capfd):
+    import json
+    import shutil
+
+    from slam_lcd.io.trajectory_files import read_tum
+
+    out = tmp_path / "run"
+    shutil.copytree(run_rrd[0], out)
+    doc = json.loads((out / "report.json").read_text(encoding="utf-8"))
+    gone = tmp_path / "moved" / "demo.mcap"
+    doc["input"]["log"] = str(gone)
+    (out / "report.json").write_text(json.dumps(doc), encoding="utf-8")
+    n = len(read_tum(out / "keyframes_corrected.tum"))
+
+    rc, stdout, err = run_cli(["view", str(out), "--save", str(tmp_path / "a.rrd")], capfd)
+    assert rc == 0, err
+    assert assert_one_line(err) == (f"WARNING: {gone}: the run's log is not there (moved?): its keyframe images and "
+                                    "the ATE over time are not shown; give its place with --log PATH")
+    ents = read_rrd(tmp_path / "a.rrd")
+    assert len(rows(ents["/world/keyframes/camera"], "Transform3D:translation")) == n
+    assert not [b for b in rows(ents["/world/keyframes/camera"], "EncodedImage:blob") if b]
+    assert "/world/corrected" in ents and "/world/loops/accepted" in ents
+
+    rc, stdout, err = run_cli(["view", str(out), "--save", str(tmp_path / "b.rrd"), "--log", str(report_run[2])], capfd)
+    assert rc == 0 and err.strip() == "", err
+    ents = read_rrd(tmp_path / "b.rrd")
+    assert len([b for b in rows(ents["/world/keyframes/camera"], "EncodedImage:blob") if b]) == n
+    assert "/ate/corrected" in ents
+
+    rc, _, err = run_cli(["view", str(out), "--save", str(tmp_path / "c.rrd"), "--log", str(gone)], capfd)
+    assert rc == 2
+    assert assert_one_line(err) == f"slam-lcd view: error: {gone}: no such log (--log)"
+
+
 def test_recording_carries_the_projects_layout(run_rrd):
     from rerun.chunk import RrdReader
 
