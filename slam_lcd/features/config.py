@@ -48,8 +48,9 @@ class FeaturesConfig:
     # arithmetic of SuperPoint's shared encoder: 'float32' (the reference) or 'bfloat16' (autocast;
     # the detector and descriptor heads stay float32). On CPUs with AMX / AVX512-BF16 a 640x480
     # forward takes ~0.43x the time; 95% of the keypoints stay within 1 px, descriptor cosine 0.9998
-    # (docs/features.md). Elsewhere bfloat16 is emulated and slower (the log warns once)
-    precision: Literal["float32", "bfloat16"] = "float32"
+    # (docs/features.md). Elsewhere bfloat16 is emulated and slower (the log warns once). 'auto':
+    # bfloat16 where the device computes it natively (oneDNN's check on CPU; the GPU's own), else float32
+    precision: Literal["auto", "float32", "bfloat16"] = "auto"
     # ORB baseline: number of features, pyramid scale factor and levels, FAST threshold
     orb_n_features: int = ranged(1000, "[1, inf)")
     orb_scale_factor: float = ranged(1.2, "(1, inf)")

@@ -48,6 +48,13 @@ def bfloat16_is_native(device: torch.device) -> bool:
         return False
 
 
+def resolve_precision(precision: str, device: torch.device) -> str:
+    """``auto`` -> ``bfloat16`` where ``device`` computes it natively, else ``float32``; others as they are."""
+    if precision == "auto":
+        return "bfloat16" if bfloat16_is_native(device) else "float32"
+    return precision
+
+
 class SuperPointExtractor(Extractor):
     """SuperPoint on CPU or CUDA, batched, under ``torch.inference_mode``."""
 
@@ -67,7 +74,7 @@ class SuperPointExtractor(Extractor):
                 sha256=conf.weights_sha256,
                 allow_download=conf.allow_download,
             )
-            model = SuperPoint(self.model_conf(conf))
+            model = SuperPoint(self.model_conf(conf, self.device))
             load_state_dict_checked(model, self.weights_path)
             self._weights_id = sha256_of(self.weights_path)
         else:  # an in-memory model (tests, benchmarks): identify it by its parameters
@@ -85,12 +92,14 @@ class SuperPointExtractor(Extractor):
         self._trim_heap = self.device.type == "cpu" and conf.cpu_allocator == "retain"
         if self._trim_heap:
             retain_freed_memory()
+        self.precision = str(self.model.conf["backbone_precision"])  # what 'auto' became on this device
         if conf.precision == "bfloat16" and not bfloat16_is_native(self.device):
             log.warning("features.precision bfloat16: this %s has no native bfloat16 arithmetic; SuperPoint runs "
                         "emulated and slower than float32", "CPU" if self.device.type == "cpu" else "GPU")
 
     @staticmethod
-    def model_conf(conf: FeaturesConfig) -> dict:
+    def model_conf(conf: FeaturesConfig, device: torch.device | None = None) -> dict:
+        """The model's settings; ``features.precision: auto`` resolved for ``device`` (default: the CPU)."""
         if conf.nms_radius < 0 or conf.remove_borders < 0:
             raise ConfigError("features.nms_radius and features.remove_borders must be >= 0")
         if conf.max_keypoints == 0 or conf.max_keypoints < -1:
@@ -101,7 +110,7 @@ class SuperPointExtractor(Extractor):
             "max_keypoints": conf.max_keypoints,
             "remove_borders": conf.remove_borders,
             "descriptor_sampling": conf.descriptor_sampling,
-            "backbone_precision": conf.precision,
+            "backbone_precision": resolve_precision(conf.precision, device or torch.device("cpu")),
         }
 
     def identity(self) -> dict:

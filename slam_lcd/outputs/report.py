@@ -91,6 +91,8 @@ def report_facts(result: RunResult, cfg, rows: list[dict], ate_before, ate_after
         # localize: share of keyframes localised, reasons, errors against ground truth
         "localization": ({k: v for k, v in result.localization.items() if not k.startswith("_")}
                          if result.localization is not None else None),
+        # the features used: kind and, for SuperPoint, the encoder's arithmetic (features.precision resolved)
+        "features": result.features,
         # tracking-loss segments: keyframes in each, components joined by loops, ATE per component (docs/outputs.md)
         "segments": result.segments,
         # the map as a point cloud: sharpness before/after, distance to true surfaces (docs/map_cloud.md)

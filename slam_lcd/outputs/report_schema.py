@@ -118,6 +118,10 @@ REPORT_SCHEMA: dict[str, Any] = {
         "config": {"type": "object"},
         "map_cloud": _MAP_CLOUD,
         "segments": _SEGMENTS,
+        # the features used; precision: SuperPoint's encoder arithmetic (null for ORB), precision_setting: the key
+        "features": {"type": ["object", "null"], "required": ["kind", "precision", "precision_setting"],
+                     "properties": {"kind": {"type": ["string", "null"]}, "precision": {"type": ["string", "null"]},
+                                    "precision_setting": {"type": "string"}}},
         # what to read first; "frame": "map" for a run into a map (corrected.tum, the loops and the ATE are the
         # map's), "session" otherwise
         "headline": {"type": "object", "required": ["frame", "loops_accepted", "ate_before_m", "ate_after_m"],

@@ -50,6 +50,8 @@ class RunResult:
     map_cloud: dict | None = None
     # the sensor the cloud was built from (kind, topics, camera, mounting, rectification): export-map rebuilds it
     map_cloud_sensor: dict | None = field(default=None, repr=False)
+    # the features the run used: kind, and for SuperPoint the encoder's arithmetic ('auto' resolved on this device)
+    features: dict | None = None
     # tracking-loss segments of the pose graph (slam_lcd.outputs.segments.segment_facts), None: no keyframe
     segments: dict | None = None
     # the ground truth the run evaluated against (a Trajectory), or None; what a viewer of the run reuses
@@ -110,6 +112,9 @@ class RunResult:
             from .segments import segments_line  # lazy: numpy and the evaluation
 
             lines.append(segments_line(self.segments["segments"], self.segments["components"]))
+        if self.features is not None and self.features.get("precision"):
+            lines.append(f"features: {self.features['kind']}, encoder in {self.features['precision']} "
+                         f"(features.precision {self.features['precision_setting']})")
         if self.map_cloud is not None:
             from .map_cloud import cloud_summary_line  # lazy: OpenCV
 

@@ -151,6 +151,9 @@ def run_log(
             pipe = make_pipeline(cfg, models, log_path, topics, album if live is None else live.sink(album),
                                  rectified=stereo is not None and stereo.rectifier is not None, map_use=map_use,
                                  map_cloud=map_cloud)
+            result.features = {"kind": getattr(pipe.extractor, "kind", None),
+                               "precision": getattr(pipe.extractor, "precision", None),
+                               "precision_setting": cfg.features.precision}
             if calibrated is not None:  # the calibration file's camera (CameraInfo is not read then)
                 set_calibrated_camera(pipe, cfg, calibrated, vo_odometry, stereo, tf,
                                       body_frame_of(first.get(topics.odom)))
