@@ -106,6 +106,9 @@ class Keyframe:
     colour: np.ndarray | None = None  # the colour image (RGB uint8) when the camera has colour: the map cloud's colours
     # the odometry broke before this keyframe (tracking lost): it opens a new segment of the pose graph
     segment_start: bool = False
+    # where covariance_since_last comes from: "given" (the log's odometry covariances) or "model" (the
+    # front end's motion model: the log gave none, all-zero ones, or frontend.odom_covariance is "model")
+    covariance_source: str = "given"
 
 
 @dataclass

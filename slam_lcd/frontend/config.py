@@ -23,9 +23,12 @@ class FrontendConfig:
     # meaning of the cov given to push(): pose covariance, covariance of the motion since the previous push,
     # or ignore it and use the motion model
     odom_covariance: Literal["absolute", "relative", "model"] = "absolute"
-    # motion model: translation sigma per metre travelled (used when no covariance is given)
-    odom_trans_sigma_per_m: float = ranged(0.02, "[0, inf)")
-    odom_rot_sigma_per_rad: float = ranged(0.02, "[0, inf)")  # motion model: rotation sigma (rad) per radian turned
+    # motion model (used where the log gives no covariance): a random walk, variance growing linearly with
+    # the distance travelled and the angle turned, whatever the odometry rate (docs/frontend.md, calibration);
+    # the same figures as the map's per-metre allowance (map.pcm_sigma_*), so the loop gate and PCM agree
+    odom_trans_sigma_per_sqrt_m: float = ranged(0.05, "[0, inf)")  # translation sigma (m) per sqrt(m) travelled
+    odom_rot_sigma_per_sqrt_m: float = ranged(0.02, "[0, inf)")  # rotation sigma (rad) per sqrt(m) travelled
+    odom_rot_sigma_per_sqrt_rad: float = ranged(0.05, "[0, inf)")  # rotation sigma (rad) per sqrt(rad) turned
     odom_min_sigma_trans: float = ranged(0.002, "(0, inf)")  # floor on each translation sigma of a relative motion (m)
     odom_min_sigma_rot_deg: float = ranged(0.05, "(0, inf)")  # floor on each rotation sigma of a relative motion (deg)
     # --- camera mounting ---

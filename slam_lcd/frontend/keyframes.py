@@ -4,7 +4,9 @@ A frame becomes a keyframe when the body moved or turned enough since the last k
 when too much time passed, or when too few of the last keyframe's features are still
 tracked in it (the image content changed). Between keyframes the odometry covariance is
 accumulated in GTSAM's Pose3 convention, so each keyframe carries the covariance of the
-motion since the previous keyframe: exactly what a between factor needs.
+motion since the previous keyframe: exactly what a between factor needs. Where the log gives
+no covariance the motion model stands in for it, and the keyframe says so
+(``Keyframe.covariance_source``): the map's PCM then uses its own per-metre allowance.
 """
 from __future__ import annotations
 
@@ -32,18 +34,21 @@ class _Pending:
     right_image: np.ndarray | None
     is_keyframe: bool
     colour: np.ndarray | None = None
+    source: str = "given"  # of cov_since_kf: "given" by the log or "model"
 
 
-def motion_model_covariance(T_rel: np.ndarray, conf: FrontendConfig) -> np.ndarray:
-    """Covariance of one relative motion when the odometry gives none (GTSAM order).
+def motion_model_covariance(distance: float, angle: float, conf: FrontendConfig) -> np.ndarray:
+    """Covariance of a motion between keyframes when the odometry gives none (GTSAM order, no floor).
 
-    Sigmas grow with the distance travelled and the angle turned, plus a floor.
+    A random walk: the variance grows linearly with the ``distance`` travelled (m) and the
+    ``angle`` turned (rad), so a step's covariance does not depend on how many odometry samples
+    make it up (a sigma proportional to each sample's length, composed, would shrink as the rate
+    rises). The map's per-metre allowance (:func:`slam_lcd.map.pcm.step_covariances`) is the same
+    formula with the same default figures.
     """
-    dist = float(np.linalg.norm(T_rel[:3, 3]))
-    ang = rotation_angle(T_rel[:3, :3])
-    s_t = conf.odom_trans_sigma_per_m * dist
-    s_r = conf.odom_rot_sigma_per_rad * ang
-    return np.diag([s_r**2] * 3 + [s_t**2] * 3)
+    v_r = conf.odom_rot_sigma_per_sqrt_m ** 2 * distance + conf.odom_rot_sigma_per_sqrt_rad ** 2 * abs(angle)
+    v_t = conf.odom_trans_sigma_per_sqrt_m ** 2 * distance
+    return np.diag([v_r] * 3 + [v_t] * 3)
 
 
 def covariance_floor(conf: FrontendConfig) -> np.ndarray:
@@ -73,7 +78,8 @@ class KeyframeSelector:
     (the pose's covariance, growing with time, GTSAM order: the motion covariance is the
     difference to the last keyframe's), ``relative`` (covariance of the motion since the
     previous push) or ``model`` (ignored; the motion model is used). Missing or all-zero
-    covariances fall back to the motion model.
+    covariances fall back to the motion model; each keyframe's ``covariance_source`` says which
+    (``"given"`` or ``"model"``).
 
     ``keep_images=False`` (a consumer such as the pipeline takes the keyframes ``push``
     returns): ``self.keyframes`` holds light copies (stamp, pose, covariance, and the newest
@@ -90,7 +96,9 @@ class KeyframeSelector:
         self.reasons: list[str] = []
         self._last: _Pending | None = None
         self._kf_abs_cov: np.ndarray | None = None  # absolute covariance at the last keyframe (absolute mode)
-        self._model_since_kf = np.zeros((6, 6))
+        self._model_since_kf = np.zeros((6, 6))  # relative mode: the given covariances composed since the keyframe
+        self._path_since_kf = 0.0  # metres travelled since the last keyframe (sum over the samples)
+        self._all_given = True  # relative mode: every sample since the last keyframe gave a covariance
         self.last_overlap: float | None = None
 
     # ------------------------------------------------------------------ helpers
@@ -120,7 +128,7 @@ class KeyframeSelector:
         kf = Keyframe(id=len(self.keyframes), stamp=int(p.stamp), T_world_body=p.T.copy(), image=p.image,
                       camera=self.camera, T_body_camera=self.T_body_camera.copy(), depth=p.depth,
                       right_image=p.right_image, covariance_since_last=cov_since, features=p.features,
-                      colour=p.colour, segment_start=reason == "segment-break")
+                      colour=p.colour, segment_start=reason == "segment-break", covariance_source=p.source)
         if self.keep_images:
             self.keyframes.append(kf)
         else:  # only the newest keyframe is compared with: older ones need no features
@@ -128,7 +136,8 @@ class KeyframeSelector:
                 self.keyframes[-1].features = None
             self.keyframes.append(Keyframe(id=kf.id, stamp=kf.stamp, T_world_body=kf.T_world_body, features=kf.features,
                                            covariance_since_last=kf.covariance_since_last,
-                                           segment_start=kf.segment_start))
+                                           segment_start=kf.segment_start,
+                                           covariance_source=kf.covariance_source))
         self.reasons.append(reason)
         p.is_keyframe = True
         return kf
@@ -161,7 +170,7 @@ class KeyframeSelector:
             self._last = p
             self._kf_abs_cov = given if conf.odom_covariance == "absolute" else None
             made = [self._make_keyframe(p, None, "first")]
-            self._model_since_kf = np.zeros((6, 6))
+            self._restart()
             return made
         if stamp_ns < prev.stamp:
             raise UnsortedStampsError(f"stamp {stamp_ns} is earlier than the previous one ({prev.stamp})")
@@ -170,18 +179,21 @@ class KeyframeSelector:
         assert kf is not None  # the first pose (prev is None above) made one
         T_prev_cur = inv(prev.T) @ T
         T_kf_cur = inv(kf.T_world_body) @ T
-        # --- covariance of the motion since the last keyframe
-        if conf.odom_covariance == "relative" and given is not None:
-            self._model_since_kf = compose_covariance(self._model_since_kf, T_prev_cur, given)
-        else:
-            self._model_since_kf = compose_covariance(self._model_since_kf, T_prev_cur,
-                                                      motion_model_covariance(T_prev_cur, conf))
+        # --- covariance of the motion since the last keyframe: as the log gave it, else the motion model
+        self._path_since_kf += float(np.linalg.norm(T_prev_cur[:3, 3]))
+        if conf.odom_covariance == "relative":
+            self._all_given &= given is not None
+            if given is not None:
+                self._model_since_kf = compose_covariance(self._model_since_kf, T_prev_cur, given)
         if conf.odom_covariance == "absolute" and given is not None and self._kf_abs_cov is not None:
-            cov_since = relative_covariance(kf.T_world_body, self._kf_abs_cov, T, given, floor)
+            cov_since, source = relative_covariance(kf.T_world_body, self._kf_abs_cov, T, given, floor), "given"
+        elif conf.odom_covariance == "relative" and self._all_given:
+            cov_since, source = self._model_since_kf + np.diag(floor), "given"
         else:
-            cov_since = self._model_since_kf + np.diag(floor)
+            model = motion_model_covariance(self._path_since_kf, rotation_angle(T_kf_cur[:3, :3]), conf)
+            cov_since, source = model + np.diag(floor), "model"
 
-        cur = _Pending(stamp_ns, T, cov_since, image, features, depth, right_image, False, colour)
+        cur = _Pending(stamp_ns, T, cov_since, image, features, depth, right_image, False, colour, source)
 
         if segment_start:
             made = [self._make_keyframe(prev, prev.cov_since_kf, "before-break")] if not prev.is_keyframe else []
@@ -189,9 +201,10 @@ class KeyframeSelector:
                 s_t, s_r = conf.vo_lost_sigma_trans, np.radians(conf.vo_lost_sigma_rot_deg)
                 segment_cov = np.diag([s_r**2] * 3 + [s_t**2] * 3)
             self._last = cur
+            cur.source = "given"  # the break's link is meant as it is (the back end reads none: a new segment)
             made.append(self._make_keyframe(cur, np.asarray(segment_cov, np.float64), "segment-break"))
             self._kf_abs_cov = given if conf.odom_covariance == "absolute" else None
-            self._model_since_kf = np.zeros((6, 6))
+            self._restart()
             return made
 
         self._last = cur
@@ -214,8 +227,14 @@ class KeyframeSelector:
             return []
         made = [self._make_keyframe(cur, cov_since, reason)]
         self._kf_abs_cov = given if conf.odom_covariance == "absolute" else None
-        self._model_since_kf = np.zeros((6, 6))
+        self._restart()
         return made
+
+    def _restart(self) -> None:
+        """A keyframe was made: the motion since the last keyframe starts again."""
+        self._model_since_kf = np.zeros((6, 6))
+        self._path_since_kf = 0.0
+        self._all_given = True
 
 
 def select_keyframes(trajectory: Trajectory, conf: FrontendConfig | None = None,

@@ -27,11 +27,13 @@ class MapConfig:
     # pairwise consistency of two loops between the same two sessions: chi-square quantile of
     # the cycle (loop, odometry in one session, loop back, odometry in the other), 6 dof
     pcm_probability: float = ranged(0.99, "(0, 1)")
-    # odometry uncertainty per square-root metre travelled (variance grows with the distance), used
-    # for the cycle's covariance and the link test only where the session's odometry gives no
-    # covariance (m/sqrt(m) and rad/sqrt(m), 1 sigma)
+    # odometry uncertainty per square-root metre travelled (variance grows with the distance, and with the
+    # angle turned), used for the cycle's covariance, the link test and the joint solve where the session's
+    # odometry gave no covariance or the front end modelled it (m/sqrt(m), rad/sqrt(m), rad/sqrt(rad), 1 sigma;
+    # the front end's motion model has the same figures: docs/multisession.md)
     pcm_sigma_trans_per_m: float = ranged(0.05, "[0, inf)")
     pcm_sigma_rot_per_m: float = ranged(0.02, "[0, inf)")
+    pcm_sigma_rot_per_rad: float = ranged(0.05, "[0, inf)")
     # the exact search for the largest consistent set stops after this many search nodes and takes
     # the largest set found so far (logged and recorded in the pair's decision)
     pcm_clique_budget: int = ranged(100000, "[1, inf)")

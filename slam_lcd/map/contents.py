@@ -47,7 +47,11 @@ class SessionKeyframes:
     first, value = (nibble - 8) / scale; empty for float16 and ORB's bytes) and ``points3d``
     (camera frame, NaN where unknown). Poses: ``T_odom`` in the session's own odometry frame,
     ``T_gt`` ground truth at the keyframe stamps where the run had it (NaN otherwise; only for
-    evaluation), ``cov`` the odometry covariance since the previous keyframe (NaN: none).
+    evaluation), ``cov`` the odometry covariance since the previous keyframe (NaN: none) and
+    ``cov_source`` where it came from: ``"given"`` by the log's odometry or ``"model"`` (the front
+    end's motion model, which the map replaces by its per-metre allowance). A map written before
+    the map recorded it has no ``cov_source``: its covariances read as given, so it joins and
+    solves as it did when it was written.
     """
 
     ids: np.ndarray  # (n,) int64, unique in the map
@@ -61,9 +65,23 @@ class SessionKeyframes:
     scales: np.ndarray  # (K,) float32 for int8 and int4, else (0,)
     points3d: np.ndarray  # (K, 3) float32
     points_source: np.ndarray  # (n,) str: rgbd | stereo | landmarks | none
+    cov_source: np.ndarray | None = None  # (n,) str: given | model; None: not recorded (read as given)
 
     ARRAYS = ("ids", "stamps", "T_odom", "cov", "T_gt", "offsets", "keypoints", "descriptors", "scales",
               "points3d", "points_source")
+    OPTIONAL = ("cov_source",)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Every array to write (the optional ones where present)."""
+        out = {k: getattr(self, k) for k in self.ARRAYS}
+        out.update({k: getattr(self, k) for k in self.OPTIONAL if getattr(self, k) is not None})
+        return out
+
+    def cov_modelled(self) -> np.ndarray:
+        """(n,) bool: which steps' covariances the front end modelled (none in a map that did not record it)."""
+        if self.cov_source is None:
+            return np.zeros(len(self.ids), bool)
+        return np.asarray(self.cov_source) == "model"
 
     def __len__(self) -> int:
         return len(self.ids)
@@ -96,7 +114,8 @@ class SessionKeyframes:
               and self.T_gt.shape == (n, 4, 4) and self.offsets.shape == (n + 1,) and self.points_source.shape == (n,)
               and self.keypoints.shape == (K, 2) and len(self.descriptors) == K and self.points3d.shape == (K, 3)
               and (len(self.scales) in (0, K)) and n > 0 and int(self.offsets[0]) == 0 and int(self.offsets[-1]) == K
-              and bool(np.all(np.diff(self.offsets) >= 0)))
+              and bool(np.all(np.diff(self.offsets) >= 0))
+              and (self.cov_source is None or np.shape(self.cov_source) == (n,)))
         if not ok:
             raise MapError("session file's arrays do not fit together (damaged or not written by slam-lcd)", where)
         if not np.all(np.isfinite(self.T_odom)):

@@ -44,7 +44,7 @@ from .config import MapConfig
 from .joins import judge_pair, recheck
 from .joint_types import LINK, JointLoop, JointResult, PairDecision, SessionPoses, is_link
 from .links import gate_links, link_weight, linked_steps, shared_weight
-from .pcm import SessionChains
+from .pcm import SessionChains, allowance, is_modelled
 
 log = logging.getLogger(__name__)
 
@@ -60,8 +60,12 @@ def information_noise(info: np.ndarray, scale: float = 1.0):
     return gtsam.noiseModel.Gaussian.Information(scale * info)
 
 
-def odometry_covariance(cov: np.ndarray | None) -> np.ndarray:
-    """An odometry step's covariance as given when it is a valid one, else the default step noise."""
+def odometry_covariance(cov: np.ndarray | None, modelled: bool = False, T_step: np.ndarray | None = None,
+                        conf: MapConfig | None = None) -> np.ndarray:
+    """An odometry step's covariance as given when it is a valid one, else the default step noise; one the
+    front end ``modelled`` is replaced by the map's per-metre allowance for ``T_step`` (:func:`.pcm.allowance`)."""
+    if modelled and T_step is not None:
+        return allowance(T_step, conf or MapConfig())
     return np.asarray(cov, float) if valid_information(cov) else np.diag(ODOM_SIGMAS ** 2)
 
 
@@ -137,9 +141,10 @@ def _known_graph(sessions, loops, links, comp, init, chains) -> gtsam.NonlinearF
     for s in sessions:
         w = shared_weight(s)
         for i in range(1, len(s.ids)):
-            cov = odometry_covariance(s.cov[i]) / (w if int(s.ids[i]) in shared else 1.0)
-            graph.add(gtsam.BetweenFactorPose3(int(s.ids[i - 1]), int(s.ids[i]),
-                                               gtsam.Pose3(inv(s.T_odom[i - 1]) @ s.T_odom[i]),
+            step = inv(s.T_odom[i - 1]) @ s.T_odom[i]
+            cov = odometry_covariance(s.cov[i], is_modelled(s, i), step, chains.conf)
+            cov = cov / (w if int(s.ids[i]) in shared else 1.0)
+            graph.add(gtsam.BetweenFactorPose3(int(s.ids[i - 1]), int(s.ids[i]), gtsam.Pose3(step),
                                                gtsam.noiseModel.Gaussian.Covariance(cov)))
     roots: dict[int, int] = {}
     for si in range(len(sessions)):

@@ -35,6 +35,9 @@ class SessionPoses:
     # and links then count half each; None: not known (the map does not record it), counted as True
     # (see map/links.py)
     odometry_independent: bool | None = None
+    # (n,) bool: the steps whose covariance the front end modelled (the per-metre allowance replaces it,
+    # slam_lcd.map.pcm.step_covariances); None: every covariance as given
+    cov_modelled: np.ndarray | None = None
 
 
 @dataclass

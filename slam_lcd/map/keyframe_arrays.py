@@ -76,7 +76,7 @@ def session_arrays(detector, kfs: list[Keyframe], gt: Trajectory | None, form: s
     """A finished session's keyframes as the map stores them (what the detector kept of each, ``form``
     the map's descriptor form; ground truth at the keyframe stamps, for evaluation only)."""
     det = detector
-    ids, stamps, T_odom, cov, offs = [], [], [], [], [0]
+    ids, stamps, T_odom, cov, cov_src, offs = [], [], [], [], [], [0]
     kps, descs, scales, p3s, srcs = [], [], [], [], []
     for kf in kfs:
         light, desc, p3, src = det.stored(kf.id)
@@ -86,6 +86,7 @@ def session_arrays(detector, kfs: list[Keyframe], gt: Trajectory | None, form: s
         T_odom.append(np.asarray(kf.T_world_body, float))
         c = kf.covariance_since_last
         cov.append(np.asarray(c, float) if c is not None else np.full((6, 6), np.nan))
+        cov_src.append("model" if kf.covariance_source == "model" else "given")
         kps.append(np.asarray(light.features.keypoints, np.float32).reshape(-1, 2))
         d, sc = compact_for_map(desc, form)
         descs.append(d)
@@ -109,7 +110,7 @@ def session_arrays(detector, kfs: list[Keyframe], gt: Trajectory | None, form: s
         descriptors=np.concatenate([d.reshape(-1, dim) for d in descs]) if descs else np.zeros((0, dim)),
         scales=np.concatenate(scales).astype(np.float32) if scales else np.zeros(0, np.float32),
         points3d=np.concatenate(p3s) if p3s else np.zeros((0, 3), np.float32),
-        points_source=np.array(srcs, dtype="<U10"))
+        points_source=np.array(srcs, dtype="<U10"), cov_source=np.array(cov_src, dtype="<U5"))
 
 
 def visual_links(detector, kf_ids: list[int]) -> list[JointLoop]:

@@ -13,8 +13,10 @@ and true loops tens of metres apart fail the test.
 Each session's relative pose between two of its keyframes is its own best estimate
 (``SessionPoses.T_init``: its odometry corrected by its own loops); the covariance is its
 odometry chain's, an upper bound for that estimate. A step's covariance is the one the odometry
-gave; where it gave none (or no valid one), the per-metre allowance ``map.pcm_sigma_trans_per_m``
-and ``map.pcm_sigma_rot_per_m`` (variance growing with the distance of the step).
+gave; where it gave none (or no valid one), or the front end modelled it (``SessionPoses.cov_modelled``),
+the per-metre allowance ``map.pcm_sigma_trans_per_m``, ``pcm_sigma_rot_per_m`` and
+``pcm_sigma_rot_per_rad`` (variance growing with the distance and the angle of the step: a random
+walk, the front end's motion model with the same default figures, docs/multisession.md).
 
 The test is symmetric: each loop is turned so that its ``a`` end lies in the session listed first
 in the map (a loop seen from its other end has ``Z^-1`` and its covariance carried by ``Ad(Z)``),
@@ -27,22 +29,39 @@ import numpy as np
 
 from ..backend.gate import ChainRelatives, GateLoop, chain_covariance, chi2_quantile, cycle_chi2
 from ..backend.loop_factors import valid_information
-from ..geometry import adjoint, inv
+from ..geometry import adjoint, inv, rotation_angle
 from .config import MapConfig
 from .joint_types import JointLoop, SessionPoses
 
+# floor on each sigma of a step's allowance (rad, m): the front end's default floor (frontend.odom_min_sigma_*),
+# so that a step that did not move still has a valid covariance, as the front end's modelled one has
+FLOOR = np.array([np.radians(0.05) ** 2] * 3 + [0.002 ** 2] * 3)
+
+
+def allowance(T_step: np.ndarray, conf: MapConfig) -> np.ndarray:
+    """The per-metre allowance of one odometry step ``T_step`` (6x6, GTSAM order): a random walk, plus
+    :data:`FLOOR`. With the default figures, the front end's modelled covariance of the same step."""
+    d = float(np.linalg.norm(T_step[:3, 3]))
+    v_r = conf.pcm_sigma_rot_per_m ** 2 * d + conf.pcm_sigma_rot_per_rad ** 2 * float(rotation_angle(T_step))
+    return np.diag([v_r] * 3 + [conf.pcm_sigma_trans_per_m ** 2 * d] * 3 + FLOOR)
+
+
+def is_modelled(s: SessionPoses, i: int) -> bool:
+    """Did the front end model step i's covariance (the log gave none)?"""
+    return s.cov_modelled is not None and bool(s.cov_modelled[i])
+
 
 def step_covariances(s: SessionPoses, conf: MapConfig) -> np.ndarray:
-    """(n, 6, 6): each odometry step's covariance as given, else the per-metre allowance for its length."""
+    """(n, 6, 6): each odometry step's covariance as given, else (none, no valid one, or a modelled one)
+    the per-metre allowance for its length and angle."""
     n = len(s.ids)
     out = np.zeros((n, 6, 6))
     for i in range(1, n):
         c = s.cov[i]
-        if valid_information(c):
+        if valid_information(c) and not is_modelled(s, i):
             out[i] = 0.5 * (np.asarray(c, float) + np.asarray(c, float).T)
             continue
-        d = float(np.linalg.norm(s.T_odom[i, :3, 3] - s.T_odom[i - 1, :3, 3]))
-        out[i] = np.diag([conf.pcm_sigma_rot_per_m ** 2 * d] * 3 + [conf.pcm_sigma_trans_per_m ** 2 * d] * 3)
+        out[i] = allowance(inv(s.T_odom[i - 1]) @ s.T_odom[i], conf)
     return out
 
 
@@ -52,6 +71,7 @@ class SessionChains:
     def __init__(self, sessions: list[SessionPoses], conf: MapConfig):
         self.sessions = sessions
         self.where = {int(k): (si, i) for si, s in enumerate(sessions) for i, k in enumerate(s.ids)}
+        self.conf = conf
         self.chains = [ChainRelatives.from_steps(np.asarray(s.T_odom, float), step_covariances(s, conf))
                        for s in sessions]
         self._stacked: dict[int, tuple[np.ndarray, np.ndarray]] = {}

@@ -101,7 +101,7 @@ def _load_arrays(path: Path, names: tuple[str, ...], fh: BinaryIO | None = None,
 def read_session(root: str | Path, manifest: MapManifest, index: int) -> SessionKeyframes:
     root = Path(root)
     path = _checked(root, manifest, manifest.sessions[index]["file"])
-    s = SessionKeyframes(**_load_arrays(path, SessionKeyframes.ARRAYS))
+    s = SessionKeyframes(**_load_arrays(path, SessionKeyframes.ARRAYS, optional=SessionKeyframes.OPTIONAL))
     s.check(path)
     return s
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry import inv
+from .config import MapConfig
 from .contents import MapGraph, SessionKeyframes
 from .joint_graph import JointLoop, SessionPoses, information_noise, odometry_covariance
 from .joint_types import is_link
@@ -39,12 +40,12 @@ def session_poses(table: list[dict], sessions: list[SessionKeyframes],
     for meta, s in zip(table, sessions, strict=True):
         T = np.array([poses[int(k)] for k in s.ids]) if poses else s.T_odom.copy()
         out.append(SessionPoses(meta["name"], s.ids, s.T_odom, s.cov, T.reshape(-1, 4, 4), int(meta["component"]),
-                                odometry_independent=odometry_independent(meta)))
+                                odometry_independent=odometry_independent(meta), cov_modelled=s.cov_modelled()))
     return out
 
 
 def factor_graph(table: list[dict], sessions: list[SessionKeyframes], graph: MapGraph, poses: dict[int, np.ndarray],
-                 key=None):
+                 key=None, conf: MapConfig | None = None):
     """(``gtsam.NonlinearFactorGraph``, ``gtsam.Values``) of a map: see :meth:`Map.factor_graph`.
 
     The factors are the joint solve's: a session on the built-in visual odometry has its linked
@@ -58,12 +59,14 @@ def factor_graph(table: list[dict], sessions: list[SessionKeyframes], graph: Map
     linked = {max(int(lp.query), int(lp.match)) for lp in loops if is_link(lp)}  # consecutive ids: the later one
     g, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
     for s in sessions:
+        modelled = s.cov_modelled()
         for i, k in enumerate(s.ids):
             values.insert(key(int(k)), gtsam.Pose3(poses.get(int(k), s.T_odom[i])))
             if i:
-                cov = odometry_covariance(s.cov[i]) * (2.0 if int(k) in half and int(k) in linked else 1.0)
-                g.add(gtsam.BetweenFactorPose3(key(int(s.ids[i - 1])), key(int(k)),
-                                               gtsam.Pose3(inv(s.T_odom[i - 1]) @ s.T_odom[i]),
+                step = inv(s.T_odom[i - 1]) @ s.T_odom[i]
+                cov = odometry_covariance(s.cov[i], bool(modelled[i]), step, conf)
+                cov = cov * (2.0 if int(k) in half and int(k) in linked else 1.0)
+                g.add(gtsam.BetweenFactorPose3(key(int(s.ids[i - 1])), key(int(k)), gtsam.Pose3(step),
                                                gtsam.noiseModel.Gaussian.Covariance(cov)))
     for lp in loops:
         w = 0.5 if is_link(lp) and int(lp.query) in half else 1.0

@@ -264,7 +264,8 @@ class Map:
                                    np.asarray(c.information, float), True, False, ""))
         sessions = session_poses(self.manifest.sessions, self.sessions, self.poses())
         sessions.append(SessionPoses(name, sess.ids, sess.T_odom, sess.cov, np.asarray(own.poses, float), None,
-                                     odometry_independent=odometry_independent(extra or {})))
+                                     odometry_independent=odometry_independent(extra or {}),
+                                     cov_modelled=sess.cov_modelled()))
         result = solve(sessions, loops, self.conf)
         self.last_join = result
         graph = MapGraph(
@@ -381,7 +382,7 @@ class Map:
         key`` (default: the keyframe id). No prior: the user fixes the gauge (e.g. a prior on
         one keyframe, or their own absolute factors).
         """
-        return factor_graph(self.manifest.sessions, self.sessions, self.graph, self.poses(), key)
+        return factor_graph(self.manifest.sessions, self.sessions, self.graph, self.poses(), key, self.conf)
 
     # ------------------------------------------------------------------ localisation
     def localise(self, pipeline):

@@ -231,15 +231,14 @@ def _commit(root: Path, manifest: MapManifest, new_sessions: list[tuple[dict, Se
         for i, (meta, sess) in enumerate(new_sessions):
             name = f"sessions/{n_before + i + 1:04d}-{tag}.npz"
             written.append(root / name)
-            files[name] = _write_npz(root / name, {k: getattr(sess, k) for k in SessionKeyframes.ARRAYS})
+            files[name] = _write_npz(root / name, sess.arrays())
             known[meta["name"]] = name
         for index, s in enumerate(table):
             if s["name"] in (rewritten or {}) and s["name"] not in {m["name"] for m, _ in new_sessions}:
                 name = f"sessions/{index + 1:04d}-{tag}.npz"
                 files.pop(known.get(s["name"]) or "", None)
                 written.append(root / name)
-                files[name] = _write_npz(root / name, {k: getattr(rewritten[s["name"]], k)  # type: ignore[index]
-                                                        for k in SessionKeyframes.ARRAYS})
+                files[name] = _write_npz(root / name, rewritten[s["name"]].arrays())  # type: ignore[index]
                 known[s["name"]] = name
         for s in table:
             s["file"] = known[s["name"]]

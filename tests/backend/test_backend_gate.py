@@ -205,3 +205,24 @@ def test_gate_on_a_users_graph_asks_isam2_marginals():
     ok = g.add_loop(LoopClosure(60, 20, inv(gt[20]) @ gt[60], np.diag([1e4] * 3 + [400.0] * 3)))
     assert ok.verdict == "accepted"
     _user_factors_untouched(isam, user, g)
+
+
+@pytest.mark.parametrize("covariances", ["zero", "model"])
+def test_where_the_front_end_modelled_the_covariance_the_gate_chains_what_the_maps_pcm_chains(covariances):
+    """The single-session gate's chain covariance over modelled steps is PCM's per-metre allowance chain."""
+    from slam_lcd.map.config import MapConfig
+    from slam_lcd.map.pcm import SessionChains
+
+    from support.odometry_routes import drive, open_route, session_of
+
+    kfs = drive(open_route(10.0, length_m=30.0), 3, covariances)[:50]
+    assert {k.covariance_source for k in kfs[1:]} == {"model"}
+    pg = PoseGraph()
+    for k in kfs:
+        pg.add_keyframe(k.id, k.stamp, k.T_world_body, k.covariance_since_last)
+    chains = SessionChains([session_of("s", kfs, 0)], MapConfig())
+    for i, j in ((0, 1), (3, 20), (10, 49)):
+        gate_T, gate_S = pg._relatives.odometry(i, j)
+        pcm_T, pcm_S = chains.odometry(i, j)
+        np.testing.assert_allclose(gate_T, pcm_T, atol=1e-12)
+        np.testing.assert_allclose(gate_S, pcm_S, rtol=0.02, atol=1e-9)

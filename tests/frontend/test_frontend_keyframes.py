@@ -124,3 +124,31 @@ def test_segment_break_promotes_previous_frame_and_adds_large_noise():
     assert sel.reasons[-2:] == ["before-break", "segment-break"]
     assert np.sqrt(sel.keyframes[-1].covariance_since_last[3, 3]) >= 1.0
     assert np.sqrt(sel.keyframes[1].covariance_since_last[3, 3]) < 0.1
+
+
+@pytest.mark.parametrize("covariances", ["none", "zero", "model"])
+def test_the_modelled_covariance_does_not_shrink_with_the_odometry_rate(covariances):
+    """A keyframe step's modelled covariance is the same at 10, 50 and 200 Hz (a random walk per metre)."""
+    conf = FrontendConfig(kf_min_translation=0.5, kf_max_interval_s=0, kf_min_overlap=0,
+                          odom_covariance="model" if covariances == "model" else "absolute")
+    got = {}
+    for rate in (10, 50, 200):
+        sel = KeyframeSelector(conf)
+        for k in range(int(2.0 * rate) + 1):  # 2 m straight at 1 m/s, turning 0.1 rad/s
+            T = se3_exp([0, 0, 0.1 * k / rate, 0, 0, 0]) @ se3_exp([0, 0, 0, k / rate, 0, 0])
+            sel.push(int(k * 1e9 / rate), T, None if covariances == "none" else np.zeros((6, 6)))
+        assert {kf.covariance_source for kf in sel.keyframes[1:]} == {"model"}
+        got[rate] = sel.keyframes[1].covariance_since_last
+    s_t = conf.odom_trans_sigma_per_sqrt_m * np.sqrt(0.5)
+    for rate, c in got.items():
+        np.testing.assert_allclose(np.sqrt(c[3, 3]), s_t, rtol=0.05, err_msg=f"{rate} Hz")
+        np.testing.assert_allclose(c, got[10], rtol=0.05, err_msg=f"{rate} Hz against 10 Hz")
+
+
+def test_given_covariances_are_marked_given_and_a_step_missing_one_is_modelled():
+    conf = FrontendConfig(odom_covariance="relative", kf_min_translation=0.5, kf_max_interval_s=0, kf_min_overlap=0)
+    sel = KeyframeSelector(conf)
+    C = np.diag([1e-6] * 3 + [1e-4] * 3)
+    for k in range(21):  # 0.1 m a sample; the sample at 1.3 m gives no covariance
+        sel.push(k * 10**8, se3_exp([0, 0, 0, 0.1 * k, 0, 0]), None if k == 13 else C)
+    assert [kf.covariance_source for kf in sel.keyframes] == ["given", "given", "given", "model", "given"]

@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 from test_map_sessions import INFO, _route, _session, _true_loop  # tests/ is on sys.path (pytest rootdir import)
 
-from slam_lcd.geometry import adjoint, compose_covariance, inv, make_T, se3_exp, so3_exp
+from slam_lcd.geometry import adjoint, compose_covariance, inv, make_T, rotation_angle, se3_exp, so3_exp
 from slam_lcd.map.cliques import maximum_clique
 from slam_lcd.map.config import MapConfig
 from slam_lcd.map.joint_graph import JointLoop, SessionPoses, solve
-from slam_lcd.map.pcm import SessionChains, pairwise_consistent, pcm_threshold, step_covariances
+from slam_lcd.map.pcm import FLOOR, SessionChains, pairwise_consistent, pcm_threshold, step_covariances
 
 STEP = 0.5  # m between keyframes
 SIG_T, SIG_R = 0.05, 0.02  # odometry noise per sqrt(m): the sessions' own covariances
@@ -90,8 +90,9 @@ def test_chain_covariance_is_the_composition_of_the_steps_through_adjoints_and_t
     conf = MapConfig()
     steps = step_covariances(s, conf)
     d = np.linalg.norm(s.T_odom[3, :3, 3] - s.T_odom[2, :3, 3])
-    np.testing.assert_allclose(steps[3], np.diag([conf.pcm_sigma_rot_per_m ** 2 * d] * 3
-                                                  + [conf.pcm_sigma_trans_per_m ** 2 * d] * 3))
+    a = rotation_angle(inv(s.T_odom[2]) @ s.T_odom[3])  # the step's noise turned it a little
+    v_r = conf.pcm_sigma_rot_per_m ** 2 * d + conf.pcm_sigma_rot_per_rad ** 2 * a
+    np.testing.assert_allclose(steps[3], np.diag([v_r] * 3 + [conf.pcm_sigma_trans_per_m ** 2 * d] * 3 + FLOOR))
     np.testing.assert_allclose(steps[5], s.cov[5])  # given: used as it is, nothing added
     cov = np.zeros((6, 6))
     for i in range(2, 8):  # composed one step at a time, frame of the last keyframe
