@@ -4,7 +4,9 @@ A mixin, as :class:`~.graph_outputs.GraphOutputs` is: it reads the graph's lists
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+import logging
+from collections.abc import Callable
+from typing import TYPE_CHECKING, TypeVar
 
 import gtsam
 
@@ -15,7 +17,11 @@ from .segments import SegmentRow, Segments, accepted_pairs, join_check
 
 if TYPE_CHECKING:
     from .config import BackendConfig
+    from .gate import ChainRelatives
     from .records import LoopEntry
+
+log = logging.getLogger(__name__)
+T = TypeVar("T")
 
 
 class GraphSegments:
@@ -30,7 +36,9 @@ class GraphSegments:
     _segments: Segments
     _relatives: Relatives
     _ids: list[int]
+    _keys: list[int]
     _stamps: list[int]
+    _chain: ChainRelatives
 
     def _loop_noise(self, lp: LoopEntry):  # PoseGraph's
         raise NotImplementedError
@@ -45,12 +53,32 @@ class GraphSegments:
         graph = gtsam.NonlinearFactorGraph(self._base)
         for lp in held:
             graph.add(lp.factor(self._loop_noise(lp)))
+        values = gtsam.Values()
+        for k, key in enumerate(self._keys):  # the keyframes registered (not one an update failed on)
+            try:
+                values.insert(key, self._isam.calculateEstimatePose3(key))
+            except RuntimeError:  # an update that failed left no estimate: the odometry chain's pose
+                values.insert(key, gtsam.Pose3(self._chain.pose(k)))
         with defer_sigint():
-            res = isam.update(graph, self._isam.calculateEstimate())
+            res = isam.update(graph, values)
             slots = list(res.getNewFactorsIndices())[self._base.size():]
             for lp, idx in zip(held, slots, strict=True):
                 lp.isam_index = int(idx)
             self._isam, self._qr = isam, True
+
+    def _solvable(self, update: Callable[[], T]) -> T:
+        """Run an iSAM2 ``update``; where Cholesky declares the system indeterminate (covariances whose scales lie
+        orders of magnitude apart, e.g. absolute covariances read as relative ones), refactor by QR and run it
+        again (said once)."""
+        try:
+            return update()
+        except RuntimeError as e:
+            if self._qr or "ndetermina" not in str(e):
+                raise
+        log.warning("the pose graph is too poorly conditioned for Cholesky factorisation (odometry covariances "
+                    "of very different scales): it is solved by QR from here on")
+        self._use_qr()
+        return update()
 
     def _join_check(self, lp: LoopEntry):
         """The verdict on a loop between two components no accepted loop connects yet (None: not such a loop)."""

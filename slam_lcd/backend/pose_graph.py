@@ -163,7 +163,7 @@ class PoseGraph(GraphOutputs, GraphSegments):
         prefix = self._chain.next_prefix(T, cov)
         t0 = time.perf_counter()
         with defer_sigint():  # iSAM2 and the lists change together
-            self._isam.update(graph, values)
+            self._solvable(lambda: self._isam.update(graph, values))
             self._base.push_back(graph)
             if k and cov is not None:  # (every keyframe after the first has its odometry step)
                 self._base_edges.append(G2oEdge(k - 1, k, step, np.linalg.inv(cov)))
@@ -279,15 +279,15 @@ class PoseGraph(GraphOutputs, GraphSegments):
         graph = gtsam.NonlinearFactorGraph()
         for lp in add:
             graph.add(lp.factor(self._loop_noise(lp)))
-        rm = [lp.isam_index for lp in remove if lp.isam_index is not None]
         with defer_sigint():  # iSAM2's factor slots and ours change together
-            res = self._isam.update(graph, gtsam.Values(), rm)
+            res = self._solvable(lambda: self._isam.update(
+                graph, gtsam.Values(), [lp.isam_index for lp in remove if lp.isam_index is not None]))
             for lp in remove:
                 lp.isam_index = None
             for lp, idx in zip(add, res.getNewFactorsIndices(), strict=True):
                 lp.isam_index = int(idx)
         for _ in range(self.conf.isam2_extra_updates_per_loop):
-            self._isam.update()
+            self._solvable(lambda: self._isam.update())
 
     def _residual_chi2(self, lp: LoopEntry, values: gtsam.Values | None = None) -> float:
         if values is None:

@@ -110,3 +110,16 @@ def test_the_pipeline_chain_hands_every_break_to_the_graph():
         g.add_keyframe(kf.id, kf.stamp, kf.T_world_body, kf.covariance_since_last, segment_start=kf.segment_start)
     _check_solved(g, len(kfs))
     assert len(g.segment_rows()) == 6
+
+
+def test_a_large_noise_step_beside_precise_ones_is_solved_by_qr_not_a_traceback(caplog):
+    """Covariances of very different scales without a segment flag (a user's front end, absolute covariances read
+    as relative ones): Cholesky declares the system indeterminate; the graph refactors by QR and goes on."""
+    poses = _circle(40)
+    g = PoseGraph(BackendConfig())
+    for k, T in enumerate(poses):
+        cov = np.diag([2.5] * 3 + [100.0] * 3) if k in (10, 11) else STEP_COV
+        g.add_keyframe(k, 10**9 * k, T, cov if k else None)
+    _check_solved(g, 40)
+    assert "solved by QR" in caplog.text
+    assert np.allclose(g.estimate_array(), poses, atol=1e-6)
