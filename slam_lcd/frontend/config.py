@@ -54,6 +54,15 @@ class FrontendConfig:
     vo_lost_sigma_trans: float = ranged(10.0, "(0, inf)")
     # rotation sigma (deg) of the large-noise link after tracking loss
     vo_lost_sigma_rot_deg: float = ranged(90.0, "(0, inf)")
+    # relocalisation before a loss: the last tracking keyframes kept and tried again (0: off)
+    vo_reloc_keyframes: int = ranged(5, "[0, inf)")
+    vo_reloc_max_gap_s: float = ranged(1.0, "[0, inf)")  # ... only this long after the last tracked pose (s)
+    # guided matching: search radius around a point's predicted projection, as a fraction of the image width
+    vo_reloc_search_radius: float = ranged(0.06, "(0, 1]")
+    # a relocalised pose farther than this from the constant-velocity prediction is rejected (m, deg)
+    vo_reloc_gate_translation: float = ranged(0.3, "(0, inf)")
+    vo_reloc_gate_rotation_deg: float = ranged(10.0, "(0, 180]")
+    vo_reloc_min_inliers: int = ranged(12, "[4, inf)")  # inliers a relocalised pose needs (gated by the prior)
     stereo_max_row_diff_px: float = ranged(1.5, "[0, inf)")  # rectified stereo: match only within this many rows
     # smallest usable disparity (px)
     stereo_min_disparity_px: float = ranged(1.0, "(0, inf)", below="stereo_max_disparity_px")
