@@ -256,7 +256,9 @@ class _FrameToKeyframeOdometry:
             else:  # keep the reference tracked against: this frame has too little structure
                 self.ring.pop()
                 self.ref = ref
-        return self._emit(VoFrame(stamp_ns, status, self.segment, self._body(T_wc), cov, n_matches, n_in, res.rms_px))
+        reason = f"relocalised against the tracking keyframe at stamp {ref.stamp}" if relocalised else ""
+        return self._emit(VoFrame(stamp_ns, status, self.segment, self._body(T_wc), cov, n_matches, n_in, res.rms_px,
+                                  reason))
 
     def _emit(self, f: VoFrame) -> VoFrame:
         self.frames.append(f)
