@@ -36,9 +36,11 @@ class FrontendConfig:
     # --- visual odometry (used only when the log has no odometry) ---
     vo_features: Literal["orb", "superpoint"] = "orb"  # feature kind for tracking
     vo_max_features: int = ranged(1000, "[1, inf)")  # ORB features per frame
-    # ORB's FAST threshold for tracking (the strongest vo_max_features corners are kept either way; a low
-    # threshold keeps dim, low-contrast and small images from running short of corners)
-    vo_orb_fast_threshold: int = ranged(7, "[0, 255]")
+    vo_orb_fast_threshold: int = ranged(20, "[0, 255]")  # ORB's FAST threshold for tracking
+    # a frame with fewer corners than this fraction of vo_max_features is detected again with the fallback
+    # FAST threshold (dim, low-contrast and small images)
+    vo_orb_fallback_below: float = ranged(0.5, "[0, 1]")
+    vo_orb_fallback_fast_threshold: int = ranged(7, "[0, 255]")
     vo_match_ratio: float = ranged(0.85, "(0, 1]")  # Lowe ratio for descriptor matching (frame to keyframe)
     vo_ransac_reprojection_px: float = ranged(2.0, "(0, inf)")  # PnP-RANSAC inlier threshold (pixels)
     vo_ransac_iterations: int = ranged(200, "[1, inf)")  # PnP-RANSAC iterations
@@ -81,6 +83,9 @@ def default_extractor(conf: FrontendConfig):
     from ..features import FeaturesConfig, load_extractor
 
     if conf.vo_features == "orb":
-        return load_extractor(FeaturesConfig(kind="orb", orb_n_features=conf.vo_max_features,
-                                             orb_fast_threshold=conf.vo_orb_fast_threshold))
+        from .tracking_orb import TrackingOrbExtractor
+
+        return TrackingOrbExtractor(FeaturesConfig(kind="orb", orb_n_features=conf.vo_max_features,
+                                                   orb_fast_threshold=conf.vo_orb_fast_threshold),
+                                    conf.vo_orb_fallback_fast_threshold, conf.vo_orb_fallback_below)
     return load_extractor(FeaturesConfig(kind="superpoint", max_keypoints=conf.vo_max_features))
