@@ -39,7 +39,7 @@ class FrontendConfig:
     vo_orb_fast_threshold: int = ranged(20, "[0, 255]")  # ORB's FAST threshold for tracking
     # a frame with fewer corners than this fraction of vo_max_features is detected again with the fallback
     # FAST threshold (dim, low-contrast and small images)
-    vo_orb_fallback_below: float = ranged(0.25, "[0, 1]")
+    vo_orb_fallback_below: float = ranged(0.5, "[0, 1]")
     vo_orb_fallback_fast_threshold: int = ranged(7, "[0, 255]")
     vo_match_ratio: float = ranged(0.85, "(0, 1]")  # Lowe ratio for descriptor matching (frame to keyframe)
     vo_ransac_reprojection_px: float = ranged(2.0, "(0, inf)")  # PnP-RANSAC inlier threshold (pixels)
