@@ -39,6 +39,11 @@ class FrontendConfig:
     # --- visual odometry (used only when the log has no odometry) ---
     vo_features: Literal["orb", "superpoint"] = "orb"  # feature kind for tracking
     vo_max_features: int = ranged(1000, "[1, inf)")  # ORB features per frame
+    vo_orb_fast_threshold: int = ranged(20, "[0, 255]")  # ORB's FAST threshold for tracking
+    # a frame with fewer corners than this fraction of vo_max_features is detected again with the fallback
+    # FAST threshold (dim, low-contrast and small images)
+    vo_orb_fallback_below: float = ranged(0.5, "[0, 1]")
+    vo_orb_fallback_fast_threshold: int = ranged(7, "[0, 255]")
     vo_match_ratio: float = ranged(0.85, "(0, 1]")  # Lowe ratio for descriptor matching (frame to keyframe)
     vo_ransac_reprojection_px: float = ranged(2.0, "(0, inf)")  # PnP-RANSAC inlier threshold (pixels)
     vo_ransac_iterations: int = ranged(200, "[1, inf)")  # PnP-RANSAC iterations
@@ -57,6 +62,15 @@ class FrontendConfig:
     vo_lost_sigma_trans: float = ranged(10.0, "(0, inf)")
     # rotation sigma (deg) of the large-noise link after tracking loss
     vo_lost_sigma_rot_deg: float = ranged(90.0, "(0, inf)")
+    # relocalisation before a loss: the last tracking keyframes kept and tried again (0: off)
+    vo_reloc_keyframes: int = ranged(5, "[0, inf)")
+    vo_reloc_max_gap_s: float = ranged(1.0, "[0, inf)")  # ... only this long after the last tracked pose (s)
+    # guided matching: search radius around a point's predicted projection, as a fraction of the image width
+    vo_reloc_search_radius: float = ranged(0.06, "(0, 1]")
+    # a relocalised pose farther than this from the constant-velocity prediction is rejected (m, deg)
+    vo_reloc_gate_translation: float = ranged(0.3, "(0, inf)")
+    vo_reloc_gate_rotation_deg: float = ranged(10.0, "(0, 180]")
+    vo_reloc_min_inliers: int = ranged(12, "[4, inf)")  # inliers a relocalised pose needs (gated by the prior)
     stereo_max_row_diff_px: float = ranged(1.5, "[0, inf)")  # rectified stereo: match only within this many rows
     # smallest usable disparity (px)
     stereo_min_disparity_px: float = ranged(1.0, "(0, inf)", below="stereo_max_disparity_px")
@@ -72,5 +86,9 @@ def default_extractor(conf: FrontendConfig):
     from ..features import FeaturesConfig, load_extractor
 
     if conf.vo_features == "orb":
-        return load_extractor(FeaturesConfig(kind="orb", orb_n_features=conf.vo_max_features))
+        from .tracking_orb import TrackingOrbExtractor
+
+        return TrackingOrbExtractor(FeaturesConfig(kind="orb", orb_n_features=conf.vo_max_features,
+                                                   orb_fast_threshold=conf.vo_orb_fast_threshold),
+                                    conf.vo_orb_fallback_fast_threshold, conf.vo_orb_fallback_below)
     return load_extractor(FeaturesConfig(kind="superpoint", max_keypoints=conf.vo_max_features))

@@ -6,17 +6,24 @@ disparity); PnP-RANSAC plus a motion-only refinement give the pose and its covar
 (:mod:`slam_lcd.vision.pnp`). The tracking keyframe is replaced when the overlap
 drops or the camera has moved enough, so drift only grows keyframe to keyframe.
 
-Tracking loss is explicit. A frame that cannot be tracked is reported ``lost`` and gets
-no pose. The next frame is tried against the same keyframe (recovery, the same segment);
-if that fails too, a new segment starts at the last good pose, its covariance starting again
-from zero (the segment's own frame), and the frame is flagged ``segment_start`` so the
-keyframe selector and the back end see the break: the pose graph anchors the segment on its
-own and only loops join it to the others (:mod:`slam_lcd.backend.segments`). The trajectory
-never jumps silently.
+Before a frame is declared lost it is relocalised (:mod:`slam_lcd.frontend.reloc`): a
+constant-velocity prediction from the last two tracked poses guides matching against the
+current tracking keyframe and then against the last ``vo_reloc_keyframes`` ones, and a PnP
+pose outside the gate around the prediction is rejected; a success is ``relocalised`` and
+the segment goes on.
+
+Tracking loss is explicit. A frame that can be neither tracked nor relocalised is reported
+``lost`` and gets no pose. The next frame is tried again the same way (``recovered``, the
+same segment); if that fails too, a new segment starts at the last good pose, its covariance
+starting again from zero (the segment's own frame), and the frame is flagged
+``segment_start`` so the keyframe selector and the back end see the break: the pose graph
+anchors the segment on its own and only loops join it to the others
+(:mod:`slam_lcd.backend.segments`). The trajectory never jumps silently.
 """
 from __future__ import annotations
 
 import logging
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -30,6 +37,7 @@ from ..vision.pnp import solve_pnp
 from .config import FrontendConfig, default_extractor
 from .depth_points import points_from_depth, points_from_stereo
 from .matching import match_descriptors
+from .reloc import MotionPrior, guided_matches, within_gate
 
 log = logging.getLogger(__name__)
 
@@ -39,7 +47,7 @@ class VoFrame:
     """What VO says about one input frame."""
 
     stamp: int
-    status: str  # 'init' | 'tracked' | 'keyframe' | 'recovered' | 'segment-start' | 'lost'
+    status: str  # 'init' | 'tracked' | 'keyframe' | 'recovered' | 'relocalised' | 'segment-start' | 'lost'
     segment: int
     T_world_body: np.ndarray | None = None
     covariance: np.ndarray | None = None  # absolute (growing) pose covariance, GTSAM order, body frame
@@ -111,6 +119,8 @@ class _FrameToKeyframeOdometry:
         self.last_cov: np.ndarray | None = None
         self.T_ref_cur_last = np.eye(4)
         self.frames: list[VoFrame] = []
+        self.ring: deque[_TrackingKeyframe] = deque(maxlen=max(self.conf.vo_reloc_keyframes, 1))
+        self.motion = MotionPrior()
 
     # -- subclasses ---------------------------------------------------------
     def _points(self, feats: Features, image, aux) -> tuple[np.ndarray, np.ndarray]:
@@ -122,29 +132,53 @@ class _FrameToKeyframeOdometry:
 
     def _make_ref(self, feats, image, aux, T_world_cam, cov, stamp) -> int:
         pts, pcov = self._points(feats, image, aux)
+        if self.ref is not None:
+            self.ring.append(self.ref)
         self.ref = _TrackingKeyframe(feats, pts, pcov, T_world_cam, cov, stamp)
         self.T_ref_cur_last = np.eye(4)
         return int(np.isfinite(pts[:, 0]).sum())
 
-    def _track(self, feats: Features):
-        """PnP of ``feats`` against the tracking keyframe: ``(PnpResult | None, n_matches)``."""
-        ref = self.ref
-        assert ref is not None  # process() tracks only against a reference keyframe
+    def _track(self, feats: Features, uv_all: np.ndarray, ref: _TrackingKeyframe,
+               T_ref_cur_guess: np.ndarray | None = None):
+        """PnP of ``feats`` (undistorted keypoints ``uv_all``) against ``ref``: ``(PnpResult | None,
+        n_matches)``; with ``T_ref_cur_guess``, matching is guided by that pose."""
+        c = self.conf
+        # a pose the motion prior confirms (the gate) needs fewer inliers
+        min_inliers = c.vo_min_inliers if T_ref_cur_guess is None else min(c.vo_min_inliers, c.vo_reloc_min_inliers)
         valid = np.flatnonzero(np.isfinite(ref.points[:, 0]))
-        if len(valid) < self.conf.vo_min_inliers or len(feats) < self.conf.vo_min_inliers:
+        if len(valid) < min_inliers or len(feats) < min_inliers:
             return None, 0
-        m = match_descriptors(ref.features.descriptors[valid], feats.descriptors, ratio=self.conf.vo_match_ratio)
-        if len(m) < self.conf.vo_min_inliers:
+        if T_ref_cur_guess is None:
+            m = match_descriptors(ref.features.descriptors[valid], feats.descriptors, ratio=c.vo_match_ratio)
+        else:
+            m = guided_matches(ref.points[valid], ref.features.descriptors[valid], T_ref_cur_guess, self.K, uv_all,
+                               feats.descriptors, c.vo_reloc_search_radius * self.camera.width)
+        if len(m) < min_inliers:
             return None, len(m)
         i_ref = valid[m[:, 0]]
-        uv = undistort_points(self.camera, feats.keypoints[m[:, 1]])
+        uv = uv_all[m[:, 1]]
         res = solve_pnp(ref.points[i_ref], ref.point_cov[i_ref], uv, self.K,
                         reprojection_px=self.conf.vo_ransac_reprojection_px,
-                        iterations=self.conf.vo_ransac_iterations, min_inliers=self.conf.vo_min_inliers,
+                        iterations=self.conf.vo_ransac_iterations, min_inliers=min_inliers,
                         pixel_sigma=self.conf.vo_pixel_sigma)
         if not res.ok or len(res.inliers) < self.conf.vo_min_inlier_ratio * len(m):
             return None, len(m)
         return res, len(m)
+
+    def _relocalise(self, feats: Features, uv_all: np.ndarray, stamp_ns: int):
+        """``(keyframe, PnpResult, n_matches)`` of a pose found by guided matching against the tracking
+        keyframe, then the kept ones (newest first), within the motion prior's gate; or None."""
+        c = self.conf
+        T_pred = self.motion.predict(stamp_ns)
+        if (c.vo_reloc_keyframes == 0 or T_pred is None or self.ref is None
+                or self.motion.seconds_since_last(stamp_ns) > c.vo_reloc_max_gap_s):
+            return None
+        for kf in [self.ref, *reversed(self.ring)]:
+            res, n_matches = self._track(feats, uv_all, kf, inv(kf.T_world_cam) @ T_pred)
+            if res is not None and within_gate(T_pred, kf.T_world_cam @ res.T_ref_cur, c.vo_reloc_gate_translation,
+                                               c.vo_reloc_gate_rotation_deg):
+                return kf, res, n_matches
+        return None
 
     # -- main entry ---------------------------------------------------------
     def process(self, stamp_ns: int, image: np.ndarray, aux=None, features: Features | None = None) -> VoFrame:
@@ -153,6 +187,7 @@ class _FrameToKeyframeOdometry:
         stamp_ns = int(stamp_ns)
         gray = to_gray_uint8(image)
         feats = features if features is not None else self.extractor.extract(gray)
+        uv_all = undistort_points(self.camera, feats.keypoints)
 
         if self.ref is None:  # very first frame: the world frame is the first body frame
             T_wc = self.T_bc.copy()
@@ -162,9 +197,17 @@ class _FrameToKeyframeOdometry:
                 self.ref = None
                 return self._emit(VoFrame(stamp_ns, "lost", self.segment, reason=f"only {n3d} features with depth"))
             self.last_T_world_cam, self.last_cov = T_wc, cov
+            self.motion.add(stamp_ns, T_wc)
             return self._emit(VoFrame(stamp_ns, "init", self.segment, self._body(T_wc), cov, len(feats), n3d))
 
-        res, n_matches = self._track(feats)
+        ref = self.ref
+        res, n_matches = self._track(feats, uv_all, ref)
+        relocalised = False
+        if res is None:
+            found = self._relocalise(feats, uv_all, stamp_ns)
+            if found is not None:
+                ref, res, n_matches = found
+                relocalised = True
         if res is None:
             if not self.lost:
                 self.lost = True
@@ -181,31 +224,37 @@ class _FrameToKeyframeOdometry:
             self.lost = False
             self.segment += 1
             self.last_cov = cov
+            self.ring.clear()  # the kept keyframes and the motion prior belong to the segment that ended
+            self.motion.reset()
+            self.motion.add(stamp_ns, T_wc)
             log.warning("visual odometry lost tracking; new segment %d at stamp %d", self.segment, stamp_ns)
             return self._emit(VoFrame(stamp_ns, "segment-start", self.segment, self._body(T_wc), cov,
                                       n_matches, n3d, reason="tracking lost: new segment, large-noise link"))
 
         recovered = self.lost
         self.lost = False
-        ref = self.ref
         T_ref_cur = res.T_ref_cur
         T_wc = ref.T_world_cam @ T_ref_cur
         T_refb_curb = self.T_bc @ T_ref_cur @ self.T_cb
         cov_rel = transform_covariance(res.covariance, self.T_bc)
         cov = compose_covariance(ref.covariance, T_refb_curb, cov_rel)
         self.last_T_world_cam, self.last_cov = T_wc, cov
+        self.motion.add(stamp_ns, T_wc)
         self.T_ref_cur_last = T_ref_cur
-        status = "recovered" if recovered else "tracked"
+        status = "relocalised" if relocalised else "recovered" if recovered else "tracked"
         n_in = len(res.inliers)
-        if (n_in < conf.vo_new_keyframe_inliers
+        if (relocalised or n_in < conf.vo_new_keyframe_inliers
                 or np.linalg.norm(T_ref_cur[:3, 3]) > conf.vo_new_keyframe_translation
                 or np.degrees(rotation_angle(T_ref_cur[:3, :3])) > conf.vo_new_keyframe_rotation_deg):
             n3d = self._make_ref(feats, gray, aux, T_wc, cov, stamp_ns)
             if n3d >= conf.vo_min_inliers:
-                status = "keyframe" if not recovered else status
-            else:  # keep the old reference: this frame has too little structure
+                status = "keyframe" if status == "tracked" else status
+            else:  # keep the reference tracked against: this frame has too little structure
+                self.ring.pop()
                 self.ref = ref
-        return self._emit(VoFrame(stamp_ns, status, self.segment, self._body(T_wc), cov, n_matches, n_in, res.rms_px))
+        reason = f"relocalised against the tracking keyframe at stamp {ref.stamp}" if relocalised else ""
+        return self._emit(VoFrame(stamp_ns, status, self.segment, self._body(T_wc), cov, n_matches, n_in, res.rms_px,
+                                  reason))
 
     def _emit(self, f: VoFrame) -> VoFrame:
         self.frames.append(f)
