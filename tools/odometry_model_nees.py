@@ -28,23 +28,10 @@ from slam_lcd.backend.gate import ChainRelatives
 from slam_lcd.frontend.config import FrontendConfig
 from slam_lcd.frontend.keyframes import keyframes_from_trajectory
 from slam_lcd.geometry import inv, se3_log
-from slam_lcd.sim.odometry import simulate_odometry
+from slam_lcd.sim.odometry import open_route, simulate_odometry
 from slam_lcd.types import Trajectory
 
 PLANAR = [2, 3, 4]  # rz, tx, ty of GTSAM's [rx ry rz tx ty tz]
-
-
-def open_route(rate_hz: float, length_m: float = 65.0, speed: float = 1.0, lateral: float = 0.0) -> Trajectory:
-    """A gently winding open route (x forward, y = 4 sin(x / 10) m), sampled at ``rate_hz``."""
-    n = int(length_m / speed * rate_hz) + 1
-    t = np.arange(n) / rate_hz
-    x = speed * t
-    y = 4.0 * np.sin(x / 10.0) + lateral
-    th = np.arctan2(np.gradient(y), np.gradient(x))
-    P = np.repeat(np.eye(4)[None], n, 0)
-    P[:, 0, 0], P[:, 0, 1], P[:, 1, 0], P[:, 1, 1] = np.cos(th), -np.sin(th), np.sin(th), np.cos(th)
-    P[:, 0, 3], P[:, 1, 3] = x, y
-    return Trajectory(np.round(t * 1e9).astype(np.int64), P)
 
 
 def keyframe_chain(gt: Trajectory, odo: Trajectory, conf: FrontendConfig):

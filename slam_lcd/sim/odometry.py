@@ -169,6 +169,20 @@ def simulate_odometry(gt: Trajectory, seed: int = 0, noise: OdometryNoise | None
                       child_frame_id=child_frame_id)
 
 
+def open_route(rate_hz: float, length_m: float = 65.0, speed: float = 1.0, lateral: float = 0.0) -> Trajectory:
+    """Ground truth of a gently winding open route (x forward, ``y = 4 sin(x / 10) + lateral`` m) sampled at
+    ``rate_hz``: the drive the odometry model's calibration and the covariance tests use."""
+    n = int(length_m / speed * rate_hz) + 1
+    t = np.arange(n) / rate_hz
+    x = speed * t
+    y = 4.0 * np.sin(x / 10.0) + lateral
+    th = np.arctan2(np.gradient(y), np.gradient(x))
+    P = np.repeat(np.eye(4)[None], n, 0)
+    P[:, 0, 0], P[:, 0, 1], P[:, 1, 0], P[:, 1, 1] = np.cos(th), -np.sin(th), np.sin(th), np.cos(th)
+    P[:, 0, 3], P[:, 1, 3] = x, y
+    return Trajectory(np.round(t * 1e9).astype(np.int64), P)
+
+
 def end_drift(gt: Trajectory, odom: Trajectory) -> dict:
     """End-point drift of ``odom`` against ``gt`` (same stamps, unaligned: the frames coincide at start).
 

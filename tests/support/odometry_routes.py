@@ -10,21 +10,15 @@ from slam_lcd.frontend.config import FrontendConfig
 from slam_lcd.frontend.keyframes import keyframes_from_trajectory
 from slam_lcd.geometry import inv
 from slam_lcd.map.joint_types import SessionPoses
+from slam_lcd.sim.odometry import open_route as sim_route
 from slam_lcd.sim.odometry import simulate_odometry
 from slam_lcd.types import Keyframe, Trajectory
 
 
 def open_route(rate_hz: float, length_m: float = 65.0, speed: float = 1.0, lateral: float = 0.0) -> Trajectory:
-    """Ground truth of a gently winding open route sampled at ``rate_hz`` (starts at the identity)."""
-    n = int(length_m / speed * rate_hz) + 1
-    t = np.arange(n) / rate_hz
-    x = speed * t
-    y = 4.0 * np.sin(x / 10.0) + lateral
-    th = np.arctan2(np.gradient(y), np.gradient(x))
-    P = np.repeat(np.eye(4)[None], n, 0)
-    P[:, 0, 0], P[:, 0, 1], P[:, 1, 0], P[:, 1, 1] = np.cos(th), -np.sin(th), np.sin(th), np.cos(th)
-    P[:, 0, 3], P[:, 1, 3] = x, y
-    return Trajectory(np.round(t * 1e9).astype(np.int64), inv(P[0]) @ P)
+    """The simulator's open route (:func:`slam_lcd.sim.odometry.open_route`), starting at the identity."""
+    gt = sim_route(rate_hz, length_m, speed, lateral)
+    return Trajectory(gt.stamps, inv(gt.poses[0]) @ gt.poses)
 
 
 def drive(gt: Trajectory, seed: int, covariances: str) -> list[Keyframe]:
