@@ -1,8 +1,7 @@
 """The demo world in the dataset layouts (``make-demo-log --layout``) read end to end by its preset.
 
-Per layout one tiny log (60 frames, 320x240: the VO tracks from that size on; TUM at its
-own 640x480, as the Kinect depth errors leave the RGB-D VO too few points at 320x240:
-4.8 % of the path there, 0.55 % at 640x480, 0.6 % / 0.3 % with exact depth) run with
+Per layout one tiny log (60 frames, 320x240: the VO tracks from that size on, TUM's RGB-D
+VO with its Kinect depth errors too since its discontinuity test works in inverse depth) run with
 ``--config <preset>`` and no topic flag (ORB features keep each run at seconds): the topics
 the preset names are found, the calibration file is read (EuRoC), the ground truth is read
 from the layout's message (PointStamped, TF chain), the built-in VO is the odometry and
@@ -22,7 +21,6 @@ from slam_lcd.run import OutputOptions, Sources, run_log
 from slam_lcd.sim import make_demo_log
 
 FRAMES, W, H = 60, 320, 240
-SIZE = {"tum": (640, 480)}  # Kinect v1 depth errors (slam_lcd.sim.kinect): the VO needs TUM's own size
 
 EXPECTED = {  # layout: (preset, image topic, ground-truth topic, right topic, depth topic, gt message type)
     "euroc": ("euroc", "/cam0/image_raw", "/leica/position", "/cam1/image_raw", None, "geometry_msgs/msg/PointStamped"),
@@ -36,8 +34,8 @@ EXPECTED = {  # layout: (preset, image topic, ground-truth topic, right topic, d
 @pytest.fixture(scope="module")
 def layout_logs(tmp_path_factory):
     root = tmp_path_factory.mktemp("layouts")
-    return {name: make_demo_log(root / f"{name}.mcap", "mcap", frames=FRAMES, width=SIZE.get(name, (W, H))[0],
-                                height=SIZE.get(name, (W, H))[1], layout=name, workers=0) for name in EXPECTED}
+    return {name: make_demo_log(root / f"{name}.mcap", "mcap", frames=FRAMES, width=W, height=H, layout=name,
+                                workers=0) for name in EXPECTED}
 
 
 @pytest.mark.parametrize("layout", list(EXPECTED))
