@@ -74,6 +74,9 @@ def cases(weights: Path | None) -> list[Case]:
     out.append(Case(clean, "demo", None))
     for name, args in STRETCHES.items():
         out.append(Case(f"demo 2-lap 320x240 {name}", "demo", None, log_args=args, stretch_of=clean))
+    # bad stretches where the built-in VO is the odometry: it breaks, segments and joins show
+    out += [Case("tum s1 320x240 10Hz dark", "tum", 1, 10, log_args=["--dark", "20:3"]),
+            Case("euroc s1 320x240 10Hz drop-frames", "euroc", 1, 10, log_args=["--drop-frames", "20:3"])]
     out.append(Case("tum all dark", "tum", 1, 10, log_args=["--dark", "0:1000", "--frames", "60"], unusable=True))
     return out
 
