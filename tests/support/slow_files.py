@@ -8,5 +8,5 @@ SLOW_FILES = (
     "map/test_map_lookalike.py", "run/test_pipeline_overlap.py", "eval/test_ate_evo_flags.py",
     "map/test_map_sessions.py", "viewer/test_viewer.py", "map/test_map_cli_rules.py", "run/test_pipeline_demo.py",
     "lcd/test_lcd_symmetry.py", "map/test_map_lifelong.py", "features/test_features_superpoint.py",
-    "cli/test_bad_input.py", "run/test_run_tracking_loss.py", "sim/test_sim_stretches.py",
+    "cli/test_bad_input.py",
 )
