@@ -13,11 +13,12 @@ import gtsam
 from ..runtime.interrupts import defer_sigint
 from .gate import LoopGate, Relatives, chi2_quantile
 from .poses import isam2_params
-from .segments import SegmentRow, Segments, accepted_pairs, join_check
+from .records import ACCEPTED
+from .segments import SegmentRow, Segments, judge_join
 
 if TYPE_CHECKING:
     from .config import BackendConfig
-    from .gate import ChainRelatives
+    from .gate import ChainRelatives, GateDecision
     from .records import LoopEntry
 
 log = logging.getLogger(__name__)
@@ -92,3 +93,26 @@ class GraphSegments:
         """One row per tracking-loss segment: keyframes, stamps, component, joining loops (:mod:`.segments`)."""
         return self._segments.rows(self._ids, self._stamps, accepted_pairs(self._loops)) if self._ids else []
 
+
+def accepted_pairs(loops: list[LoopEntry]) -> list[tuple[int, int]]:
+    """``(position_a, position_b)`` of the accepted loops: what joins segments."""
+    return [(lp.a, lp.b) for lp in loops if lp.record.verdict == ACCEPTED]
+
+
+def join_check(segments: Segments, loops: list[LoopEntry], new: LoopEntry, relatives: Relatives,
+               threshold: float, min_loops: int) -> GateDecision | None:
+    """:func:`judge_join` for ``new`` (the last of ``loops``) when it lies between two components; else None."""
+    if len(segments) < 2:
+        return None
+    of = segments.of
+    comp = segments.components(accepted_pairs(loops))
+    ca, cb = comp[of[new.a]], comp[of[new.b]]
+    if ca == cb:
+        return None
+
+    def side(p: int) -> int | None:
+        return {ca: 0, cb: 1}.get(comp[of[p]])
+
+    waiting = [o.gate for o in loops if o is not new and o.record.verdict != ACCEPTED and not o.gate.excluded
+               and {side(o.a), side(o.b)} == {0, 1}]
+    return judge_join(new.gate, side, waiting, relatives, threshold, min_loops, (of[new.a], of[new.b]))

@@ -25,17 +25,11 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..geometry import adjoint, inv
 from .gate import GateDecision, GateLoop, Relatives, pair_chi2
-
-if TYPE_CHECKING:
-    from .records import LoopEntry
-
-ACCEPTED = "accepted"  # records.ACCEPTED (records imports gtsam; this module stays numpy only)
 
 
 @dataclass
@@ -142,27 +136,3 @@ def judge_join(loop: GateLoop, side_of, waiting: Sequence[GateLoop], relatives: 
 def break_covariance(sigma_rot: float, sigma_trans: float) -> np.ndarray:
     """Covariance standing for the unknown motion across a break (GTSAM order), as the weak prior's."""
     return np.diag([sigma_rot**2] * 3 + [sigma_trans**2] * 3)
-
-
-def accepted_pairs(loops: Sequence[LoopEntry]) -> list[tuple[int, int]]:
-    """``(position_a, position_b)`` of the accepted loops: what joins segments."""
-    return [(lp.a, lp.b) for lp in loops if lp.record.verdict == ACCEPTED]
-
-
-def join_check(segments: Segments, loops: Sequence[LoopEntry], new: LoopEntry, relatives: Relatives,
-               threshold: float, min_loops: int) -> GateDecision | None:
-    """:func:`judge_join` for ``new`` (the last of ``loops``) when it lies between two components; else None."""
-    if len(segments) < 2:
-        return None
-    of = segments.of
-    comp = segments.components(accepted_pairs(loops))
-    ca, cb = comp[of[new.a]], comp[of[new.b]]
-    if ca == cb:
-        return None
-
-    def side(p: int) -> int | None:
-        return {ca: 0, cb: 1}.get(comp[of[p]])
-
-    waiting = [o.gate for o in loops if o is not new and o.record.verdict != ACCEPTED and not o.gate.excluded
-               and {side(o.a), side(o.b)} == {0, 1}]
-    return judge_join(new.gate, side, waiting, relatives, threshold, min_loops, (of[new.a], of[new.b]))

@@ -39,6 +39,7 @@ import numpy as np
 
 from ..backend.gnc import gnc_loop_weights
 from ..backend.loop_factors import valid_information
+from ..backend.poses import levenberg_marquardt
 from ..geometry import inv
 from .config import MapConfig
 from .joins import judge_pair, recheck
@@ -70,12 +71,8 @@ def odometry_covariance(cov: np.ndarray | None, modelled: bool = False, T_step: 
 
 
 def solve_lm(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values) -> gtsam.Values:
-    """Levenberg-Marquardt to tight tolerances (the map's and a localisation's final solves)."""
-    params = gtsam.LevenbergMarquardtParams()
-    params.setRelativeErrorTol(1e-9)
-    params.setAbsoluteErrorTol(1e-9)
-    params.setMaxIterations(100)
-    return gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
+    """Levenberg-Marquardt to tight tolerances (the map's and a localisation's final solves): the back end's."""
+    return levenberg_marquardt(graph, values)
 
 
 def _between(lp: JointLoop, scale: float = 1.0) -> gtsam.BetweenFactorPose3:
