@@ -14,9 +14,8 @@ from collections.abc import Sequence
 
 class OdometryBreaks:
     def __init__(self) -> None:
-        self.stamps: list[int] = []  # every break handed in, in order (the outputs' segments)
+        self.stamps: list[int] = []  # every break handed in, in order
         self._waiting: deque[int] = deque()  # breaks not yet handed to a frame, oldest first
-        self.frames_inside = 0  # frames skipped: inside a break
 
     def add(self, stamp_ns: int) -> None:
         self.stamps.append(int(stamp_ns))

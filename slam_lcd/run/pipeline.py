@@ -327,7 +327,6 @@ class Pipeline:
 
     def _process(self, f: WaitingFrame) -> list[LoopClosure]:
         if self.breaks.inside(f.stamp, self._odom.stamps):  # no odometry pose there
-            self.breaks.frames_inside += 1
             return []
         T, cov = self._odom.at(f.stamp)
         features = None
