@@ -63,6 +63,17 @@ def valid_information(M) -> bool:
     return True
 
 
+def valid_informations(M: np.ndarray) -> np.ndarray:
+    """(n,) bool: :func:`valid_information` of each of ``n`` 6x6 matrices, at once (a session's steps)."""
+    M = np.asarray(M, dtype=np.float64).reshape(-1, 6, 6)
+    Mt = M.transpose(0, 2, 1)
+    ok = np.all(np.isfinite(M), axis=(1, 2))
+    ok[ok] = np.all(np.abs(M[ok] - Mt[ok]) <= 1e-9 + 1e-6 * np.abs(Mt[ok]), axis=(1, 2))
+    if ok.any():
+        ok[ok] = np.linalg.eigvalsh(0.5 * (M[ok] + Mt[ok]))[:, 0] > 0
+    return ok
+
+
 def loop_noise(information, kernel=None, kernel_width: float = 3.0):
     """Gaussian noise model from a 6x6 information matrix, wrapped in a robust kernel when one is named.
 

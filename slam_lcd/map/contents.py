@@ -66,10 +66,13 @@ class SessionKeyframes:
     points3d: np.ndarray  # (K, 3) float32
     points_source: np.ndarray  # (n,) str: rgbd | stereo | landmarks | none
     cov_source: np.ndarray | None = None  # (n,) str: given | model; None: not recorded (read as given)
+    # (n, 4, 4) the session's own estimate (odometry corrected by its own loops, its odometry frame), what the
+    # pair verdicts read; None: not recorded (computed from the odometry and the session's own loops)
+    T_own: np.ndarray | None = None
 
     ARRAYS = ("ids", "stamps", "T_odom", "cov", "T_gt", "offsets", "keypoints", "descriptors", "scales",
               "points3d", "points_source")
-    OPTIONAL = ("cov_source",)
+    OPTIONAL = ("cov_source", "T_own")
 
     def arrays(self) -> dict[str, np.ndarray]:
         """Every array to write (the optional ones where present)."""
@@ -115,10 +118,11 @@ class SessionKeyframes:
               and self.keypoints.shape == (K, 2) and len(self.descriptors) == K and self.points3d.shape == (K, 3)
               and (len(self.scales) in (0, K)) and n > 0 and int(self.offsets[0]) == 0 and int(self.offsets[-1]) == K
               and bool(np.all(np.diff(self.offsets) >= 0))
-              and (self.cov_source is None or np.shape(self.cov_source) == (n,)))
+              and (self.cov_source is None or np.shape(self.cov_source) == (n,))
+              and (self.T_own is None or np.shape(self.T_own) == (n, 4, 4)))
         if not ok:
             raise MapError("session file's arrays do not fit together (damaged or not written by slam-lcd)", where)
-        if not np.all(np.isfinite(self.T_odom)):
+        if not np.all(np.isfinite(self.T_odom)) or (self.T_own is not None and not np.all(np.isfinite(self.T_own))):
             raise MapError("session file holds non-finite keyframe poses", where)
 
 

@@ -11,24 +11,29 @@ anchors are read back as ``T_map_first_keyframe @ inv(T_odom_first_keyframe)``.
 Sessions that no accepted loop connects stay in separate components, each in the frame of its
 first session, and the map says so. The steps of :func:`solve`:
 
-1. **Visual links** are tested against the odometry step they span and weighed once where they
-   and the odometry share the camera (:mod:`.links`).
-2. **Joins.** Per pair of sessions, the largest pairwise-consistent set of loops (PCM with
-   covariances propagated through the adjoints, :mod:`.pcm`; the exact maximum clique with a
-   node budget, :mod:`.cliques`) joins them when it is big enough, spans distinct places in both
-   sessions and has no rival of similar size (:mod:`.joins`). A single loop between two
-   unconnected graphs cannot be tested against anything, and a false one would fold one map
-   onto another.
-3. **GNC.** A batch GNC (TLS) re-check over every loop between sessions and every link, with
-   each session's odometry and own loops as known inliers.
-4. **Re-check.** The surviving loops of each joined pair must still join it (rules 1 and 2 of
-   :mod:`.joins`); a pair that fails is undone ("undone by gnc"), the components are recomputed
-   (a component that lost its join gets its own prior and frame) and steps 3-4 run again, until
-   no join is undone (each round undoes one join at least, so at most one round per pair).
-5. A Levenberg-Marquardt solve of the final graph.
+1. **Visual links** of a new session are tested against the odometry step they span, weighed
+   once where they and the odometry share the camera (:mod:`.links`), and re-checked by GNC in
+   the session's own graph (:func:`.pair_verdicts.judge_links`).
+2. **Joins.** Each pair of sessions with loops between them that has no verdict yet is judged
+   from the two sessions alone (:mod:`.pair_verdicts`): the largest pairwise-consistent set of
+   loops (PCM with covariances propagated through the adjoints, :mod:`.pcm`; the exact maximum
+   clique, :mod:`.cliques`) joins them when it is big enough, spans distinct places in both
+   sessions and has no rival of similar size (:mod:`.joins`); a GNC re-check in the two
+   sessions' graph and the rules again on its survivors. A single loop between two unconnected
+   graphs cannot be tested against anything, and a false one would fold one map onto another.
+   A pair judged at an earlier append keeps its verdict (``judged``): its accepted loops are
+   known inliers.
+3. **Joint solve.** Levenberg-Marquardt over every session's odometry, own loops, accepted links
+   and the accepted loops of every joined pair.
+4. **Contradictions.** A joined pair whose loops the joint solution mostly rejects is judged
+   again: a GNC over its loops as candidates in the joint graph, then the join rules on the
+   survivors; a pair that fails is undone ("undone by gnc"), the components are recomputed and
+   steps 3-4 run again (each round undoes one join at least).
 
-Why batch here: an append joins sessions once; a batch solve is exact at that moment, and the
-sessions' own iSAM2 graphs stay as they were.
+Why per pair: a verdict that reads only its two sessions does not depend on the order in which
+logs joined the map nor on sessions unrelated to it, and an append costs what its own pairs
+cost, not what the whole history does. Why batch: an append joins sessions once; a batch solve
+is exact at that moment, and the sessions' own iSAM2 graphs stay as they were.
 """
 from __future__ import annotations
 
@@ -37,37 +42,19 @@ import logging
 import gtsam
 import numpy as np
 
-from ..backend.gnc import gnc_loop_weights
-from ..backend.loop_factors import valid_information
 from ..backend.poses import levenberg_marquardt
 from ..geometry import inv
+from . import pair_verdicts as pv
 from .config import MapConfig
-from .joins import judge_pair, recheck
-from .joint_types import LINK, JointLoop, JointResult, PairDecision, SessionPoses, is_link
-from .links import gate_links, link_weight, linked_steps, shared_weight
-from .pcm import SessionChains, allowance, is_modelled
+from .joins import recheck
+from .joint_types import JOINED, LINK, JointLoop, JointResult, PairDecision, SessionPoses
+from .pcm import SessionChains
+from .session_factors import ODOM_SIGMAS, between, information_noise, odometry_covariance
 
 log = logging.getLogger(__name__)
 
-__all__ = ["LINK", "JointLoop", "JointResult", "PairDecision", "SessionPoses", "information_noise",
+__all__ = ["LINK", "ODOM_SIGMAS", "JointLoop", "JointResult", "PairDecision", "SessionPoses", "information_noise",
            "odometry_covariance", "solve", "solve_lm"]
-
-ODOM_SIGMAS = np.r_[[0.01] * 3, [0.05] * 3]  # step noise when a session's odometry gave none
-
-
-def information_noise(info: np.ndarray, scale: float = 1.0):
-    """A Gaussian noise model from a (symmetrised) information matrix, GTSAM order, times ``scale``."""
-    info = 0.5 * (np.asarray(info, float) + np.asarray(info, float).T)
-    return gtsam.noiseModel.Gaussian.Information(scale * info)
-
-
-def odometry_covariance(cov: np.ndarray | None, modelled: bool = False, T_step: np.ndarray | None = None,
-                        conf: MapConfig | None = None) -> np.ndarray:
-    """An odometry step's covariance as given when it is a valid one, else the default step noise; one the
-    front end ``modelled`` is replaced by the map's per-metre allowance for ``T_step`` (:func:`.pcm.allowance`)."""
-    if modelled and T_step is not None:
-        return allowance(T_step, conf or MapConfig())
-    return np.asarray(cov, float) if valid_information(cov) else np.diag(ODOM_SIGMAS ** 2)
 
 
 def solve_lm(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values) -> gtsam.Values:
@@ -75,109 +62,118 @@ def solve_lm(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values) -> gtsam.V
     return levenberg_marquardt(graph, values)
 
 
-def _between(lp: JointLoop, scale: float = 1.0) -> gtsam.BetweenFactorPose3:
-    return gtsam.BetweenFactorPose3(lp.match, lp.query, gtsam.Pose3(lp.T), information_noise(lp.info, scale))
-
-
-def _judge_pairs(sessions, loops, chains, conf):
-    """Every pair of sessions with loops between them: its decision and the loops that join it."""
+def _pairs(loops: list[JointLoop], chains: SessionChains) -> dict[tuple[int, int], list[JointLoop]]:
+    """The loops between sessions, by pair of sessions (a loop with both ends in one session is refused)."""
     by_pair: dict[tuple[int, int], list[JointLoop]] = {}
     for lp in loops:
         if not lp.inter:
             continue
         s, t = chains.session_of(lp.query), chains.session_of(lp.match)
-        lp.accepted = False
         if s == t:
-            lp.reason = "pcm: both ends in one session"
+            lp.accepted, lp.reason = False, "pcm: both ends in one session"
             continue
         by_pair.setdefault((min(s, t), max(s, t)), []).append(lp)
-    decisions: dict[tuple[int, int], PairDecision] = {}
-    joins: dict[tuple[int, int], list[JointLoop]] = {}
-    for pair, group in sorted(by_pair.items()):
-        decisions[pair], chosen = judge_pair(pair, group, chains, conf)
-        if chosen:
-            joins[pair] = chosen
-    return decisions, joins
+    return by_pair
+
+
+def _earlier(pair: tuple[int, int], group: list[JointLoop], sessions: list[SessionPoses], judged: dict,
+             rule: str) -> PairDecision | None:
+    """The pair's recorded verdict when it still holds: made under the same rules, on the same loops."""
+    names = (sessions[pair[0]].name, sessions[pair[1]].name)
+    rec = judged.get(names) or judged.get(names[::-1])
+    if rec is None or rec.get("rule") != rule or int(rec.get("offered", -1)) != len(group):
+        return None
+    d = pv.from_record(rec)
+    d.sessions = names
+    return d
 
 
 def solve(sessions: list[SessionPoses], loops: list[JointLoop], conf: MapConfig | None = None,
-          gnc_inlier_probability: float = 0.99) -> JointResult:
-    """Judge the inter-session loops and links, connect sessions, and solve the joint graph (module docstring)."""
+          gnc_inlier_probability: float = 0.99, judged: dict | None = None) -> JointResult:
+    """Judge the inter-session loops and links, connect sessions, and solve the joint graph (module docstring).
+
+    ``judged``: the verdicts of earlier appends (``(name, name) -> record``, :func:`.pair_verdicts.record`),
+    taken as they were; the visual links of sessions an earlier solve placed (``prev_component`` set) keep
+    their verdicts. :attr:`JointResult.rule` fingerprints the rules, for the records."""
     conf = conf or MapConfig()
     chains = SessionChains(sessions, conf)
-    links = [lp for lp in loops if is_link(lp)]
-    failed = gate_links(links, chains, conf.link_probability)
+    graphs = pv.SessionGraphs(sessions, loops, chains)
+    failed = sum(pv.judge_links(si, graphs, chains, conf, gnc_inlier_probability)
+                 for si, s in enumerate(sessions) if s.prev_component is None)
     if failed:
-        log.info("%d of %d visual links disagree with the odometry and are left out", failed, len(links))
-    decisions, joins = _judge_pairs(sessions, loops, chains, conf)
+        log.info("%d visual links disagree with the odometry and are left out", failed)
+    rule = pv.rule_key(conf, gnc_inlier_probability)
+    decisions: dict[tuple[int, int], PairDecision] = {}
+    joins: dict[tuple[int, int], list[JointLoop]] = {}
+    for pair, group in sorted(_pairs(loops, chains).items()):
+        d = _earlier(pair, group, sessions, judged or {}, rule)
+        if d is None:
+            for lp in group:
+                lp.accepted = False
+            d = pv.judge(pair, group, graphs, chains, conf, gnc_inlier_probability)
+        decisions[pair] = d
+        if d.decision == JOINED and any(lp.accepted for lp in group):
+            joins[pair] = group
     while True:
         comp, init = _components(sessions, joins, chains)
-        values = _gnc_round(sessions, loops, links, comp, init, chains, gnc_inlier_probability)
-        undone = [p for p in sorted(joins) if recheck(decisions[p], p, joins[p], chains, conf)]
-        if not undone:
+        graph = _joint_graph(sessions, graphs, joins, comp, init)
+        values = solve_lm(graph, pv.values_of(init))
+        against = pv.contradicted(joins, values, gnc_inlier_probability)
+        if not against:
             break
-        for p in undone:
-            log.info("%s", decisions[p].reason)
-            del joins[p]
-    graph = _known_graph(sessions, loops, links, comp, init, chains)
-    for lp in loops:
-        if lp.accepted and (lp.inter or is_link(lp)):
-            graph.add(_between(lp, link_weight(lp, chains) if is_link(lp) else 1.0))
-    values = solve_lm(graph, values)
+        undone = _rejudge(against, sessions, graphs, joins, decisions, comp, init, chains, conf,
+                          gnc_inlier_probability)
+        if not undone:
+            graph = _joint_graph(sessions, graphs, joins, comp, init)
+            values = solve_lm(graph, values)
+            break
     poses = {int(k): values.atPose3(int(k)).matrix() for s in sessions for k in s.ids}
     # a component that the solve left isolated keeps its first session's frame
     anchors = {s.name: poses[int(s.ids[0])] @ inv(s.T_odom[0]) for s in sessions}
     return JointResult(poses, {s.name: comp[si] for si, s in enumerate(sessions)}, anchors, list(loops),
-                       [decisions[p] for p in sorted(decisions)])
+                       [decisions[p] for p in sorted(decisions)], rule)
 
 
-def _known_graph(sessions, loops, links, comp, init, chains) -> gtsam.NonlinearFactorGraph:
-    """Known inliers: every session's odometry (weighed with its accepted links), own loops, a prior per component."""
-    shared = linked_steps(links, chains)
-    graph = gtsam.NonlinearFactorGraph()
-    for s in sessions:
-        w = shared_weight(s)
-        for i in range(1, len(s.ids)):
-            step = inv(s.T_odom[i - 1]) @ s.T_odom[i]
-            cov = odometry_covariance(s.cov[i], is_modelled(s, i), step, chains.conf)
-            cov = cov / (w if int(s.ids[i]) in shared else 1.0)
-            graph.add(gtsam.BetweenFactorPose3(int(s.ids[i - 1]), int(s.ids[i]), gtsam.Pose3(step),
-                                               gtsam.noiseModel.Gaussian.Covariance(cov)))
+def _joint_graph(sessions, graphs: pv.SessionGraphs, joins, comp, init) -> gtsam.NonlinearFactorGraph:
+    """Every session's known inliers, a prior per component, and the accepted loops of the joined pairs."""
     roots: dict[int, int] = {}
     for si in range(len(sessions)):
         roots.setdefault(comp[si], si)
-    for si in roots.values():
-        k0 = int(sessions[si].ids[0])
-        graph.add(gtsam.PriorFactorPose3(k0, gtsam.Pose3(init[k0]), gtsam.noiseModel.Diagonal.Sigmas(np.full(6, 1e-6))))
-    for lp in loops:
-        if not lp.inter and lp.accepted and not is_link(lp):
-            graph.add(_between(lp))
+    graph = graphs.known(list(range(len(sessions))), list(roots.values()), init)
+    for group in joins.values():
+        for lp in group:
+            if lp.accepted:
+                graph.add(between(lp))
     return graph
 
 
-def _gnc_round(sessions, loops, links, comp, init, chains, inlier_probability: float) -> gtsam.Values:
-    """GNC over the accepted loops between sessions and the accepted links; marks its outliers. Its solution."""
-    values = gtsam.Values()
-    for k, T in init.items():
-        values.insert(int(k), gtsam.Pose3(T))
-    known = _known_graph(sessions, loops, links, comp, init, chains)
-    cands = [lp for lp in loops if lp.accepted and (lp.inter or is_link(lp))]
-    if not cands:
-        return solve_lm(known, values)
-    factors = [_between(lp, link_weight(lp, chains) if is_link(lp) else 1.0) for lp in cands]
-    # GNC starts from the optimum with every candidate: the initial values (each session's own
-    # estimate, placed by one loop) can be far from what the links say, and TLS started there
-    # turned every loop of a consistent set into an outlier
-    start = gtsam.NonlinearFactorGraph(known)
-    for f in factors:
-        start.add(f)
-    res = gnc_loop_weights(known, factors, solve_lm(start, values), inlier_probability=inlier_probability)
-    for lp, w, c2 in zip(cands, res.weights, res.residual_chi2, strict=True):
-        if w < 0.5:
+def _rejudge(against, sessions, graphs, joins, decisions, comp, init, chains, conf, p_inlier) -> list:
+    """Judge the contradicted pairs again in the joint graph: their loops as GNC candidates (the rest known
+    inliers), then the join rules on the survivors. Returns the pairs undone (removed from ``joins``)."""
+    cands = []
+    for pair in against:
+        for lp in joins[pair]:
+            if lp.accepted or lp.reason.startswith("gnc"):
+                lp.accepted = True
+                cands.append(lp)
+    for pair in against:  # the candidates leave the known graph while they are judged
+        for lp in joins[pair]:
             lp.accepted = False
-            what = f"outlier of the joint graph (weight {w:.2f}, residual chi2 {c2:.1f})"
-            lp.reason = f"{LINK}: gnc: {what}" if is_link(lp) else f"gnc: {what}"
-    return res.values
+    known = _joint_graph(sessions, graphs, joins, comp, init)
+    for lp in cands:
+        lp.accepted = True
+    pv.gnc_check(known, cands, chains, pv.values_of(init), p_inlier)
+    undone = []
+    for pair in against:
+        d = decisions[pair]
+        d.status = pv.REJUDGED
+        why = "re-judged: the joint graph of every session contradicted its loops"
+        d.reason = f"{d.reason}; {why}" if d.reason else why
+        if recheck(d, pair, joins[pair], chains, conf):
+            log.info("%s", d.reason)
+            del joins[pair]
+            undone.append(pair)
+    return undone
 
 
 def _components(sessions, joins, chains) -> tuple[dict[int, int], dict[int, np.ndarray]]:
@@ -204,7 +200,8 @@ def _components(sessions, joins, chains) -> tuple[dict[int, int], dict[int, np.n
                 if prev is not None and prev == sessions[root].prev_component:  # together before too
                     _place(sessions[t], np.eye(4), init)
                 else:
-                    _place(sessions[t], _alignment(group, chains, init, t), init)
+                    alive = [lp for lp in group if lp.accepted] or group
+                    _place(sessions[t], pv.alignment(alive, chains, init, t, sessions[t].T_init), init)
                 queue.append(t)
         n_comp += 1
     return comp, init
@@ -213,22 +210,3 @@ def _components(sessions, joins, chains) -> tuple[dict[int, int], dict[int, np.n
 def _place(s: SessionPoses, A: np.ndarray, init: dict[int, np.ndarray]) -> None:
     for k, T in zip(s.ids, s.T_init, strict=True):
         init[int(k)] = A @ T
-
-
-def _alignment(group: list[JointLoop], chains: SessionChains, init, t: int) -> np.ndarray:
-    """Transform that places session ``t`` (own frame) next to its already-placed partner through the loops.
-
-    Each loop gives one candidate ``A = T_map_a Z T_t_b^-1``; the one closest to the others (medoid
-    by translation) is taken: robust to a loop that PCM let through by a small margin.
-    """
-    cands = []
-    for lp in group:
-        if chains.session_of(lp.query) == t:  # match placed, query in t
-            other, mine, Z = lp.match, lp.query, lp.T
-        else:
-            other, mine, Z = lp.query, lp.match, inv(lp.T)
-        si, i = chains.where[int(mine)]
-        cands.append(init[other] @ Z @ inv(chains.sessions[si].T_init[i]))
-    ts = np.array([A[:3, 3] for A in cands])
-    med = int(np.argmin(np.linalg.norm(ts[:, None] - ts[None], axis=2).sum(1)))
-    return cands[med]

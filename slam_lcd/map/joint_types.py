@@ -38,6 +38,14 @@ class SessionPoses:
     # (n,) bool: the steps whose covariance the front end modelled (the per-metre allowance replaces it,
     # slam_lcd.map.pcm.step_covariances); None: every covariance as given
     cov_modelled: np.ndarray | None = None
+    # (n, 4, 4) the session's own estimate: its odometry corrected by its own loops, in its odometry frame,
+    # never bent by other sessions' loops (what the pairwise test and the pair's own verdict read, so that a
+    # verdict depends on the two sessions alone, not on the order of appends); None: ``T_init`` is it
+    T_own: np.ndarray | None = None
+
+    def own(self) -> np.ndarray:
+        """(n, 4, 4) the session's own estimate (:attr:`T_own`, else :attr:`T_init`)."""
+        return np.asarray(self.T_own if self.T_own is not None else self.T_init, float)
 
 
 @dataclass
@@ -71,6 +79,9 @@ class PairDecision:
     exact: bool = True  # False: the clique search ran out of its budget (best found so far taken)
     kept: int = 0  # loops of the pair in the final graph
     reason: str = ""
+    # "judged": at this solve; "kept": the verdict of an earlier append, taken as it was; "re-judged":
+    # an earlier verdict that the joint graph contradicted, judged again with every loop as a candidate
+    status: str = "judged"
 
 
 @dataclass
@@ -80,3 +91,4 @@ class JointResult:
     anchors: dict[str, np.ndarray]  # session name -> T_component_sessionodom
     loops: list[JointLoop] = field(default_factory=list)
     pairs: list[PairDecision] = field(default_factory=list)  # one per pair of sessions with loops between them
+    rule: str = ""  # fingerprint of the rules the pairs were judged by (slam_lcd.map.pair_verdicts.rule_key)

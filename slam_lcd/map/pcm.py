@@ -11,7 +11,9 @@ the gate's do; here many pairs at once. Without the adjoints a heading error's l
 and true loops tens of metres apart fail the test.
 
 Each session's relative pose between two of its keyframes is its own best estimate
-(``SessionPoses.T_init``: its odometry corrected by its own loops); the covariance is its
+(``SessionPoses.own()``: its odometry corrected by its own loops, never a pose that another
+session's loops bent, so that the verdict on a pair depends on the two sessions alone and not
+on the order in which they joined the map); the covariance is its
 odometry chain's, an upper bound for that estimate. A step's covariance is the one the odometry
 gave; where it gave none (or no valid one), or the front end modelled it (``SessionPoses.cov_modelled``),
 the per-metre allowance ``map.pcm_sigma_trans_per_m``, ``pcm_sigma_rot_per_m`` and
@@ -28,8 +30,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..backend.gate import ChainRelatives, GateLoop, chain_covariance, chi2_quantile, cycle_chi2
-from ..backend.loop_factors import valid_information
 from ..geometry import adjoint, inv, rotation_angle
+from ..loop_factor import valid_informations
 from .config import MapConfig
 from .joint_types import JointLoop, SessionPoses
 
@@ -56,12 +58,14 @@ def step_covariances(s: SessionPoses, conf: MapConfig) -> np.ndarray:
     the per-metre allowance for its length and angle."""
     n = len(s.ids)
     out = np.zeros((n, 6, 6))
-    for i in range(1, n):
-        c = s.cov[i]
-        if valid_information(c) and not is_modelled(s, i):
-            out[i] = 0.5 * (np.asarray(c, float) + np.asarray(c, float).T)
-            continue
-        out[i] = allowance(inv(s.T_odom[i - 1]) @ s.T_odom[i], conf)
+    c = np.asarray(s.cov, float).reshape(-1, 6, 6)
+    given = valid_informations(c)
+    if s.cov_modelled is not None:
+        given &= ~np.asarray(s.cov_modelled, bool)
+    out[given] = 0.5 * (c[given] + c[given].transpose(0, 2, 1))
+    for i in np.flatnonzero(~given):
+        if i:
+            out[i] = allowance(inv(s.T_odom[i - 1]) @ s.T_odom[i], conf)
     return out
 
 
@@ -72,9 +76,15 @@ class SessionChains:
         self.sessions = sessions
         self.where = {int(k): (si, i) for si, s in enumerate(sessions) for i, k in enumerate(s.ids)}
         self.conf = conf
-        self.chains = [ChainRelatives.from_steps(np.asarray(s.T_odom, float), step_covariances(s, conf))
-                       for s in sessions]
+        self._chains: dict[int, ChainRelatives] = {}
         self._stacked: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+    def chain(self, si: int) -> ChainRelatives:
+        """Session ``si``'s chain, built when first asked for: an append reads only the sessions it judges."""
+        if si not in self._chains:
+            s = self.sessions[si]
+            self._chains[si] = ChainRelatives.from_steps(np.asarray(s.T_odom, float), step_covariances(s, self.conf))
+        return self._chains[si]
 
     def session_of(self, kf: int) -> int:
         return self.where[int(kf)][0]
@@ -88,21 +98,25 @@ class SessionChains:
     def odometry(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
         """``T_a_b`` by the odometry alone and its chain covariance (frame b); a and b in one session."""
         si, i, j = self._same_session(a, b)
-        return self.chains[si].odometry(i, j)
+        return self.chain(si).odometry(i, j)
 
     def estimates(self, si: int, i: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``T_i_j`` by session ``si``'s own estimate, with its odometry chain's covariance (frame j), for
         many pairs of positions at once."""
         if si not in self._stacked:
-            self._stacked[si] = self.chains[si].stacked()
+            self._stacked[si] = self.chain(si).stacked()
         odom, P = self._stacked[si]
-        X = np.asarray(self.sessions[si].T_init, float)
+        X = self.sessions[si].own()
         return inv(X[i]) @ X[j], chain_covariance(odom[j], P[np.minimum(i, j)], P[np.maximum(i, j)])
+
+    def own_pose(self, kf: int) -> np.ndarray:
+        """A keyframe's pose (4x4) in its session's own estimate."""
+        si, i = self.where[int(kf)]
+        return self.sessions[si].own()[i]
 
     def position(self, kf: int) -> np.ndarray:
         """A keyframe's position in its session's own estimate."""
-        si, i = self.where[int(kf)]
-        return np.asarray(self.sessions[si].T_init[i, :3, 3], float)
+        return self.own_pose(kf)[:3, 3]
 
 
 def oriented(lp: JointLoop, first_session: int, chains: SessionChains) -> GateLoop:

@@ -11,8 +11,9 @@ import numpy as np
 from ..geometry import inv
 from .config import MapConfig
 from .contents import MapGraph, SessionKeyframes
-from .joint_graph import JointLoop, SessionPoses, information_noise, odometry_covariance
+from .joint_graph import JointLoop, SessionPoses, information_noise, odometry_covariance, solve_lm
 from .joint_types import is_link
+from .session_factors import between, odometry_factors
 
 BUILTIN_VO = "visual odometry (built in)"  # a session's odometry source when slam-lcd's own VO made it
 
@@ -33,14 +34,43 @@ def existing_loops(sessions: list[SessionKeyframes], graph: MapGraph) -> list[Jo
     return out
 
 
-def session_poses(table: list[dict], sessions: list[SessionKeyframes],
-                  poses: dict[int, np.ndarray]) -> list[SessionPoses]:
-    """Each session with its best-known poses (the map frame's where the map has them) and component."""
+def own_estimate(s: SessionPoses, loops: list[JointLoop]) -> np.ndarray:
+    """(n, 4, 4) a session's own estimate where the map did not record it: its odometry and its own accepted loops
+    and links (``loops``: within the session), solved alone in its odometry frame."""
+    import gtsam
+
+    graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+    for i, k in enumerate(s.ids):
+        values.insert(int(k), gtsam.Pose3(s.T_odom[i]))
+    for f in odometry_factors(s, MapConfig()):
+        graph.add(f)
+    graph.add(gtsam.PriorFactorPose3(int(s.ids[0]), gtsam.Pose3(s.T_odom[0]),
+                                     gtsam.noiseModel.Diagonal.Sigmas(np.full(6, 1e-6))))
+    mine = [lp for lp in loops if lp.accepted and values.exists(int(lp.query)) and values.exists(int(lp.match))]
+    if not mine:
+        return np.asarray(s.T_odom, float).copy()
+    for lp in mine:
+        graph.add(between(lp))
+    out = solve_lm(graph, values)
+    return np.array([out.atPose3(int(k)).matrix() for k in s.ids])
+
+
+def session_poses(table: list[dict], sessions: list[SessionKeyframes], poses: dict[int, np.ndarray],
+                  loops: list[JointLoop] | None = None) -> list[SessionPoses]:
+    """Each session with its best-known poses (the map frame's where the map has them), component and own estimate
+    (recorded, else :func:`own_estimate` from ``loops``, the map's loops)."""
     out = []
-    for meta, s in zip(table, sessions, strict=True):
+    sess_of = {int(k): si for si, s in enumerate(sessions) for k in s.ids}
+    own: dict[int, list[JointLoop]] = {}
+    for lp in loops or []:
+        if not lp.inter and sess_of.get(int(lp.query)) is not None:
+            own.setdefault(sess_of[int(lp.query)], []).append(lp)
+    for si, (meta, s) in enumerate(zip(table, sessions, strict=True)):
         T = np.array([poses[int(k)] for k in s.ids]) if poses else s.T_odom.copy()
-        out.append(SessionPoses(meta["name"], s.ids, s.T_odom, s.cov, T.reshape(-1, 4, 4), int(meta["component"]),
-                                odometry_independent=odometry_independent(meta), cov_modelled=s.cov_modelled()))
+        sp = SessionPoses(meta["name"], s.ids, s.T_odom, s.cov, T.reshape(-1, 4, 4), int(meta["component"]),
+                          odometry_independent=odometry_independent(meta), cov_modelled=s.cov_modelled())
+        sp.T_own = s.T_own if s.T_own is not None else own_estimate(sp, own.get(si, []))
+        out.append(sp)
     return out
 
 

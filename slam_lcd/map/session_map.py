@@ -40,6 +40,7 @@ from .keyframe_arrays import (
 from .lifelong import array_bytes, compact, counts, reduce_append
 from .localize import localise_pipeline
 from .locks import WriterLock
+from .pair_verdicts import judged_pairs, keep_pairs
 from .session_graph import existing_loops, factor_graph, odometry_independent, session_poses
 from .store import LogAlreadyInMapError, MapError, MapGraph, MapManifest, SessionKeyframes, check_map_target, read_vocab
 
@@ -262,11 +263,12 @@ class Map:
         for c in getattr(pipeline, "map_closures", []):
             loops.append(JointLoop(int(c.query_id), int(c.match_id), np.asarray(c.T_match_query, float),
                                    np.asarray(c.information, float), True, False, ""))
-        sessions = session_poses(self.manifest.sessions, self.sessions, self.poses())
-        sessions.append(SessionPoses(name, sess.ids, sess.T_odom, sess.cov, np.asarray(own.poses, float), None,
+        sess.T_own = np.asarray(own.poses, float).reshape(-1, 4, 4)
+        sessions = session_poses(self.manifest.sessions, self.sessions, self.poses(), loops)
+        sessions.append(SessionPoses(name, sess.ids, sess.T_odom, sess.cov, sess.T_own, None,
                                      odometry_independent=odometry_independent(extra or {}),
-                                     cov_modelled=sess.cov_modelled()))
-        result = solve(sessions, loops, self.conf)
+                                     cov_modelled=sess.cov_modelled(), T_own=sess.T_own))
+        result = solve(sessions, loops, self.conf, judged=judged_pairs(self.manifest.sessions))
         self.last_join = result
         graph = MapGraph(
             kf_ids=np.array([k for s in sessions for k in s.ids], np.int64),
@@ -308,6 +310,7 @@ class Map:
         for m in metas:
             m["component"] = int(result.component[m["name"]])
             m["T_map_session"] = np.asarray(result.anchors[m["name"]], float).tolist()
+        keep_pairs(metas, result)
         self.sessions = self.sessions + [sess]
         self.graph = graph
         self._unsaved.append((meta, sess))

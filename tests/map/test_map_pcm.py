@@ -212,8 +212,8 @@ def test_a_wrong_visual_link_is_dropped_and_the_true_loops_between_sessions_kept
 
 
 def test_a_link_and_a_visual_odometry_step_count_half_each_an_independent_odometry_in_full(route):
-    from slam_lcd.map.joint_graph import _known_graph
     from slam_lcd.map.links import gate_links
+    from slam_lcd.map.pair_verdicts import SessionGraphs
 
     info_link = np.linalg.inv(np.diag([0.0012 ** 2] * 3 + [0.005 ** 2] * 3))
     seen = {}
@@ -224,7 +224,7 @@ def test_a_link_and_a_visual_odometry_step_count_half_each_an_independent_odomet
         chains = SessionChains([s], MapConfig())
         gate_links([link], chains, 0.999)
         init = {int(k): T for k, T in zip(s.ids, s.T_init, strict=True)}
-        graph = _known_graph([s], [link], [link], {0: 0}, init, chains)
+        graph = SessionGraphs([s], [link], chains).known([0], [0], init)
         step = graph.at(0)  # the odometry step 0 -> 1, which the link spans
         seen[independent] = step.noiseModel().R().T @ step.noiseModel().R()
     np.testing.assert_allclose(seen[False], 0.5 * np.linalg.inv(s.cov[1]), rtol=1e-9)
