@@ -1,7 +1,7 @@
 """Every output of ``slam-lcd run``, written as one set (:class:`~slam_lcd.outputs.output_set.OutputSet`).
 
 :data:`RUN_OUTPUTS`: config.yaml, odometry.tum, corrected.tum, keyframes_corrected.tum,
-loops.csv, graph.g2o, corrected.mcap, report.json, report.md, report.html, trajectory.png,
+loops.csv, graph.g2o, keyframe_keypoints.npz, corrected.mcap, report.json, report.md, report.html, trajectory.png,
 ate_over_time.png, loops/ (pictures), map.ply, map_odometry.ply and their top views (docs/map_cloud.md);
 ``PARTIAL.txt`` when the run was interrupted.
 """
@@ -21,6 +21,7 @@ from ..runtime.interrupts import defer_sigint, interrupted_word, signal_name
 from ..types import Trajectory
 from .figures import write_plots
 from .html_report import THUMB_WIDTH, write_html_report
+from .keypoints import KEYPOINTS_FILE, keyframe_keypoints, write_keyframe_keypoints
 from .loop_pictures import LOOPS_DIR
 from .loops import VERIFIED, add_map_verdicts, count_false_accepted, loop_rows, write_loops_csv
 from .map_cloud import MAP_CLOUD_FILES, not_built, write_map_clouds
@@ -43,7 +44,7 @@ log = logging.getLogger(__name__)
 # a run into a map: corrected.tum and keyframes_corrected.tum are in the map frame, these the session's own
 SESSION_FRAME_FILES = ("corrected_session.tum", "keyframes_corrected_session.tum")
 RUN_OUTPUTS = ("config.yaml", "odometry.tum", "corrected.tum", "keyframes_corrected.tum", *SESSION_FRAME_FILES,
-               "graph.g2o", "loops.csv", SEGMENTS_FILE,
+               "graph.g2o", "loops.csv", SEGMENTS_FILE, KEYPOINTS_FILE,
                "corrected.mcap", "trajectory.png", "ate_over_time.png", "report.json", "report.md", "report.html",
                LOOPS_DIR, MAP_DIR, *LOCALIZATION_FILES, *MAP_CLOUD_FILES)
 
@@ -154,6 +155,9 @@ def write_outputs(pipe, out_dir: Path, result: RunResult, gt: Trajectory | None,
         outputs.append("graph.g2o")
     else:
         skipped.append("graph.g2o: not written (no keyframe yet)")
+    if pipe.keyframes:  # for `slam-lcd view`: keypoints cannot be read back from the log (slam_lcd.outputs.keypoints)
+        write_keyframe_keypoints(out_dir / KEYPOINTS_FILE, *keyframe_keypoints(pipe))
+        outputs.append(KEYPOINTS_FILE)
 
     rows = loop_rows(pipe.candidate_records, pipe.loop_records, pipe.keyframes, gt,
                      position_only=result.gt_position_only, keyframe_poses=kf_session)

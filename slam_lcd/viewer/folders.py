@@ -54,6 +54,8 @@ class RunFolder:
     notes: list[str] = field(default_factory=list)
     log: Path | None = None  # the run's log where it is now (report.json's, or --log); None: not found
     images: dict = field(default_factory=dict)  # keyframe stamp (ns) -> thumbnail (uint8), read from ``log``
+    # keyframe stamp (ns, keyframes_corrected.tum's) -> (k, 2) pixels, from keyframe_keypoints.npz where the run kept it
+    keypoints: dict = field(default_factory=dict)
     moved_log: str | None = None  # the one line that says the log is not where report.json says
 
 
@@ -153,7 +155,28 @@ def read_run(root: str | Path, *, ground_truth: bool = True, gt: Trajectory | No
         _add_ate(run, gt)
     if images:
         _add_images(run)
+        _add_keypoints(run)
     return run
+
+
+def _add_keypoints(run: RunFolder) -> None:
+    """``run.keypoints`` from the run's keyframe_keypoints.npz (a run written without it: none), by the
+    keyframes' stamps as keyframes_corrected.tum gives them (decimal seconds: matched to the nearest)."""
+    from ..outputs.keypoints import KEYPOINTS_FILE, read_keyframe_keypoints
+    from .images import STAMP_TOLERANCE_NS
+
+    path = run.root / KEYPOINTS_FILE
+    if not path.is_file():
+        return
+    kept = read_keyframe_keypoints(path)
+    exact = np.array(sorted(kept), np.int64)
+    if not len(exact):
+        return
+    for s in np.asarray(run.keyframes.stamps, np.int64):
+        i = int(np.searchsorted(exact, s))
+        j = min((k for k in (i - 1, i) if 0 <= k < len(exact)), key=lambda k: abs(int(exact[k]) - int(s)))
+        if abs(int(exact[j]) - int(s)) <= STAMP_TOLERANCE_NS:
+            run.keypoints[int(s)] = kept[int(exact[j])]
 
 
 def _locate_log(run: RunFolder, given: str | Path | None) -> None:

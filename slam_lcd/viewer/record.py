@@ -45,9 +45,9 @@ def seconds(stamps_ns) -> np.ndarray:
 
 
 def log_pinhole_pose(rec, path: str, T_world_camera: np.ndarray, camera: dict | None,
-                     image: np.ndarray | None = None) -> None:
+                     image: np.ndarray | None = None, keypoints: np.ndarray | None = None) -> None:
     """A camera at ``T_world_camera`` (its frustum when the intrinsics are known), with ``image`` (a
-    thumbnail: the frustum is scaled to its width) when given."""
+    thumbnail: the frustum is scaled to its width) when given, and ``keypoints`` (full-size pixels) on it."""
     rr = require_rerun()
     parts = [rr.Transform3D(translation=T_world_camera[:3, 3], mat3x3=T_world_camera[:3, :3])]
     if camera:
@@ -60,6 +60,10 @@ def log_pinhole_pose(rec, path: str, T_world_camera: np.ndarray, camera: dict | 
     if data is not None:
         parts.append(rr.EncodedImage(contents=data, media_type="image/jpeg"))
     rec.log(path, *parts)
+    if data is not None and keypoints is not None and camera:
+        s = image.shape[1] / float(camera["width"])  # type: ignore[union-attr]  # data: image given
+        rec.log(f"{path}/keypoints", rr.Points2D(np.asarray(keypoints, np.float32) * s, colors=[(255, 220, 0)],
+                                                 radii=[1.0]))
 
 
 def body_camera(camera: dict | None) -> np.ndarray:
@@ -81,7 +85,9 @@ def log_run(rec, run: RunFolder, *, frusta: bool = True) -> None:
         T_bc = body_camera(run.camera)
         for i in range(len(kf)):
             rec.set_time(TIMELINE, timestamp=seconds(kf.stamps[i : i + 1])[0])
-            log_pinhole_pose(rec, KEYFRAME_CAMERA, kf.poses[i] @ T_bc, run.camera, run.images.get(int(kf.stamps[i])))
+            stamp = int(kf.stamps[i])
+            log_pinhole_pose(rec, KEYFRAME_CAMERA, kf.poses[i] @ T_bc, run.camera, run.images.get(stamp),
+                             run.keypoints.get(stamp))
         rec.reset_time()
     for kind, cloud in run.clouds.items():
         colours = cloud.colours if kind == "corrected" else np.full_like(cloud.colours, 140)

@@ -105,6 +105,43 @@ def test_run_recording_shows_each_keyframes_image_read_from_the_log(run_rrd, rep
     assert first.shape == want.shape and np.abs(first.astype(float) - want).mean() < 8
 
 
+def test_run_recording_shows_the_keypoints_the_run_kept_on_each_image(run_rrd, tmp_path):
+    """keyframe_keypoints.npz: one set of keypoints per keyframe, at the thumbnail's scale; a run folder
+    without the file shows its images without keypoints."""
+    import shutil
+
+    from slam_lcd.io.trajectory_files import read_tum
+    from slam_lcd.outputs.keypoints import KEYPOINTS_FILE, read_keyframe_keypoints
+    from slam_lcd.viewer.images import IMAGE_WIDTH
+
+    out, _, ents = run_rrd
+    kf = read_tum(out / "keyframes_corrected.tum")
+    kept = read_keyframe_keypoints(out / KEYPOINTS_FILE)
+    assert len(kept) == len(kf) and min(len(v) for v in kept.values()) > 50
+    shown = rows(ents["/world/keyframes/camera/keypoints"], "Points2D:positions")
+    assert len(shown) == len(kf)
+    first = np.array(shown[0], np.float32)
+    want = kept[min(kept)]
+    width = float(json_report(out)["map_cloud"]["sensor"]["camera"]["width"])
+    np.testing.assert_allclose(first, want * min(1.0, IMAGE_WIDTH / width), atol=1e-3)
+
+    bare = tmp_path / "run"
+    shutil.copytree(out, bare)
+    (bare / KEYPOINTS_FILE).unlink()
+    from slam_lcd.cli.main import main
+
+    assert main(["view", str(bare), "--save", str(tmp_path / "bare.rrd")]) == 0
+    again = read_rrd(tmp_path / "bare.rrd")
+    assert len([b for b in rows(again["/world/keyframes/camera"], "EncodedImage:blob") if b]) == len(kf)
+    assert "/world/keyframes/camera/keypoints" not in again
+
+
+def json_report(out: Path) -> dict:
+    import json
+
+    return json.loads((out / "report.json").read_text(encoding="utf-8"))
+
+
 def test_a_moved_log_is_one_line_and_the_rest_is_drawn(run_rrd, report_run, tmp_path, capfd):
     import json
     import shutil
