@@ -26,14 +26,15 @@ half of its pairs consistent.
 Bound: the search stops after ``budget`` nodes, a node of the cover search counting for
 :data:`COVER_NODE`; a node costs O(n) operations on n-bit integers, so the default budget of
 100,000 bounds a search that cannot prove its answer to a few seconds at 1000 loops (a random
-graph of 1000 vertices with 2 % of its pairs missing: 3 s).
+graph of 1000 vertices with 2 % of its pairs missing: 3.7 s).
 Measured (``tools/bench_pcm.py``, 2-core AMD EPYC): 1000 true loops of two sessions, 2 % of
-their pairs inconsistent: the largest set (840) proven in 44 nodes, 0.035 s, the largest among
-the rest (71) in 126 nodes, 0.02 s; with 10 % false loops 59 and 80 nodes. Bron–Kerbosch with a
-pivot and the size bound alone runs out of the default budget of 100,000 nodes on each (5.4 s and
-1.6 s), one loop short of the largest. Past the budget the dense search finishes greedily (every
-open branch puts its vertex of most inconsistencies in the cover), the sparse one stops; either
-returns the best clique found with ``exact=False``; the caller logs it and records it.
+their pairs inconsistent: the largest set (840) proven in 44 nodes, 0.02-0.035 s, the largest
+among the rest (71) in 126 nodes, 0.01-0.02 s; with 10 % false loops 59 and 80 nodes.
+Bron–Kerbosch with a pivot and the size bound alone runs out of the default budget of 100,000
+nodes on each (4.7-5.4 s and 1.5 s), one loop short of the largest. Past the budget either
+search stops and returns the best clique found with ``exact=False``, at least the greedy one (for
+a near-complete graph the better of the greedy clique and what a greedy cover leaves: the vertex
+of most inconsistencies out, repeatedly); the caller logs it and records it.
 """
 from __future__ import annotations
 
@@ -157,7 +158,7 @@ class _Cover:
 
     def search(self, live: int, limit: int, depth: int = 0, greedy: bool = False) -> int | None:
         """The smallest cover of the graph on ``live`` with fewer than ``limit`` vertices; None when there is
-        none. Greedy (or past the budget): no second branches."""
+        none (or none found within the budget). Greedy: no second branches (the search's first bound)."""
         taken, best = 0, None
         while True:
             self.nodes += 1

@@ -143,7 +143,8 @@ def pair_statistics(loops: list[JointLoop], chains: SessionChains) -> np.ndarray
     loop's own covariance ``Ad(X_b) S Ad(X_b)^T`` is computed once, and of each chain's covariance
     only the difference of its prefix sums is the pair's. What is left per pair: one product of
     poses, one logarithm, two congruences and a 6x6 solve (a third of the products of carrying
-    every term per pair).
+    every term per pair). 1000 loops (499,500 pairs): 1.2-1.4 s on a 2-core AMD EPYC
+    (``tools/bench_pcm.py``).
     """
     n = len(loops)
     out = np.full((n, n), np.inf)
