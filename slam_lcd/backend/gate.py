@@ -114,14 +114,14 @@ def cycle_chi2(Z1, S1, Z2, S2, A, SA, C, SC) -> np.ndarray:
     ``Ad((Z2 C)^-1)``, ``Z2`` by ``Ad(C^-1)``; ``Z1`` and ``C`` end there already (to first order
     around the identity the cycle should be).
     """
-    e = _se3_log_stack(inv(Z1) @ A @ Z2 @ C)
+    e = se3_log_stack(inv(Z1) @ A @ Z2 @ C)
     T1 = adjoint(inv(Z2 @ C))
     T2 = adjoint(inv(C))
     S = S1 + T1 @ SA @ np.swapaxes(T1, -1, -2) + T2 @ S2 @ np.swapaxes(T2, -1, -2) + SC
     return np.einsum("...i,...i->...", e, np.linalg.solve(S, e[..., None])[..., 0])
 
 
-def _se3_log_stack(T: np.ndarray) -> np.ndarray:
+def se3_log_stack(T: np.ndarray) -> np.ndarray:
     """``Log`` of a stack of poses (..., 4, 4) -> (..., 6), ``[omega, v]``: :func:`se3_log`'s formulas, vectorised."""
     R, t = T[..., :3, :3], T[..., :3, 3]
     th = np.arccos(np.clip((np.trace(R, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0))
