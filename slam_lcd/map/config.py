@@ -40,6 +40,12 @@ class MapConfig:
     # the joining set's keyframes must lie at least this far apart in each of the two sessions (m):
     # a look-alike place seen from a few consecutive keyframes gives loops that agree with each other
     min_join_span_m: float = ranged(2.0, "[0, inf)")
+    # ... or their viewing directions at least this far apart in each session (deg; the angle of the rotation
+    # between two keyframes' orientations; over 180: by distance alone). 60: twice the angle within which the
+    # lifelong map counts two views as one place (place_angle_deg); two views 60 deg apart share a seventh of the
+    # demo camera's 70 deg field of view. Keyframes are made every 15 deg turned (frontend.kf_min_rotation_deg),
+    # so the 3 loops of a look-alike seen from a few consecutive keyframes span 30 deg or less
+    min_join_view_angle_deg: float = ranged(60.0, "[0, inf)")
     # not joined ("ambiguous") when a second consistent set, disjoint from the largest, could join
     # on its own and holds at least this share of the largest set's loops
     join_ambiguity_ratio: float = ranged(0.5, "(0, inf)")

@@ -71,6 +71,8 @@ class PairDecision:
     exact: bool = True  # False: the clique search ran out of its budget (best found so far taken)
     kept: int = 0  # loops of the pair in the final graph
     reason: str = ""
+    # the largest set's viewing directions: the angle (deg) between its most different ones in each session
+    span_deg: tuple[float, float] = (0.0, 0.0)
 
 
 @dataclass

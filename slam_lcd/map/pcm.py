@@ -99,10 +99,15 @@ class SessionChains:
         X = np.asarray(self.sessions[si].T_init, float)
         return inv(X[i]) @ X[j], chain_covariance(odom[j], P[np.minimum(i, j)], P[np.maximum(i, j)])
 
+    def own_pose(self, kf: int) -> np.ndarray:
+        """A keyframe's pose (4x4) in its session's own estimate: the one source of :meth:`position` and of the
+        viewing directions the join rules compare."""
+        si, i = self.where[int(kf)]
+        return np.asarray(self.sessions[si].T_init[i], float)
+
     def position(self, kf: int) -> np.ndarray:
         """A keyframe's position in its session's own estimate."""
-        si, i = self.where[int(kf)]
-        return np.asarray(self.sessions[si].T_init[i, :3, 3], float)
+        return self.own_pose(kf)[:3, 3]
 
 
 def oriented(lp: JointLoop, first_session: int, chains: SessionChains) -> GateLoop:
