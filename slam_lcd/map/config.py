@@ -62,6 +62,12 @@ class MapConfig:
     # was the same from 0 to 4 m on the measured demo runs and fell at 5-6 m (the confirming window
     # of 10 keyframes is about 5 m)
     localize_min_place_separation_m: float = ranged(3.0, "[0, inf)")
+    # localise: ... or their map keyframes look in directions at least this far apart (deg; the angle of the
+    # rotation between the two map keyframes' orientations; over 180: by distance alone): views of two walls
+    # are two places even a step apart, so a log turning in place or walking a small room confirms its fixes.
+    # 60: as map.min_join_view_angle_deg; at 15 deg a keyframe (frontend.kf_min_rotation_deg) it is 4 keyframes
+    # of a turn, well inside the 10-keyframe window that may confirm a fix
+    localize_min_view_angle_deg: float = ranged(60.0, "[0, inf)")
     # localise: fixes falling into groups that disagree (a look-alike place and the true one): a group
     # wins only with at least this many times its rival's fixes; otherwise both are ambiguous. 2: a
     # look-alike corridor seen by 7 fixes against its true place's 16 was decided right at 1.5 and 2,

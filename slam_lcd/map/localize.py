@@ -10,9 +10,14 @@ could fool appearance:
    ``NEIGHBOURS`` keyframes agrees with it through the odometry between them (relative pose
    within ``map.localize_max_disagreement_m`` / ``_deg`` plus the odometry's drift over the
    distance travelled) and comes from another place: their map keyframes at least
-   ``map.localize_min_place_separation_m`` apart, or the log travelled that far between them.
+   ``map.localize_min_place_separation_m`` apart (or the log travelled that far between them),
+   or looking in directions at least ``map.localize_min_view_angle_deg`` apart (the angle of
+   the rotation between the two map keyframes' orientations: no camera mounting needed; the
+   angle between the optical axes for a level camera turning, an upper bound on it otherwise).
    Neighbouring keyframes that see one look-alike place agree with each other as well as true
-   fixes do; they are one match seen several times, not independent evidence.
+   fixes do; they are one match seen several times, not independent evidence. Views of two
+   walls of one room are two places: a log that turns in place or walks a small room confirms
+   its fixes by direction where it cannot by distance.
 2. **Groups that disagree.** Confirmed fixes that agree with each other through the odometry,
    link by link along the log, form a group. Where two groups disagree (their fixes closest
    along the log do not agree through the odometry: a look-alike place and the true one), the
@@ -148,6 +153,7 @@ class _Pairs:
     near: np.ndarray  # (k, k) bool: close enough along the log to be linked into one group
     travelled: np.ndarray  # (k, k) metres the log travelled between the two
     separation: np.ndarray  # (k, k) metres between the places: map keyframes apart or log travelled
+    view_deg: np.ndarray  # (k, k) degrees between the map keyframes' viewing directions
 
 
 def _pairs(order: list[int], fixes: dict, map_poses: dict, T_odom: np.ndarray, path: np.ndarray,
@@ -156,7 +162,8 @@ def _pairs(order: list[int], fixes: dict, map_poses: dict, T_odom: np.ndarray, p
     F = np.array([fixes[i][1] for i in order]).reshape(-1, 4, 4)
     odo = T_odom[order]
     s = path[order]
-    place = np.array([map_poses[int(fixes[i][0].match_id)][:3, 3] for i in order]).reshape(-1, 3)
+    mapped = np.array([map_poses[int(fixes[i][0].match_id)] for i in order]).reshape(-1, 4, 4)
+    place, R = mapped[:, :3, 3], mapped[:, :3, :3]
     k = len(order)
     agree = np.zeros((k, k), bool)
     odo_inv = inv(odo)
@@ -174,12 +181,15 @@ def _pairs(order: list[int], fixes: dict, map_poses: dict, T_odom: np.ndarray, p
     neighbours = (gap <= NEIGHBOURS) & (gap > 0)
     near = neighbours | ((travelled <= GROUP_WINDOW_M) & (gap > 0))
     separation = np.maximum(np.linalg.norm(place[:, None] - place[None, :], axis=2), travelled)
-    return _Pairs(agree, neighbours, near, travelled, separation)
+    view_deg = np.atleast_2d(rotation_angle_deg(np.swapaxes(R, 1, 2)[:, None] @ R[None]))
+    return _Pairs(agree, neighbours, near, travelled, separation, view_deg)
 
 
 def _confirmed(order: list[int], pair: _Pairs, conf: MapConfig, reasons: dict) -> list[int]:
     """Fixes (rows of ``pair``) that a neighbouring fix to a distinct place confirms through the odometry."""
-    ok = (pair.agree & pair.neighbours & (pair.separation >= conf.localize_min_place_separation_m)).any(axis=1)
+    distinct = (pair.separation >= conf.localize_min_place_separation_m) | (
+        pair.view_deg >= conf.localize_min_view_angle_deg)
+    ok = (pair.agree & pair.neighbours & distinct).any(axis=1)
     for a in np.flatnonzero(~ok):
         reasons[order[a]] = "fix not confirmed by a neighbouring fix to another place through the odometry"
     return [int(a) for a in np.flatnonzero(ok)]
