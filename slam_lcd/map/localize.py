@@ -18,13 +18,16 @@ could fool appearance:
    fixes do; they are one match seen several times, not independent evidence. Views of two
    walls of one room are two places: a log that turns in place or walks a small room confirms
    its fixes by direction where it cannot by distance.
-2. **Groups that disagree.** Confirmed fixes that agree with each other through the odometry,
-   link by link along the log, form a group. Where two groups disagree (their fixes closest
-   along the log do not agree through the odometry: a look-alike place and the true one), the
-   one with at least ``map.localize_min_group_ratio`` times the other's fixes wins and the
-   other's fixes are dropped; when neither is that much larger, both are *ambiguous* and not
-   localised. The joint solve cannot be left to choose: the odometry between two groups bends
-   to fit both before the solve calls either an outlier.
+2. **Groups that disagree.** Fixes that agree with each other through the odometry, link by
+   link along the log, form a group, confirmed or not. Where two groups disagree (their fixes
+   closest along the log do not agree through the odometry: a look-alike place and the true
+   one), the one with at least ``map.localize_min_group_ratio`` times the other's fixes wins
+   and the other's fixes are dropped; when neither is that much larger, both are *ambiguous*
+   and not localised. Only confirmed fixes are kept, but every group is a rival: a run of
+   keyframes along a look-alike can confirm itself across its own length, and the true place's
+   few fixes, too close together to confirm themselves, must still count against it. The joint
+   solve cannot be left to choose: the odometry between two groups bends to fit both before the
+   solve calls either an outlier.
 3. **One joint solve.** The log's keyframes are variables, its odometry the factors between
    them, each kept fix a prior with the loop's information; GNC (TLS) drops fixes the rest
    disagree with, Levenberg-Marquardt gives the poses. The map's poses are constants: the map
@@ -205,21 +208,30 @@ def _groups(rows: list[int], pair: _Pairs) -> list[list[int]]:
     return [idx[label == g].tolist() for g in np.unique(label)]
 
 
-def _settle_groups(order: list[int], rows: list[int], pair: _Pairs, conf: MapConfig, reasons: dict) -> list[int]:
+def _settle_groups(order: list[int], confirmed: list[int], pair: _Pairs, conf: MapConfig,
+                   reasons: dict) -> list[int]:
     """The confirmed fixes kept: a group wins over a rival it clearly outnumbers; similar rivals are ambiguous.
 
-    Two groups are rivals when they disagree where the odometry between them is shortest: they
-    cannot both be right. (Two groups that agree there are two stretches of one hypothesis.)
+    Groups are made of every fix, confirmed or not, and a group is judged against every rival, so
+    that a few true fixes too close together to confirm themselves still stand against a long run
+    of look-alike fixes. Only a group's confirmed fixes are kept (the others already have their
+    reason). Two groups are rivals when they disagree where the odometry between them is
+    shortest: they cannot both be right. (Two groups that agree there are two stretches of one
+    hypothesis.)
     """
-    groups = _groups(rows, pair)
+    groups = _groups(list(range(len(order))), pair)
+    sure = set(confirmed)
     kept: list[int] = []
     for g in groups:
+        mine = [a for a in g if a in sure]
+        if not mine:
+            continue
         rival = max((len(h) for h in groups if h is not g and _rivals(g, h, pair)), default=0)
         why = _verdict(len(g), rival, conf.localize_min_group_ratio)
         if why is None:
-            kept += g
+            kept += mine
             continue
-        for a in g:
+        for a in mine:
             reasons[order[a]] = why
     return sorted(kept)
 
