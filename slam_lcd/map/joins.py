@@ -29,7 +29,6 @@ import logging
 
 import numpy as np
 
-from ..geometry import rotation_angle_deg
 from .cliques import maximum_clique
 from .config import MapConfig
 from .joint_types import AMBIGUOUS, JOINED, TOO_FEW, TOO_SHORT, UNDONE, JointLoop, PairDecision
@@ -52,8 +51,9 @@ def view_extent_deg(kfs: list[int], chains: SessionChains) -> float:
     kfs = sorted(set(kfs))
     if len(kfs) < 2:
         return 0.0
-    R = np.array([chains.own_pose(k)[:3, :3] for k in kfs])
-    return float(np.max(rotation_angle_deg(np.swapaxes(R, 1, 2)[:, None] @ R[None])))
+    flat = np.array([chains.own_pose(k)[:3, :3].ravel() for k in kfs])
+    # the angle of R_a^T R_b from its trace, sum(R_a * R_b), for every two at once
+    return float(np.degrees(np.arccos(np.clip((np.min(flat @ flat.T) - 1.0) / 2.0, -1.0, 1.0))))
 
 
 def _ends(loops: list[JointLoop], pair: tuple[int, int], chains: SessionChains) -> tuple[list[int], list[int]]:

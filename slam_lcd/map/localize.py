@@ -184,7 +184,9 @@ def _pairs(order: list[int], fixes: dict, map_poses: dict, T_odom: np.ndarray, p
     neighbours = (gap <= NEIGHBOURS) & (gap > 0)
     near = neighbours | ((travelled <= GROUP_WINDOW_M) & (gap > 0))
     separation = np.maximum(np.linalg.norm(place[:, None] - place[None, :], axis=2), travelled)
-    view_deg = np.atleast_2d(rotation_angle_deg(np.swapaxes(R, 1, 2)[:, None] @ R[None]))
+    # the angle of R_a^T R_b from its trace, sum(R_a * R_b): (k, k) at once, no (k, k, 3, 3) stack
+    flat = R.reshape(-1, 9)
+    view_deg = np.degrees(np.arccos(np.clip((flat @ flat.T - 1.0) / 2.0, -1.0, 1.0)))
     return _Pairs(agree, neighbours, near, travelled, separation, view_deg)
 
 
