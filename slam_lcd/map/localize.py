@@ -23,11 +23,11 @@ could fool appearance:
    closest along the log do not agree through the odometry: a look-alike place and the true
    one), the one with at least ``map.localize_min_group_ratio`` times the other's fixes wins
    and the other's fixes are dropped; when neither is that much larger, both are *ambiguous*
-   and not localised. Only confirmed fixes are kept, but every group is a rival: a run of
-   keyframes along a look-alike can confirm itself across its own length, and the true place's
-   few fixes, too close together to confirm themselves, must still count against it. The joint
-   solve cannot be left to choose: the odometry between two groups bends to fit both before the
-   solve calls either an outlier.
+   and not localised. Only confirmed fixes are kept and counted, but every group is a rival (one
+   with no confirmed fix counts all its fixes): a run of keyframes along a look-alike can confirm
+   itself across its own length, and the true place's few fixes, too close together to confirm
+   themselves, must still count against it. The joint solve cannot be left to choose: the
+   odometry between two groups bends to fit both before the solve calls either an outlier.
 3. **One joint solve.** The log's keyframes are variables, its odometry the factors between
    them, each kept fix a prior with the loop's information; GNC (TLS) drops fixes the rest
    disagree with, Levenberg-Marquardt gives the poses. The map's poses are constants: the map
@@ -216,20 +216,25 @@ def _settle_groups(order: list[int], confirmed: list[int], pair: _Pairs, conf: M
 
     Groups are made of every fix, confirmed or not, and a group is judged against every rival, so
     that a few true fixes too close together to confirm themselves still stand against a long run
-    of look-alike fixes. Only a group's confirmed fixes are kept (the others already have their
-    reason). Two groups are rivals when they disagree where the odometry between them is
+    of look-alike fixes. A group counts its confirmed fixes; one with none counts all its fixes
+    (it has no others to show). Only a group's confirmed fixes are kept (the others already have
+    their reason). Two groups are rivals when they disagree where the odometry between them is
     shortest: they cannot both be right. (Two groups that agree there are two stretches of one
     hypothesis.)
     """
     groups = _groups(list(range(len(order))), pair)
     sure = set(confirmed)
+
+    def size(g: list[int]) -> int:  # its confirmed fixes; a group with none, all its fixes
+        return sum(a in sure for a in g) or len(g)
+
     kept: list[int] = []
     for g in groups:
         mine = [a for a in g if a in sure]
         if not mine:
             continue
-        rival = max((len(h) for h in groups if h is not g and _rivals(g, h, pair)), default=0)
-        why = _verdict(len(g), rival, conf.localize_min_group_ratio)
+        rival = max((size(h) for h in groups if h is not g and _rivals(g, h, pair)), default=0)
+        why = _verdict(len(mine), rival, conf.localize_min_group_ratio)
         if why is None:
             kept += mine
             continue
