@@ -120,10 +120,10 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
-    from slam_lcd.runtime.machine import cpu_flags, cpu_model, usable_cores
+    from slam_lcd.runtime.machine import machine_line
 
-    print(f"machine: {cpu_model()} ({' '.join(cpu_flags())}), {usable_cores()} cores; "
-          f"median of {args.repeat}; false share {args.false:g}", flush=True)
+    print(machine_line(), flush=True)
+    print(f"median of {args.repeat}; false share {args.false:g}", flush=True)
     judged = {n: bench(n, args.false, args.repeat, args.seed) for n in args.loops}
     if GOAL_N in judged:
         t = judged[GOAL_N]

@@ -40,6 +40,12 @@ class MapConfig:
     # the joining set's keyframes must lie at least this far apart in each of the two sessions (m):
     # a look-alike place seen from a few consecutive keyframes gives loops that agree with each other
     min_join_span_m: float = ranged(2.0, "[0, inf)")
+    # ... or their viewing directions at least this far apart in each session (deg; the angle of the rotation
+    # between two keyframes' orientations; over 180: by distance alone). 60: twice the angle within which the
+    # lifelong map counts two views as one place (place_angle_deg); two views 60 deg apart share a seventh of the
+    # demo camera's 70 deg field of view. Keyframes are made every 15 deg turned (frontend.kf_min_rotation_deg),
+    # so the 3 loops of a look-alike seen from a few consecutive keyframes span 30 deg or less
+    min_join_view_angle_deg: float = ranged(60.0, "[0, inf)")
     # not joined ("ambiguous") when a second consistent set, disjoint from the largest, could join
     # on its own and holds at least this share of the largest set's loops
     join_ambiguity_ratio: float = ranged(0.5, "(0, inf)")
@@ -56,6 +62,12 @@ class MapConfig:
     # was the same from 0 to 4 m on the measured demo runs and fell at 5-6 m (the confirming window
     # of 10 keyframes is about 5 m)
     localize_min_place_separation_m: float = ranged(3.0, "[0, inf)")
+    # localise: ... or their map keyframes look in directions at least this far apart (deg; the angle of the
+    # rotation between the two map keyframes' orientations; over 180: by distance alone): views of two walls
+    # are two places even a step apart, so a log turning in place or walking a small room confirms its fixes.
+    # 60: as map.min_join_view_angle_deg; at 15 deg a keyframe (frontend.kf_min_rotation_deg) it is 4 keyframes
+    # of a turn, well inside the 10-keyframe window that may confirm a fix
+    localize_min_view_angle_deg: float = ranged(60.0, "[0, inf)")
     # localise: fixes falling into groups that disagree (a look-alike place and the true one): a group
     # wins only with at least this many times its rival's fixes; otherwise both are ambiguous. 2: a
     # look-alike corridor seen by 7 fixes against its true place's 16 was decided right at 1.5 and 2,

@@ -79,6 +79,8 @@ class PairDecision:
     exact: bool = True  # False: the clique search ran out of its budget (best found so far taken)
     kept: int = 0  # loops of the pair in the final graph
     reason: str = ""
+    # the largest set's viewing directions: the angle (deg) between its most different ones in each session
+    span_deg: tuple[float, float] = (0.0, 0.0)
     # "judged": at this solve; "kept": the verdict of an earlier append, taken as it was; "re-judged":
     # an earlier verdict that the joint graph contradicted, judged again with every loop as a candidate
     status: str = "judged"

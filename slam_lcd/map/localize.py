@@ -10,16 +10,24 @@ could fool appearance:
    ``NEIGHBOURS`` keyframes agrees with it through the odometry between them (relative pose
    within ``map.localize_max_disagreement_m`` / ``_deg`` plus the odometry's drift over the
    distance travelled) and comes from another place: their map keyframes at least
-   ``map.localize_min_place_separation_m`` apart, or the log travelled that far between them.
+   ``map.localize_min_place_separation_m`` apart (or the log travelled that far between them),
+   or looking in directions at least ``map.localize_min_view_angle_deg`` apart (the angle of
+   the rotation between the two map keyframes' orientations: no camera mounting needed; the
+   angle between the optical axes for a level camera turning, an upper bound on it otherwise).
    Neighbouring keyframes that see one look-alike place agree with each other as well as true
-   fixes do; they are one match seen several times, not independent evidence.
-2. **Groups that disagree.** Confirmed fixes that agree with each other through the odometry,
-   link by link along the log, form a group. Where two groups disagree (their fixes closest
-   along the log do not agree through the odometry: a look-alike place and the true one), the
-   one with at least ``map.localize_min_group_ratio`` times the other's fixes wins and the
-   other's fixes are dropped; when neither is that much larger, both are *ambiguous* and not
-   localised. The joint solve cannot be left to choose: the odometry between two groups bends
-   to fit both before the solve calls either an outlier.
+   fixes do; they are one match seen several times, not independent evidence. Views of two
+   walls of one room are two places: a log that turns in place or walks a small room confirms
+   its fixes by direction where it cannot by distance.
+2. **Groups that disagree.** Fixes that agree with each other through the odometry, link by
+   link along the log, form a group, confirmed or not. Where two groups disagree (their fixes
+   closest along the log do not agree through the odometry: a look-alike place and the true
+   one), the one with at least ``map.localize_min_group_ratio`` times the other's fixes wins
+   and the other's fixes are dropped; when neither is that much larger, both are *ambiguous*
+   and not localised. Only confirmed fixes are kept and counted, but every group is a rival (one
+   with no confirmed fix counts all its fixes): a run of keyframes along a look-alike can confirm
+   itself across its own length, and the true place's few fixes, too close together to confirm
+   themselves, must still count against it. The joint solve cannot be left to choose: the
+   odometry between two groups bends to fit both before the solve calls either an outlier.
 3. **One joint solve.** The log's keyframes are variables, its odometry the factors between
    them, each kept fix a prior with the loop's information; GNC (TLS) drops fixes the rest
    disagree with, Levenberg-Marquardt gives the poses. The map's poses are constants: the map
@@ -148,6 +156,7 @@ class _Pairs:
     near: np.ndarray  # (k, k) bool: close enough along the log to be linked into one group
     travelled: np.ndarray  # (k, k) metres the log travelled between the two
     separation: np.ndarray  # (k, k) metres between the places: map keyframes apart or log travelled
+    view_deg: np.ndarray  # (k, k) degrees between the map keyframes' viewing directions
 
 
 def _pairs(order: list[int], fixes: dict, map_poses: dict, T_odom: np.ndarray, path: np.ndarray,
@@ -156,7 +165,8 @@ def _pairs(order: list[int], fixes: dict, map_poses: dict, T_odom: np.ndarray, p
     F = np.array([fixes[i][1] for i in order]).reshape(-1, 4, 4)
     odo = T_odom[order]
     s = path[order]
-    place = np.array([map_poses[int(fixes[i][0].match_id)][:3, 3] for i in order]).reshape(-1, 3)
+    mapped = np.array([map_poses[int(fixes[i][0].match_id)] for i in order]).reshape(-1, 4, 4)
+    place, R = mapped[:, :3, 3], mapped[:, :3, :3]
     k = len(order)
     agree = np.zeros((k, k), bool)
     odo_inv = inv(odo)
@@ -174,12 +184,17 @@ def _pairs(order: list[int], fixes: dict, map_poses: dict, T_odom: np.ndarray, p
     neighbours = (gap <= NEIGHBOURS) & (gap > 0)
     near = neighbours | ((travelled <= GROUP_WINDOW_M) & (gap > 0))
     separation = np.maximum(np.linalg.norm(place[:, None] - place[None, :], axis=2), travelled)
-    return _Pairs(agree, neighbours, near, travelled, separation)
+    # the angle of R_a^T R_b from its trace, sum(R_a * R_b): (k, k) at once, no (k, k, 3, 3) stack
+    flat = R.reshape(-1, 9)
+    view_deg = np.degrees(np.arccos(np.clip((flat @ flat.T - 1.0) / 2.0, -1.0, 1.0)))
+    return _Pairs(agree, neighbours, near, travelled, separation, view_deg)
 
 
 def _confirmed(order: list[int], pair: _Pairs, conf: MapConfig, reasons: dict) -> list[int]:
     """Fixes (rows of ``pair``) that a neighbouring fix to a distinct place confirms through the odometry."""
-    ok = (pair.agree & pair.neighbours & (pair.separation >= conf.localize_min_place_separation_m)).any(axis=1)
+    distinct = (pair.separation >= conf.localize_min_place_separation_m) | (
+        pair.view_deg >= conf.localize_min_view_angle_deg)
+    ok = (pair.agree & pair.neighbours & distinct).any(axis=1)
     for a in np.flatnonzero(~ok):
         reasons[order[a]] = "fix not confirmed by a neighbouring fix to another place through the odometry"
     return [int(a) for a in np.flatnonzero(ok)]
@@ -195,21 +210,35 @@ def _groups(rows: list[int], pair: _Pairs) -> list[list[int]]:
     return [idx[label == g].tolist() for g in np.unique(label)]
 
 
-def _settle_groups(order: list[int], rows: list[int], pair: _Pairs, conf: MapConfig, reasons: dict) -> list[int]:
+def _settle_groups(order: list[int], confirmed: list[int], pair: _Pairs, conf: MapConfig,
+                   reasons: dict) -> list[int]:
     """The confirmed fixes kept: a group wins over a rival it clearly outnumbers; similar rivals are ambiguous.
 
-    Two groups are rivals when they disagree where the odometry between them is shortest: they
-    cannot both be right. (Two groups that agree there are two stretches of one hypothesis.)
+    Groups are made of every fix, confirmed or not, and a group is judged against every rival, so
+    that a few true fixes too close together to confirm themselves still stand against a long run
+    of look-alike fixes. A group counts its confirmed fixes; one with none counts all its fixes
+    (it has no others to show). Only a group's confirmed fixes are kept (the others already have
+    their reason). Two groups are rivals when they disagree where the odometry between them is
+    shortest: they cannot both be right. (Two groups that agree there are two stretches of one
+    hypothesis.)
     """
-    groups = _groups(rows, pair)
+    groups = _groups(list(range(len(order))), pair)
+    sure = set(confirmed)
+
+    def size(g: list[int]) -> int:  # its confirmed fixes; a group with none, all its fixes
+        return sum(a in sure for a in g) or len(g)
+
     kept: list[int] = []
     for g in groups:
-        rival = max((len(h) for h in groups if h is not g and _rivals(g, h, pair)), default=0)
-        why = _verdict(len(g), rival, conf.localize_min_group_ratio)
-        if why is None:
-            kept += g
+        mine = [a for a in g if a in sure]
+        if not mine:
             continue
-        for a in g:
+        rival = max((size(h) for h in groups if h is not g and _rivals(g, h, pair)), default=0)
+        why = _verdict(len(mine), rival, conf.localize_min_group_ratio)
+        if why is None:
+            kept += mine
+            continue
+        for a in mine:
             reasons[order[a]] = why
     return sorted(kept)
 

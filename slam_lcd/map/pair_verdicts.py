@@ -56,7 +56,8 @@ def rule_key(conf: MapConfig, inlier_probability: float) -> str:
 def record(d: PairDecision, rule: str) -> dict:
     """A pair's verdict as the map's session table keeps it (JSON)."""
     out = asdict(d)
-    out["sessions"], out["span_m"], out["rule"] = list(d.sessions), [float(x) for x in d.span_m], rule
+    out["sessions"], out["rule"] = list(d.sessions), rule
+    out["span_m"], out["span_deg"] = [float(x) for x in d.span_m], [float(x) for x in d.span_deg]
     return out
 
 
@@ -64,8 +65,10 @@ def from_record(rec: dict) -> PairDecision:
     """The verdict a record keeps, taken as it was (``status`` "kept")."""
     known = {f.name for f in fields(PairDecision)}
     d = PairDecision(**{k: v for k, v in rec.items() if k in known})
-    d.sessions, d.span_m, d.status = (str(rec["sessions"][0]), str(rec["sessions"][1])), \
-        (float(rec["span_m"][0]), float(rec["span_m"][1])), KEPT
+    d.sessions, d.status = (str(rec["sessions"][0]), str(rec["sessions"][1])), KEPT
+    d.span_m = (float(rec["span_m"][0]), float(rec["span_m"][1]))
+    spread = rec.get("span_deg") or (0.0, 0.0)
+    d.span_deg = (float(spread[0]), float(spread[1]))
     return d
 
 

@@ -114,7 +114,8 @@ class SessionChains:
         return inv(X[i]) @ X[j], chain_covariance(odom[j], P[np.minimum(i, j)], P[np.maximum(i, j)])
 
     def own_pose(self, kf: int) -> np.ndarray:
-        """A keyframe's pose (4x4) in its session's own estimate."""
+        """A keyframe's pose (4x4) in its session's own estimate: the one source of :meth:`position` and of the
+        viewing directions the join rules compare."""
         si, i = self.where[int(kf)]
         return self.sessions[si].own()[i]
 

@@ -44,10 +44,12 @@ def _wrongly_localised(gt, by_id) -> list[int]:
 
 
 def test_three_consecutive_fixes_to_a_look_alike_do_not_confirm_each_other():
-    gt, by_id, loc = _localise([], [10, 11, 12])
+    # 1 m along one wall, looking one way (the route turns 90 degrees at keyframe 12, and views of two directions
+    # are two places: a look-alike seen across that turn is a look-alike of two places)
+    gt, by_id, loc = _localise([], [9, 10, 11])
     assert not any(f.localised for f in by_id.values())
     assert len(loc.trajectory) == 0 and loc.notes
-    assert all("not confirmed" in by_id[k].reason for k in (10, 11, 12)), [by_id[k].reason for k in (10, 11, 12)]
+    assert all("not confirmed" in by_id[k].reason for k in (9, 10, 11)), [by_id[k].reason for k in (9, 10, 11)]
 
 
 def test_seven_fixes_to_a_look_alike_against_five_true_ones_are_ambiguous():
@@ -76,3 +78,15 @@ def test_a_look_alike_group_far_along_the_log_from_the_true_one_still_loses():
     assert _wrongly_localised(gt, by_id) == []
     assert all(by_id[k].localised for k in range(46, 60))
     assert "larger group" in by_id[0].reason, by_id[0].reason
+
+
+def test_a_long_run_of_look_alike_fixes_does_not_win_over_true_fixes_too_few_to_confirm_themselves():
+    """Eight consecutive keyframes see the look-alike: 3.5 m along it, so the four at its ends (3 m apart)
+    confirm each other. Five see the true place over 2 m, too short to confirm themselves, yet they are a
+    rival: the look-alike must not win."""
+    true_at, alias_at = range(1, 6), range(14, 22)
+    gt, by_id, loc = _localise(true_at, alias_at, step_cov=LOG_STEP_COV)
+    assert _wrongly_localised(gt, by_id) == []
+    assert not any(by_id[k].localised for k in alias_at)
+    assert by_id[14].reason == "ambiguous: 4 fixes agree on one place, 5 on another", by_id[14].reason
+    assert all("not confirmed" in by_id[k].reason for k in true_at)

@@ -6,6 +6,8 @@ what the rule promises, not what one run happened to give.
 """
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 from test_map_sessions import INFO, _route, _session, _true_loop  # tests/ is on sys.path (pytest rootdir import)
@@ -14,7 +16,7 @@ from slam_lcd.geometry import adjoint, compose_covariance, inv, make_T, rotation
 from slam_lcd.map.cliques import maximum_clique
 from slam_lcd.map.config import MapConfig
 from slam_lcd.map.joint_graph import JointLoop, SessionPoses, solve
-from slam_lcd.map.pcm import FLOOR, SessionChains, pairwise_consistent, pcm_threshold, step_covariances
+from slam_lcd.map.pcm import FLOOR, SessionChains, allowance, pairwise_consistent, pcm_threshold, step_covariances
 
 STEP = 0.5  # m between keyframes
 SIG_T, SIG_R = 0.05, 0.02  # odometry noise per sqrt(m): the sessions' own covariances
@@ -258,3 +260,51 @@ def test_the_batched_cycle_test_is_the_loop_gates_pair_test_one_pair_at_a_time()
             g = sorted((oriented(loops[i], 0, chains), oriented(loops[j], 0, chains)), key=lambda x: (x.a, x.b))
             assert stats[i, j] == pytest.approx(pair_chi2(g[0], g[1], Own()), rel=1e-9)
             assert stats[i, j] == stats[j, i]
+
+
+def _turning_session(name: str, T0: np.ndarray, first: int, rng) -> tuple[SessionPoses, np.ndarray]:
+    """Walk 2 m in, turn a full circle in place (24 keyframes, 15 degrees each), walk 2 m on; the odometry noised
+    by exactly the covariance each step gives. Returns the session and its true poses."""
+    walk, turn = make_T(np.eye(3), np.array([STEP, 0, 0])), make_T(so3_exp(np.radians([0, 0, 15.0])), np.zeros(3))
+    steps = [walk] * 4 + [turn] * 24 + [walk] * 4
+    gt, odo, cov = [T0], [np.eye(4)], [np.full((6, 6), np.nan)]
+    for S in steps:
+        c = allowance(S, MapConfig())  # the front end's motion model: 0.05 rad per sqrt(rad) turned
+        gt.append(gt[-1] @ S)
+        odo.append(odo[-1] @ S @ se3_exp(np.linalg.cholesky(c) @ rng.normal(size=6)))
+        cov.append(c)
+    odo_a = np.array(odo)
+    return SessionPoses(name, np.arange(first, first + len(odo)), odo_a, np.array(cov), odo_a.copy()), np.array(gt)
+
+
+def test_two_sessions_that_meet_only_turning_in_place_join():
+    """Each session turns a full circle where they meet (0.3 m apart): 24 true loops between keyframes that look
+    the same way, over no distance but every direction. The span guard counts directions as well as metres."""
+    rng = np.random.default_rng(21)
+    a, gt_a = _turning_session("a", make_T(np.eye(3), np.array([-2.0, 0, 0])), 0, rng)
+    # b comes from elsewhere, facing 45 degrees off a, and turns 0.3 m from where a turned
+    b, gt_b = _turning_session("b", make_T(so3_exp(np.radians([0, 0, 45.0])), np.array([0.3, 0.0, 0])) @
+                               make_T(np.eye(3), np.array([-2.0, 0, 0])), 100, rng)
+    loop_cov = np.diag([np.radians(0.5) ** 2] * 3 + [0.03 ** 2] * 3)
+    L = np.linalg.cholesky(loop_cov)
+    loops = []
+    for i in range(4, 28):  # a's turning keyframes; b's keyframe 3 steps behind looks the same way
+        j = (i - 4 - 3) % 24 + 4
+        loops.append(JointLoop(100 + j, i, inv(gt_a[i]) @ gt_b[j] @ se3_exp(L @ rng.normal(size=6)),
+                               np.linalg.inv(loop_cov), True))
+    res = solve([a, b], loops)
+    (d,) = res.pairs
+    print(f"turning in place: {d.decision}, {d.largest} of {d.offered} loops consistent, spans "
+          f"{d.span_m[0]:.2f} m / {d.span_m[1]:.2f} m and {d.span_deg[0]:.0f} / {d.span_deg[1]:.0f} deg")
+    assert d.decision == "joined" and d.largest >= 22 and max(d.span_m) < 0.1
+    assert res.component == {"a": 0, "b": 0}
+    assert np.linalg.norm(res.poses[100 + 16][:3, 3] - res.poses[16][:3, 3]) == pytest.approx(0.3, abs=0.1)
+    # three of those loops, from consecutive keyframes (30 degrees of the turn), are what a look-alike gives: too short
+    few = solve([a, b], [JointLoop(lp.query, lp.match, lp.T, lp.info, True) for lp in loops[:3]])
+    assert few.pairs[0].decision == "too short a span" and few.component == {"a": 0, "b": 1}
+    # by distance alone the same loops span too short a stretch, and the reason gives both figures
+    off = solve([a, b], [JointLoop(lp.query, lp.match, lp.T, lp.info, True) for lp in loops],
+                MapConfig(min_join_view_angle_deg=360.0))
+    assert off.pairs[0].decision == "too short a span" and off.component == {"a": 0, "b": 1}
+    assert re.search(r"\(0\.0 m and 0\.0 m, viewing directions 1[78]\d deg and 1[78]\d deg apart; 2 m or 360 deg "
+                     r"needed in each\)", off.pairs[0].reason), off.pairs[0].reason
