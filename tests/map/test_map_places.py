@@ -7,9 +7,13 @@ last-use records and variants.
 """
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 
 from slam_lcd.map.config import MapConfig
+from slam_lcd.map.contents import MapGraph, SessionKeyframes
+from slam_lcd.map.lifelong import compact, counts, reduce_append
 from slam_lcd.map.places import REDUNDANT, RICHER, VARIANT, Kept, judge, match_ratio
 
 
@@ -86,8 +90,113 @@ def test_a_richer_view_replaces_only_its_own_appearance_and_each_appearance_keep
     assert sorted(k.appearance for k in kept) == [0, 1]
 
 
+def test_an_append_whose_richer_view_replaces_an_old_one_rewrites_that_session():
+    """The poor view of session 0 replaced by session 1's rich view: session 0 loses its descriptors (its file is
+    rewritten), session 1 keeps the rich view with the place's records."""
+    conf = MapConfig()
+    s0, p0 = _session(0, [POOR])
+    s1, p1 = _session(10, [_again(PLACE, 11)], x=0.2)
+    poses = {**p0, **p1}
+    g0 = _graph([0], poses, None)
+    g0.kf_place, g0.kf_last_used, g0.kf_appearance = (np.array([v], np.int64) for v in (0, 1, 0))
+    result = SimpleNamespace(poses=poses, component={"s0": 0, "s1": 0})
+    after, changed, g = reduce_append([{"name": "s0", "component": 0}], [s0], g0, _graph([0, 10], poses, g0),
+                                      result, {"name": "s1", "component": 0}, s1, [], conf)
+    assert changed == {0} and not after[0].kept().any() and after[1].kept().all()  # (the new session is written)
+    assert _records(g) == {10: (0, 2, 0)}
+
+
 def test_a_richer_view_of_the_same_append_drops_the_poorer_one_it_added():
     conf = MapConfig()
     v = judge([(10, _pose(0.0), _const(POOR)), (11, _pose(0.1), _const(_again(PLACE, 10)))], 0, [], conf,
               now=1, next_place=0)
     assert v.status == {10: REDUNDANT, 11: RICHER} and v.place == {11: 0}
+
+
+# -- compact of a map that keeps places
+
+
+def _session(first_id: int, views: list[np.ndarray], x: float = 0.0):
+    """A session file (float16 descriptors) of ``views`` 0.4 m apart from ``x`` on, and its poses."""
+    n = len(views)
+    desc = np.concatenate(views).astype(np.float16)
+    T = np.stack([_pose(x + 0.4 * i) for i in range(n)])
+    rows = len(desc)
+    sess = SessionKeyframes(
+        ids=np.arange(first_id, first_id + n, dtype=np.int64), stamps=np.arange(n, dtype=np.int64) * 10**9,
+        T_odom=T, cov=np.zeros((n, 6, 6)), T_gt=np.full((n, 4, 4), np.nan),
+        offsets=np.concatenate([[0], np.cumsum([len(v) for v in views])]).astype(np.int64),
+        keypoints=np.zeros((rows, 2), np.float32), descriptors=desc, scales=np.zeros(0, np.float32),
+        points3d=np.zeros((rows, 3), np.float32), points_source=np.array(["rgbd"] * n, "<U10"))
+    return sess, {int(k): t for k, t in zip(sess.ids, T, strict=True)}
+
+
+def _route(kind: str, first_id: int, shift_m: float = 0.0) -> tuple[SessionKeyframes, dict[int, np.ndarray]]:
+    """Six views 0.4 m apart along a wall of 300 points, 100 a view (test_map_lifelong's route), as a session
+    file (float16 descriptors); ``night`` describes 55 % of the points otherwise."""
+    rng = np.random.default_rng(7)
+    day = rng.normal(size=(300, 64))
+    pts = {"day": day, "night": np.where(rng.random((300, 1)) < 0.45, day, rng.normal(size=(300, 64)))}[kind]
+    pts = _unit(pts)
+    return _session(first_id, [pts[30 * i: 30 * i + 100] for i in range(6)], shift_m)
+
+
+def _graph(ids: list[int], poses: dict[int, np.ndarray], before: MapGraph | None) -> MapGraph:
+    g = MapGraph.empty()
+    g.kf_ids = np.array(ids, np.int64)
+    g.T_map = np.stack([poses[k] for k in ids])
+    for name in MapGraph.OPTIONAL:  # the records of the keyframes the map held, as a joint solve carries them
+        old = getattr(before, name, None) if before is not None else None
+        if old is not None:
+            setattr(g, name, np.concatenate([old, np.full(len(ids) - len(old), -1, np.int64)]))
+    return g
+
+
+def _lifelong_map(conf: MapConfig):
+    """Sessions day, night, day (slightly off), each appended with the rule: (table, sessions, graph, poses, the
+    sessions each append changed)."""
+    table, sessions, poses, graph, rewrites = [], [], {}, MapGraph.empty(), []
+    for i, (kind, shift) in enumerate((("day", 0.0), ("night", 0.05), ("day", 0.1))):
+        sess, p = _route(kind, 100 * i, shift)
+        poses.update(p)
+        meta = {"name": f"s{i}", "component": 0}
+        new_graph = _graph([k for s in [*sessions, sess] for k in s.ids.tolist()], poses, graph)
+        result = SimpleNamespace(poses=poses, component={m["name"]: 0 for m in [*table, meta]})
+        sessions, changed, graph = reduce_append(table, sessions, graph, new_graph, result, meta, sess, [], conf)
+        table.append(meta)
+        rewrites.append(changed)
+    return table, sessions, graph, poses, rewrites
+
+
+def _records(graph: MapGraph) -> dict[int, tuple[int, int, int]]:
+    return {int(k): (int(p), int(u), int(a)) for k, p, u, a in
+            zip(graph.kf_ids, graph.kf_place, graph.kf_last_used, graph.kf_appearance, strict=True) if p >= 0}
+
+
+def test_compacting_a_lifelong_map_keeps_its_appearances_last_uses_and_variants():
+    conf = MapConfig()
+    table, sessions, graph, poses, rewrites = _lifelong_map(conf)
+    assert rewrites == [{0}, {1}, {2}]  # each append dropped views of its own session only: no earlier file rewritten
+    before = _records(graph)
+    assert {a for _, _, a in before.values()} == {0, 1} and len({u for _, u, _ in before.values()}) >= 2
+    nights = {k for k, (_, _, a) in before.items() if a == 1}
+    assert nights and nights <= set(range(100, 106))
+    first = counts(graph, sessions)
+    for _ in range(2):  # compacted, then compacted again
+        sessions, changed, graph = compact(table, sessions, graph, poses, [], conf)
+        assert not changed and _records(graph) == before
+        assert counts(graph, sessions) == first
+
+
+def test_compacting_a_lifelong_map_drops_what_the_rules_now_drop():
+    """With fewer variants allowed, each full place gives up views down to one; what stays keeps its records."""
+    table, sessions, graph, poses, _ = _lifelong_map(MapConfig())
+    before = _records(graph)
+    per_place = {p: [k for k, r in before.items() if r[0] == p] for p, _, _ in before.values()}
+    assert max(len(v) for v in per_place.values()) >= 2
+    sessions, changed, graph = compact(table, sessions, graph, poses, [], MapConfig(max_variants=1))
+    after = _records(graph)
+    assert changed and set(after) < set(before)
+    assert all(before[k] == r for k, r in after.items())  # what stays keeps its records
+    assert all(sum(r[0] == p for r in after.values()) == 1 for p in per_place)  # every place keeps one view
+
