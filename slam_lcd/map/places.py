@@ -14,19 +14,21 @@ keyframe is judged against the keyframes the map keeps, in order:
 - **richer**: not redundant, but that share of a near kept keyframe's descriptors lies in it: the
   same appearance, seen better (the kept one a blurred or dim moment). It takes the kept one's
   place, appearance and use (now); the kept one keeps only its pose. Why replace and not add a
-  variant: both show one appearance, and the poor one, matched by every later view it holds a
-  little of, would hold a variant's room against eviction while a revisit finds few matches in it;
-  why not drop the new one: a later visit would then find its matches in the poor view only;
-- **new appearance** (a variant): kept keyframes are near but none matches it well (other
-  lighting, moved objects): it is kept as another variant of the nearest kept keyframe's place.
-  A place holds at most ``map.max_variants`` variants; a new one beyond that evicts the variant
-  that has gone longest without being matched (by a later append's keyframe or loop), so what
-  the map's users still meet stays: first among the new one's appearance, then among appearances
-  the place holds twice, so that each appearance keeps its view of the place (:func:`_evicted`):
-  a place keeps a view of every appearance seen there, as long as ``map.max_variants`` allows.
+  variant: both show one appearance, and the poor one would take a variant's room that another
+  appearance may need; why not drop the new one: a later visit would find its matches in the poor
+  view only;
+- **new appearance** (a variant): kept keyframes are near but none matches it well either way
+  (:func:`alike_ratio`; other lighting, moved objects): it is kept as another variant of the
+  nearest kept keyframe's place. A place holds at most ``map.max_variants`` variants; a new one
+  beyond that evicts the variant that has gone longest without being matched (by a later
+  append's keyframe or loop), so what the map's users still meet stays: first among the new
+  one's appearance, then among appearances the place holds twice, so that each appearance keeps
+  its view of the place (:func:`_evicted`): a place keeps a view of every appearance seen there,
+  as long as ``map.max_variants`` allows.
 
 ``map compact`` of a map that keeps places already applies the same rules to the kept views and
-their records (:func:`prune`), so a smaller ``map.max_variants`` takes effect and nothing else moves.
+their records (:func:`prune`): a smaller ``map.max_variants``, or poses that later appends moved
+together, take effect, and what stays keeps its place, appearance and last use.
 
 Each kept keyframe has an **appearance** (sessions that look alike share one: the days, the
 nights). A session is judged in the kept appearance it matches best as a whole (the median of its
@@ -83,6 +85,13 @@ def match_ratio(a: np.ndarray, b: np.ndarray) -> float:
     return mutual_matches(a, b) / len(a) if len(a) and len(b) else 0.0
 
 
+def alike_ratio(a: np.ndarray, b: np.ndarray) -> float:
+    """How alike two views look: the larger of the two :func:`match_ratio` (of the poorer view's descriptors).
+
+    Under ``map.redundant_match_ratio`` a new view is neither redundant nor richer: a new appearance."""
+    return mutual_matches(a, b) / min(len(a), len(b)) if len(a) and len(b) else 0.0
+
+
 @dataclass
 class Kept:
     """A keyframe the map keeps: its camera pose in its component's frame, place, and when it was last matched."""
@@ -134,7 +143,7 @@ class Ratios:
         return self._mutual[key] / len(da), self._mutual[key] / len(db)
 
     def alike(self, a: int, desc_a: Callable[[], np.ndarray], b: int, desc_b: Callable[[], np.ndarray]) -> float:
-        """How alike two views look: the share of the poorer one's descriptors found in the other.
+        """:func:`alike_ratio` of the two views: the share of the poorer one's descriptors found in the other.
 
         Why the poorer one's here (and not in :func:`judge`'s redundancy): whether two views show one
         appearance does not depend on how many descriptors each found; a dim view of the day is still

@@ -14,7 +14,7 @@ import numpy as np
 from slam_lcd.map.config import MapConfig
 from slam_lcd.map.contents import MapGraph, SessionKeyframes
 from slam_lcd.map.lifelong import compact, counts, reduce_append
-from slam_lcd.map.places import REDUNDANT, RICHER, VARIANT, Kept, judge, match_ratio
+from slam_lcd.map.places import REDUNDANT, RICHER, VARIANT, Kept, alike_ratio, judge, match_ratio
 
 
 def _pose(x: float) -> np.ndarray:
@@ -52,6 +52,7 @@ def test_the_share_is_of_the_view_judged_not_of_the_smaller_one():
     rich = _again(PLACE, 2)
     assert match_ratio(POOR, rich) > 0.9  # all of the poor view lies in the rich one
     assert match_ratio(rich, POOR) < 0.1  # little of the rich view lies in the poor one
+    assert alike_ratio(rich, POOR) == alike_ratio(POOR, rich) == match_ratio(POOR, rich)  # one appearance
 
 
 def test_a_poor_kept_view_does_not_absorb_richer_views_of_its_place():
