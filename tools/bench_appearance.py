@@ -2,8 +2,8 @@
 """How far each appearance state of the demo world is from ``day``, in the map's own measure.
 
 A lifelong map keeps a new keyframe as an appearance variant when less than
-``map.redundant_match_ratio`` (0.3) of the smaller keyframe's descriptors are mutual nearest
-neighbours of a kept keyframe of its place (:func:`slam_lcd.map.places.match_ratio`). This tool
+``map.redundant_match_ratio`` (0.3) of the poorer keyframe's descriptors are mutual nearest
+neighbours of a kept keyframe of its place (:func:`slam_lcd.map.places.alike_ratio`). This tool
 renders views of one route (session 2's figure eight, both blocks) in every state, extracts
 SuperPoint, and prints the median ratio of same-place pairs:
 
@@ -37,11 +37,11 @@ def render_views(state: str, poses: list[np.ndarray], cam, noise_seed: int) -> l
 
 
 def ratios(extractor, a: list[np.ndarray], b: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """match_ratio of each pair (a[i], b[i]), and the keypoint counts of a."""
-    from slam_lcd.map.places import match_ratio
+    """alike_ratio of each pair (a[i], b[i]), and the keypoint counts of a."""
+    from slam_lcd.map.places import alike_ratio
 
     fa, fb = extractor.extract_batch(a), extractor.extract_batch(b)
-    return (np.array([match_ratio(x.descriptors, y.descriptors) for x, y in zip(fa, fb, strict=True)]),
+    return (np.array([alike_ratio(x.descriptors, y.descriptors) for x, y in zip(fa, fb, strict=True)]),
             np.array([len(x.descriptors) for x in fa]))
 
 

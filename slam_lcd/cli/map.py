@@ -28,7 +28,9 @@ def register(sub) -> None:
     c = msub.add_parser("compact", help="keep places and appearance variants, not every keyframe (map.lifelong)",
                         description="Reduce a map built without map.lifelong as if each session had been appended "
                                     "with it: keyframes that a kept keyframe of their place matches well keep only "
-                                    "their pose. One atomic commit, like an append.")
+                                    "their pose. A map that keeps places already keeps its places, appearances "
+                                    "and last uses, and loses only what the rules drop now (e.g. a smaller "
+                                    "map.max_variants). One atomic commit, like an append.")
     c.add_argument("map_dir", metavar="DIR", help="map folder (changed in place, atomically)")
     c.add_argument("--config", default=None, metavar="NAME|FILE", help="preset or YAML file for the map section "
                                                                          "(default: default)")

@@ -84,8 +84,9 @@ class MapConfig:
     place_angle_deg: float = ranged(30.0, "(0, 180]")
     # the nearest kept keyframes of the place a new one is compared with
     place_compare: int = ranged(3, "[1, inf)")
-    # redundant when at least this share of the smaller keyframe's descriptors are mutual nearest
-    # neighbours of a kept keyframe of its place; below it, a new appearance of the place
+    # redundant when at least this share of the new keyframe's descriptors are mutual nearest
+    # neighbours of a kept keyframe of its place; when only that share of the kept one's are, the new
+    # one is richer and takes its place; below it both ways, a new appearance of the place
     redundant_match_ratio: float = ranged(0.3, "(0, 1]")
     # a session is judged in the kept appearance its keyframes match best (median best ratio); when
     # even that is under this share of how well they match each other (median of consecutive

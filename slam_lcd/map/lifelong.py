@@ -7,7 +7,8 @@ odometry and ground truth, so every session is still given in the map frame at f
 graph file records each keyframe's place and when it was last matched; the vocabulary snapshot
 keeps the kept keyframes' bags of words and the words they use. ``map.lifelong`` turns this on
 for appends; ``Map.compact`` applies it to a map built without it, session by session in the
-order they were appended, as if each had been appended with it.
+order they were appended, as if each had been appended with it, and to a map that keeps places
+already from its records (:func:`compact`).
 
 What this does not reduce: the joint graph keeps a variable per keyframe (kept or not) and
 every loop and visual link, so its size still follows the keyframes of every visit.
@@ -21,15 +22,16 @@ from dataclasses import replace
 import numpy as np
 
 from .contents import REMOVED, MapGraph, SessionKeyframes
-from .places import Kept, Ratios, Verdicts, appearance_of, familiarity, judge
+from .places import Kept, Ratios, Verdicts, appearance_of, familiarity, judge, prune
 
 log = logging.getLogger(__name__)
 
 
 def strip(sess: SessionKeyframes, keep: np.ndarray) -> SessionKeyframes:
-    """``sess`` with the features of the keyframes not in ``keep`` dropped (their poses stay)."""
+    """``sess`` with the features of the keyframes not in ``keep`` dropped (their poses stay); ``sess`` itself
+    when that drops nothing it still holds (the caller rewrites a session's file only when it changed)."""
     keep = np.asarray(keep, bool) & sess.kept()
-    if keep.all() or not len(sess):
+    if np.array_equal(keep, sess.kept()) or not len(sess):
         return sess
     n = np.diff(sess.offsets)
     rows = np.repeat(keep, n)
@@ -49,7 +51,8 @@ def kept_keyframes(table: list[dict], sessions: list[SessionKeyframes], graph: M
     """The map's kept keyframes for :func:`slam_lcd.map.places.judge`, and the first free place id.
 
     A map without place records (built without ``map.lifelong``) gives each kept keyframe a place of
-    its own; ``map compact`` judges such a map's sessions properly."""
+    its own; ``map compact`` judges such a map's sessions properly. In the order the keyframes were
+    added (session by session, by id), which :func:`slam_lcd.map.places.prune` follows."""
     place = dict(zip(graph.kf_ids.tolist(), graph.kf_place.tolist(), strict=True)) if graph.kf_place is not None \
         else {}
     used = dict(zip(graph.kf_ids.tolist(), graph.kf_last_used.tolist(), strict=True)) \
@@ -135,10 +138,18 @@ def reduce_append(table: list[dict], sessions: list[SessionKeyframes], old_graph
 
 def compact(table: list[dict], sessions: list[SessionKeyframes], graph: MapGraph, poses: dict[int, np.ndarray],
             loops, conf) -> tuple[list[SessionKeyframes], set[int], MapGraph]:
-    """A map built without ``map.lifelong`` reduced as if each session had been appended with it, in order
-    (with the map's present poses): (every session after it, the indices that changed, the graph with places).
+    """A map reduced by the rules: (every session after it, the indices that changed, the graph with places).
 
-    A map that keeps places already is judged again from its kept keyframes: what it dropped stays dropped."""
+    A map built without ``map.lifelong`` is reduced as if each session had been appended with it, in order
+    (with the map's present poses). A map that keeps places already keeps its records (the graph's
+    ``kf_place``, ``kf_appearance``, ``kf_last_used``) and loses only what the rules drop now
+    (:func:`slam_lcd.map.places.prune`: a smaller ``map.max_variants``, poses moved by later appends).
+    Why not judge its kept keyframes again: they lie too far apart for a session's own ratio, so the
+    appearances would merge (night views judged as days) and every last use would be that of the judging."""
+    if graph.kf_place is not None:
+        views, _ = kept_keyframes(table, sessions, graph, poses, {m["name"]: int(m["component"]) for m in table})
+        prune(views, conf)
+        return apply(views, sessions, graph)
     kept: list[Kept] = []
     for si, (meta, s) in enumerate(zip(table, sessions, strict=True)):
         earlier = {int(k) for t in sessions[:si] for k in t.ids}

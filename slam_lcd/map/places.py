@@ -7,16 +7,28 @@ keyframe is judged against the keyframes the map keeps, in order:
 - **new place**: no kept keyframe of its component lies within ``map.place_radius_m`` and
   ``map.place_angle_deg`` (camera poses): it is kept and founds a place;
 - **redundant**: one of the (up to ``map.place_compare``) nearest kept keyframes matches it well:
-  at least ``map.redundant_match_ratio`` of the smaller keyframe's descriptors are mutual nearest
-  neighbours within the matching distance. It keeps its pose (every session stays in the map
-  frame at full rate) but not its descriptors, keypoints, points or bag of words; the keyframe it
-  matched is marked used now;
-- **new appearance** (a variant): kept keyframes are near but none matches it well (other
-  lighting, moved objects): it is kept as another variant of the nearest kept keyframe's place.
-  A place holds at most ``map.max_variants`` variants; a new one beyond that evicts the variant
-  that has gone longest without being matched (by a later append's keyframe or loop), so what
-  the map's users still meet stays: first among the new one's appearance, then among appearances
-  the place holds twice, so that each appearance keeps its view of the place (:func:`_evicted`).
+  at least ``map.redundant_match_ratio`` of *its* descriptors are mutual nearest neighbours of the
+  kept one's within the matching distance (:func:`match_ratio`). It keeps its pose (every session
+  stays in the map frame at full rate) but not its descriptors, keypoints, points or bag of words;
+  the keyframe it matched is marked used now;
+- **richer**: not redundant, but that share of a near kept keyframe's descriptors lies in it: the
+  same appearance, seen better (the kept one a blurred or dim moment). It takes the kept one's
+  place, appearance and use (now); the kept one keeps only its pose. Why replace and not add a
+  variant: both show one appearance, and the poor one would take a variant's room that another
+  appearance may need; why not drop the new one: a later visit would find its matches in the poor
+  view only;
+- **new appearance** (a variant): kept keyframes are near but none matches it well either way
+  (:func:`alike_ratio`; other lighting, moved objects): it is kept as another variant of the
+  nearest kept keyframe's place. A place holds at most ``map.max_variants`` variants; a new one
+  beyond that evicts the variant that has gone longest without being matched (by a later
+  append's keyframe or loop), so what the map's users still meet stays: first among the new
+  one's appearance, then among appearances the place holds twice, so that each appearance keeps
+  its view of the place (:func:`_evicted`): a place keeps a view of every appearance seen there,
+  as long as ``map.max_variants`` allows.
+
+``map compact`` of a map that keeps places already applies the same rules to the kept views and
+their records (:func:`prune`): a smaller ``map.max_variants``, or poses that later appends moved
+together, take effect, and what stays keeps its place, appearance and last use.
 
 Each kept keyframe has an **appearance** (sessions that look alike share one: the days, the
 nights). A session is judged in the kept appearance it matches best as a whole (the median of its
@@ -41,15 +53,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-NEW_PLACE, VARIANT, REDUNDANT = "place", "variant", "redundant"
+NEW_PLACE, VARIANT, REDUNDANT, RICHER = "place", "variant", "redundant", "richer"
 MATCH_COS = 0.75  # float descriptors (unit rows): mutual nearest neighbours at least this cosine apart
 MATCH_HAMMING = 64  # binary descriptors (ORB, 256 bits): at most this many bits apart
 
 
-def match_ratio(a: np.ndarray, b: np.ndarray) -> float:
-    """Share of the smaller set's descriptors that are mutual nearest neighbours within the matching distance."""
+def mutual_matches(a: np.ndarray, b: np.ndarray) -> int:
+    """Descriptors of ``a`` and ``b`` that are each other's nearest neighbour within the matching distance."""
     if len(a) == 0 or len(b) == 0:
-        return 0.0
+        return 0
     if a.dtype == np.uint8:  # binary: Hamming distances from the bits
         A, B = np.unpackbits(a, axis=1).astype(np.float32), np.unpackbits(b, axis=1).astype(np.float32)
         dist = A @ (1 - B).T + (1 - A) @ B.T
@@ -60,7 +72,24 @@ def match_ratio(a: np.ndarray, b: np.ndarray) -> float:
         fwd, back = sim.argmax(1), sim.argmax(0)
         good = sim[np.arange(len(a)), fwd] >= MATCH_COS
     mutual = back[fwd] == np.arange(len(a))
-    return float(np.count_nonzero(mutual & good)) / min(len(a), len(b))
+    return int(np.count_nonzero(mutual & good))
+
+
+def match_ratio(a: np.ndarray, b: np.ndarray) -> float:
+    """Share of ``a``'s descriptors (the view judged) that are mutual nearest neighbours of ``b``'s.
+
+    Why of the view judged and not of the smaller set: a redundant view loses its descriptors, so the
+    question is how much of *it* the kept view still holds. Counted against the smaller set, a kept
+    view of 60 descriptors (a blurred or dim moment) holds "all" of an 800-descriptor view of the
+    unchanged place, which then drops, and a later visit finds its matches in 60 descriptors."""
+    return mutual_matches(a, b) / len(a) if len(a) and len(b) else 0.0
+
+
+def alike_ratio(a: np.ndarray, b: np.ndarray) -> float:
+    """How alike two views look: the larger of the two :func:`match_ratio` (of the poorer view's descriptors).
+
+    Under ``map.redundant_match_ratio`` a new view is neither redundant nor richer: a new appearance."""
+    return mutual_matches(a, b) / min(len(a), len(b)) if len(a) and len(b) else 0.0
 
 
 @dataclass
@@ -80,11 +109,13 @@ class Kept:
 class Verdicts:
     """What :func:`judge` decided for the new keyframes, and what it changed among the kept ones."""
 
-    status: dict[int, str] = field(default_factory=dict)  # new kf id -> place / variant / redundant
+    status: dict[int, str] = field(default_factory=dict)  # new kf id -> place / variant / redundant / richer
     place: dict[int, int] = field(default_factory=dict)  # kept kf id (new or old) -> place id
     matched: dict[int, int] = field(default_factory=dict)  # redundant new kf id -> the kept kf it matched
+    replaced: dict[int, int] = field(default_factory=dict)  # richer new kf id -> the poorer kept kf it replaced
     used: set[int] = field(default_factory=set)  # kept kf ids matched now (their last_used becomes now)
     evicted: list[int] = field(default_factory=list)  # kept kf ids no longer kept (a full place's oldest variant)
+    # (a replaced or evicted keyframe of the same append: status redundant, and out of ``place``)
     appearance: int = 0  # the appearance the session was judged in
     new_appearance: bool = False  # one the map did not hold (map.appearance_share)
 
@@ -93,20 +124,31 @@ New = tuple[int, np.ndarray, Callable[[], np.ndarray]]  # kf id, camera pose in 
 
 
 class Ratios:
-    """:func:`match_ratio` of keyframe pairs, each computed once, from descriptors each decoded once
+    """Mutual matches of keyframe pairs, each pair matched once, from descriptors each decoded once
     (a map stores them quantised; :func:`familiarity` and :func:`judge` meet the same keyframes)."""
 
     def __init__(self) -> None:
-        self._seen: dict[tuple[int, int], float] = {}
+        self._mutual: dict[tuple[int, int], int] = {}
         self._decoded: dict[int, np.ndarray] = {}
 
-    def __call__(self, kf_id: int, desc: Callable[[], np.ndarray], k: Kept) -> float:
-        return self.between(kf_id, desc, k.kf_id, k.descriptors)
+    def shares(self, a: int, desc_a: Callable[[], np.ndarray], b: int,
+               desc_b: Callable[[], np.ndarray]) -> tuple[float, float]:
+        """(:func:`match_ratio` of ``a`` against ``b``, of ``b`` against ``a``): one count of mutual matches."""
+        da, db = self._of(a, desc_a), self._of(b, desc_b)
+        if not len(da) or not len(db):
+            return 0.0, 0.0
+        key = (a, b) if a <= b else (b, a)
+        if key not in self._mutual:  # the same pairs either way: matched in one order
+            self._mutual[key] = mutual_matches(da, db) if a <= b else mutual_matches(db, da)
+        return self._mutual[key] / len(da), self._mutual[key] / len(db)
 
-    def between(self, a: int, desc_a: Callable[[], np.ndarray], b: int, desc_b: Callable[[], np.ndarray]) -> float:
-        if (a, b) not in self._seen:
-            self._seen[a, b] = match_ratio(self._of(a, desc_a), self._of(b, desc_b))
-        return self._seen[a, b]
+    def alike(self, a: int, desc_a: Callable[[], np.ndarray], b: int, desc_b: Callable[[], np.ndarray]) -> float:
+        """:func:`alike_ratio` of the two views: the share of the poorer one's descriptors found in the other.
+
+        Why the poorer one's here (and not in :func:`judge`'s redundancy): whether two views show one
+        appearance does not depend on how many descriptors each found; a dim view of the day is still
+        the day, and only the descriptors it has can say so."""
+        return max(self.shares(a, desc_a, b, desc_b))
 
     def _of(self, kf_id: int, desc: Callable[[], np.ndarray]) -> np.ndarray:
         if kf_id not in self._decoded:
@@ -118,7 +160,7 @@ def familiarity(new: list[New], component: int, kept: list[Kept], conf,
                 ratios: Ratios) -> tuple[dict[int, float], float | None]:
     """How well the map as it is knows a session's appearance: for each appearance of the kept
     keyframes, the median over the session's keyframes that have kept keyframes of that appearance
-    near of their best :func:`match_ratio` with those; and the median ratio of the session's
+    near of their best :meth:`Ratios.alike` with those; and the median ratio of the session's
     keyframes with the one before them where that lies within the place's reach (None: no two do).
 
     Why a session's median and not each keyframe alone: at nearly the same pose another appearance
@@ -135,11 +177,11 @@ def familiarity(new: list[New], component: int, kept: list[Kept], conf,
         near = _near(T, component, kept, conf.place_radius_m, cos_max)
         for a in {k.appearance for k in near}:
             alike = [k for k in near if k.appearance == a][:compare]
-            best.setdefault(a, []).append(max(ratios(kf_id, desc, k) for k in alike))
+            best.setdefault(a, []).append(max(ratios.alike(kf_id, desc, k.kf_id, k.descriptors) for k in alike))
         if j:
             prev_id, P, prev_desc = new[j - 1]
             if np.linalg.norm(P[:3, 3] - T[:3, 3]) <= conf.place_radius_m and P[:3, 2] @ T[:3, 2] >= cos_max:
-                own.append(ratios.between(kf_id, desc, prev_id, prev_desc))
+                own.append(ratios.alike(kf_id, desc, prev_id, prev_desc))
     return {a: float(np.median(v)) for a, v in best.items()}, (float(np.median(own)) if own else None)
 
 
@@ -159,42 +201,89 @@ def judge(new: list[New], component: int, kept: list[Kept], conf, now: int, next
           appearance: int = 0, ratios: Ratios | None = None) -> Verdicts:
     """Judge the new keyframes ``(kf id, camera pose in the map frame, descriptors)`` in order (module docstring).
 
-    ``kept``: the map's kept keyframes (changed in place: new kept keyframes are added, evicted
-    ones removed); ``now``: the append's generation (what ``last_used`` records); ``next_place``:
-    the first free place id; ``appearance``: the appearance the session is judged in
+    ``kept``: the map's kept keyframes (changed in place: new kept keyframes are added, replaced and
+    evicted ones removed); ``now``: the append's generation (what ``last_used`` records);
+    ``next_place``: the first free place id; ``appearance``: the appearance the session is judged in
     (:func:`appearance_of`): its keyframes are redundant only against kept keyframes of it.
     """
     out = Verdicts(appearance=appearance)
     ratios = ratios or Ratios()
-    cos_max = np.cos(np.radians(conf.place_angle_deg))
-    compare = max(1, int(conf.place_compare))
     for kf_id, T, desc in new:
-        near = _near(T, component, kept, conf.place_radius_m, cos_max)
-        if not near:
-            kept.append(Kept(kf_id, T, component, next_place, now, desc, appearance))
-            out.status[kf_id], out.place[kf_id] = NEW_PLACE, next_place
-            next_place += 1
-            continue
-        alike = [k for k in near if k.appearance == appearance][:compare]
-        scores = [ratios(kf_id, desc, k) for k in alike]
-        if scores and max(scores) >= conf.redundant_match_ratio:
-            match = alike[int(np.argmax(scores))]
-            match.last_used = now
-            out.status[kf_id], out.matched[kf_id] = REDUNDANT, match.kf_id
-            out.used.add(match.kf_id)
-            continue
-        place = near[0].place
-        kept.append(Kept(kf_id, T, component, place, now, desc, appearance))
-        out.status[kf_id], out.place[kf_id] = VARIANT, place
-        variants = [k for k in kept if k.place == place]
-        if len(variants) > conf.max_variants:
-            old = _evicted(variants, kf_id, appearance, now)
-            kept.remove(old)
-            out.evicted.append(old.kf_id)
-            out.place.pop(old.kf_id, None)
-            if old.kf_id in out.status:  # a keyframe of this append: it is not kept after all
-                out.status[old.kf_id] = REDUNDANT
+        next_place = _place_view(Kept(kf_id, T, component, -1, now, desc, appearance), kept, conf, ratios, out,
+                                 next_place)
     return out
+
+
+def prune(views: list[Kept], conf, ratios: Ratios | None = None) -> Verdicts:
+    """Views a map keeps already, with their records (place, appearance, last use), less what the rules
+    drop now: each, in the order they were added, judged as :func:`judge` judges a new keyframe against
+    the ones before it that stay, in its own appearance (``views`` changed in place).
+
+    Why not :func:`judge` again: the kept views of a map lie too far apart for a session's own ratio
+    (:func:`familiarity`), so every session would fall into one appearance, and their uses would be
+    those of the judging, not of the appends that recorded them. A view that stays keeps its place,
+    appearance and last use; one that a view before it holds (or that a richer view before it replaces)
+    hands its last use on to that view, so the place's record of use stays."""
+    out = Verdicts()
+    ratios = ratios or Ratios()
+    kept: list[Kept] = []
+    for v in views:
+        _place_view(v, kept, conf, ratios, out, -1)
+    views[:] = kept
+    return out
+
+
+def _place_view(v: Kept, kept: list[Kept], conf, ratios: Ratios, out: Verdicts, next_place: int) -> int:
+    """Judge one view against ``kept`` (changed in place), record the verdict in ``out``; the next free place id.
+
+    A view with a place (``v.place >= 0``, :func:`prune`) keeps it when it stays as a new place or variant;
+    one without (:func:`judge`) gets a new place, or the nearest kept view's."""
+    near = _near(v.T_map_camera, v.component, kept, conf.place_radius_m, np.cos(np.radians(conf.place_angle_deg)))
+    if not near:
+        if v.place < 0:
+            v.place, next_place = next_place, next_place + 1
+        _keep(v, kept, NEW_PLACE, conf, out)
+        return next_place
+    alike = [k for k in near if k.appearance == v.appearance][:max(1, int(conf.place_compare))]
+    shares = [ratios.shares(v.kf_id, v.descriptors, k.kf_id, k.descriptors) for k in alike]
+    of_new, of_kept = [s[0] for s in shares], [s[1] for s in shares]
+    if of_new and max(of_new) >= conf.redundant_match_ratio:  # the kept view holds this one
+        match = alike[int(np.argmax(of_new))]
+        match.last_used = max(match.last_used, v.last_used)
+        out.status[v.kf_id], out.matched[v.kf_id] = REDUNDANT, match.kf_id
+        out.used.add(match.kf_id)
+        return next_place
+    if of_kept and max(of_kept) >= conf.redundant_match_ratio:  # this view holds the kept one, and more
+        poor = alike[int(np.argmax(of_kept))]
+        v.place, v.last_used = poor.place, max(poor.last_used, v.last_used)
+        kept[kept.index(poor)] = v
+        out.status[v.kf_id], out.place[v.kf_id], out.replaced[v.kf_id] = RICHER, v.place, poor.kf_id
+        out.matched.update({q: v.kf_id for q, m in out.matched.items() if m == poor.kf_id})
+        _dropped(poor, out)
+        return next_place
+    if v.place < 0:
+        v.place = near[0].place
+    _keep(v, kept, VARIANT, conf, out)
+    return next_place
+
+
+def _keep(v: Kept, kept: list[Kept], status: str, conf, out: Verdicts) -> None:
+    """``v`` kept as a new place or a variant; a place holding more than ``map.max_variants`` gives one up."""
+    kept.append(v)
+    out.status[v.kf_id], out.place[v.kf_id] = status, v.place
+    variants = [k for k in kept if k.place == v.place]
+    if len(variants) > conf.max_variants:
+        old = _evicted(variants, v.kf_id, v.appearance, v.last_used)
+        kept.remove(old)
+        out.evicted.append(old.kf_id)
+        _dropped(old, out)
+
+
+def _dropped(k: Kept, out: Verdicts) -> None:
+    """A kept view given up: one judged in the same pass is not kept after all."""
+    out.place.pop(k.kf_id, None)
+    if k.kf_id in out.status:
+        out.status[k.kf_id] = REDUNDANT
 
 
 def _evicted(variants: list[Kept], new_id: int, appearance: int, now: int) -> Kept:

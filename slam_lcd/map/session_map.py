@@ -330,8 +330,9 @@ class Map:
         return state if len(kept) == len(expected) else keep_only(state, kept)
 
     def compact(self) -> dict:
-        """Keep places and variants, not every keyframe, in a map built without ``map.lifelong`` (in memory:
-        :meth:`save` commits it). Returns the map's counts (:func:`slam_lcd.map.lifelong.counts`) before and after."""
+        """Keep places and variants, not every keyframe (in memory: :meth:`save` commits it); a map that keeps
+        places already keeps its records (:func:`slam_lcd.map.lifelong.compact`). Returns the map's counts
+        (:func:`slam_lcd.map.lifelong.counts`) before and after."""
         if self._lock is None:
             raise MapError("the map was opened read-only: open it with write=True to compact it", self.root)
 

@@ -3,7 +3,7 @@
 Layout (``schema`` 1)::
 
     DIR/map.json                  manifest: schema, feature kind, sessions table, files with sha256
-    DIR/sessions/NNNN-<tag>.npz   one session's keyframes (written once, never rewritten)
+    DIR/sessions/NNNN-<tag>.npz   one session's keyframes (again under a new name when views of it drop)
     DIR/graph-<tag>.npz           loops of every session and the map-frame keyframe poses
     DIR/vocab-<tag>.npz           the online vocabulary and every keyframe's bag of words (optional)
     DIR/.lock                     the writers' lock (flock; made with the first commit, slam_lcd.map.locks)

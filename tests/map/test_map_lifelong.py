@@ -3,7 +3,7 @@
 Synthetic keyframes for the judging rule (new place / redundant / new appearance, a full place's
 oldest variant evicted), then small demo maps: a second visit of one route adds poses, not
 candidates; a session of another world adds its own places; ``map compact`` reduces a map built
-without the rule and leaves the map before or after under signals.
+without the rule, keeps a lifelong map's records, and leaves the map before or after under signals.
 """
 from __future__ import annotations
 
@@ -230,6 +230,31 @@ def test_map_compact_reduces_a_full_map_like_appending_with_the_rule(world, capf
     assert abs(c["kept_keyframes"] - life["kept_keyframes"]) <= 0.25 * life["kept_keyframes"], (c, life)
     rc, _, err = run_cli(["localize", world.logs[2], "--map", d, "--out", tmp_path / "loc", *world.orb], capfd)
     assert rc == 0, err
+
+
+def test_map_compact_of_a_lifelong_map_keeps_its_records(world, capfd, tmp_path):
+    """A map appended with the rule, compacted twice: every keyframe's place, last use and appearance, the
+    counts, and the session files stay as they are."""
+    from slam_lcd.map.session_map import Map
+
+    d = tmp_path / "map"
+    shutil.copytree(world.life, d)
+
+    def records():
+        with Map.open(d) as m:
+            g = m.graph
+            return [a.tolist() for a in (g.kf_place, g.kf_last_used, g.kf_appearance)]
+
+    before, info = records(), _info(capfd, d)
+    files = sorted(p.name for p in (d / "sessions").iterdir())
+    for _ in range(2):
+        rc, _, err = run_cli(["map", "compact", d], capfd)
+        assert rc == 0, err
+        after = _info(capfd, d)
+        assert records() == before
+        assert [after[k] for k in ("places", "variants", "appearances", "kept_keyframes")] == \
+            [info[k] for k in ("places", "variants", "appearances", "kept_keyframes")]
+        assert sorted(p.name for p in (d / "sessions").iterdir()) == files
 
 
 @pytest.mark.parametrize("point, sig", [("session-write", "SIGTERM"), ("graph-done", "SIGINT"),

@@ -1,8 +1,8 @@
 """Appearance states of the demo world: same geometry, other textures and light, and SuperPoint sees the change.
 
-A lifelong map keeps a new keyframe as an appearance variant when fewer than 30 % of the smaller
+A lifelong map keeps a new keyframe as an appearance variant when fewer than 30 % of the poorer
 keyframe's descriptors are mutual nearest neighbours of a kept keyframe of its place
-(:func:`slam_lcd.map.places.match_ratio`, ``map.redundant_match_ratio``). The states exist so that
+(:func:`slam_lcd.map.places.alike_ratio`, ``map.redundant_match_ratio``). The states exist so that
 this happens: ``renovated`` at the same pose, ``night`` from a pose a little off, as a revisit is;
 while two views of one state stay far above it.
 """
@@ -78,7 +78,7 @@ def test_a_session_log_in_a_state(tmp_path):
 
 def test_superpoint_needs_a_variant_in_the_strong_states(superpoint_weights):
     from slam_lcd.features import FeaturesConfig, load_extractor
-    from slam_lcd.map.places import match_ratio
+    from slam_lcd.map.places import alike_ratio
 
     ex = load_extractor(FeaturesConfig(weights=str(superpoint_weights), device="cpu"))
 
@@ -86,7 +86,7 @@ def test_superpoint_needs_a_variant_in_the_strong_states(superpoint_weights):
         return [f.descriptors for f in ex.extract_batch(_views(state, poses, noise))]
 
     def ratio(a, b) -> float:
-        return float(np.median([match_ratio(x, y) for x, y in zip(a, b, strict=True)]))
+        return float(np.median([alike_ratio(x, y) for x, y in zip(a, b, strict=True)]))
 
     poses, off = _east_poses(), _east_poses(dy=0.4, dyaw_deg=6.0)
     day = descriptors("day", poses, 1)
