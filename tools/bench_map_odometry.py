@@ -92,7 +92,7 @@ def section_covariance(args) -> None:
     runs = work / "runs_cov"
     print(machine_line())
     print(f"demo sessions 1 and 2, {args.size}, {args.features}")
-    for value in ("absolute", "relative", "model"):
+    for value in args.values:
         cfg = _config(args, [f"frontend.odom_covariance={value}"])
         extractor = load_extractor(cfg.features)
         plain = {k: run_session(logs[k], runs / f"plain_{value}_s{k}", cfg, extractor)[0] for k in (1, 2)}
@@ -137,6 +137,8 @@ def main() -> None:
         p.add_argument("--features", choices=["orb", "superpoint"], default="orb")
         p.add_argument("--weights", default=None)
         p.add_argument("--set", action="append", default=[])
+    sub.choices["covariance"].add_argument("--values", nargs="+", default=["absolute", "relative", "model"],
+                                           choices=["absolute", "relative", "model"])
     args = ap.parse_args()
     {"covariance": section_covariance, "orders": section_orders}[args.section](args)
 
