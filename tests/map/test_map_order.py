@@ -18,6 +18,7 @@ from test_map_sessions import INFO, _route
 from slam_lcd.geometry import inv, make_T, se3_exp, so3_exp
 from slam_lcd.map.joint_graph import JointLoop, SessionPoses, solve
 from slam_lcd.map.pair_verdicts import KEPT, record
+from slam_lcd.map.replay import append_in_order
 
 NAMES = ("s0", "s1", "s2")
 FIRST = {"s0": 0, "s1": 1000, "s2": 2000, "other": 3000}
@@ -53,34 +54,11 @@ def world():
 
 
 def _append(order, world):
-    """Append the sessions in ``order`` as a map does; every solve's result and the loops' final states."""
+    """Append the sessions in ``order`` as a map does (:func:`slam_lcd.map.replay.append_in_order`)."""
     sessions, loops = world
-    judged: dict = {}
-    state: dict = {}  # (query, match) -> (accepted, reason) as the map's graph file keeps them
-    res, results = None, []
-    for k in range(1, len(order) + 1):
-        subset = []
-        for name in order[:k]:
-            s = copy.deepcopy(sessions[name])
-            if res is not None and name in res.component:
-                s.prev_component = res.component[name]
-                s.T_init = np.array([res.poses[int(i)] for i in s.ids])
-            s.T_own = sessions[name].T_odom.copy()
-            subset.append(s)
-        present = set(order[:k])
-        now = []
-        for (a, b), group in loops.items():
-            if a in present and b in present:
-                for lp in group:
-                    lp = copy.deepcopy(lp)
-                    if (lp.query, lp.match) in state:
-                        lp.accepted, lp.reason = state[(lp.query, lp.match)]
-                    now.append(lp)
-        res = solve(subset, now, judged=judged)
-        judged = {tuple(d.sessions): record(d, res.rule) for d in res.pairs}
-        state = {(lp.query, lp.match): (lp.accepted and not lp.reason.startswith("gnc"), lp.reason) for lp in now}
-        results.append(res)
-    return results, state
+    chosen = {n: sessions[n] for n in order}
+    return append_in_order(chosen, [lp for (a, b), group in loops.items() if a in chosen and b in chosen
+                                    for lp in group], order)
 
 
 def _components(res) -> set[frozenset[str]]:

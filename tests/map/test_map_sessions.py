@@ -250,6 +250,12 @@ def test_batch_appends_its_logs_to_one_map_in_name_order(example_map, tmp_path):
     s = map_summary(Map.open(tmp_path / "map"))
     assert [x["name"] for x in s["sessions"]] == ["session1", "session5"]
     assert len(s["components"]) == 1 and s["inter_session_accepted"] >= 3, s["inter_session_loops"][:3]
+    # the pair's verdict is recorded with its later session, and each session keeps its own estimate
+    saved = Map.open(tmp_path / "map")
+    (rec,) = saved.manifest.sessions[1]["pairs"]
+    assert rec["sessions"] == ["session1", "session5"] and rec["decision"] == "joined" and rec["rule"]
+    assert "pairs" not in saved.manifest.sessions[0]
+    assert all(x.T_own is not None and x.T_own.shape == x.T_odom.shape for x in saved.sessions)
     assert (tmp_path / "res" / "map_sessions" / "session5" / "map" / "sessions.csv").is_file()
     # loops.csv of the second session: its candidates into session 1 carry the joint graph's verdicts
     import csv
