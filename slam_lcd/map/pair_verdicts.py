@@ -145,8 +145,9 @@ def values_of(init: dict[int, np.ndarray]) -> gtsam.Values:
 
 
 def gnc_check(known: gtsam.NonlinearFactorGraph, cands: list[JointLoop], chains: SessionChains,
-              values: gtsam.Values, inlier_probability: float) -> gtsam.Values:
-    """GNC (TLS) over ``cands`` with ``known`` as known inliers; marks the outliers. Its solution.
+              values: gtsam.Values, inlier_probability: float, graph_name: str = "the joint graph") -> gtsam.Values:
+    """GNC (TLS) over ``cands`` with ``known`` as known inliers; marks the outliers (their reason names
+    ``graph_name``). Its solution.
 
     GNC starts from the optimum with every candidate: the initial values (each session's own estimate,
     placed by one loop) can be far from what the loops say, and TLS started there turned every loop of
@@ -161,7 +162,7 @@ def gnc_check(known: gtsam.NonlinearFactorGraph, cands: list[JointLoop], chains:
     for lp, w, c2 in zip(cands, res.weights, res.residual_chi2, strict=True):
         if w < 0.5:
             lp.accepted = False
-            what = f"outlier of the joint graph (weight {w:.2f}, residual chi2 {c2:.1f})"
+            what = f"outlier of {graph_name} (weight {w:.2f}, residual chi2 {c2:.1f})"
             lp.reason = f"{LINK}: gnc: {what}" if is_link(lp) else f"gnc: {what}"
     return res.values
 
@@ -177,7 +178,7 @@ def judge_links(si: int, graphs: SessionGraphs, chains: SessionChains, conf: Map
         s = graphs.sessions[si]
         init = {int(k): T for k, T in zip(s.ids, s.own(), strict=True)}
         known = graphs.known([si], [si], init, links_known=False)
-        gnc_check(known, cands, chains, values_of(init), inlier_probability)
+        gnc_check(known, cands, chains, values_of(init), inlier_probability, "the session's own graph")
     return failed
 
 
@@ -211,7 +212,8 @@ def judge(pair: tuple[int, int], group: list[JointLoop], graphs: SessionGraphs, 
     init = {int(k): T for k, T in zip(sp.ids, sp.own(), strict=True)}
     A = alignment(chosen, chains, init, q, sq.own())
     init.update({int(k): A @ T for k, T in zip(sq.ids, sq.own(), strict=True)})
-    gnc_check(graphs.known([p, q], [p], init), chosen, chains, values_of(init), inlier_probability)
+    gnc_check(graphs.known([p, q], [p], init), chosen, chains, values_of(init), inlier_probability,
+              "the two sessions' graph")
     recheck(d, pair, chosen, chains, conf)
     return d
 
