@@ -167,9 +167,10 @@ def _rejudge(against, sessions, graphs, joins, decisions, comp, init, chains, co
     for pair in against:
         d = decisions[pair]
         d.status = pv.REJUDGED
+        gone = recheck(d, pair, joins[pair], chains, conf)
         why = "re-judged: the joint graph of every session contradicted its loops"
         d.reason = f"{d.reason}; {why}" if d.reason else why
-        if recheck(d, pair, joins[pair], chains, conf):
+        if gone:
             log.info("%s", d.reason)
             del joins[pair]
             undone.append(pair)

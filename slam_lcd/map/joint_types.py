@@ -84,6 +84,7 @@ class PairDecision:
     # "judged": at this solve; "kept": the verdict of an earlier append, taken as it was; "re-judged":
     # an earlier verdict that the joint graph contradicted, judged again with every loop as a candidate
     status: str = "judged"
+    recorded: str = ""  # a kept verdict's status when it was recorded ("judged" or "re-judged")
 
 
 @dataclass

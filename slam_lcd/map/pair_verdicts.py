@@ -57,6 +57,8 @@ def record(d: PairDecision, rule: str) -> dict:
     """A pair's verdict as the map's session table keeps it (JSON)."""
     out = asdict(d)
     out["sessions"], out["rule"] = list(d.sessions), rule
+    out["status"] = d.recorded if d.status == KEPT else d.status  # how the verdict was made
+    out.pop("recorded", None)
     out["span_m"], out["span_deg"] = [float(x) for x in d.span_m], [float(x) for x in d.span_deg]
     return out
 
@@ -66,6 +68,7 @@ def from_record(rec: dict) -> PairDecision:
     known = {f.name for f in fields(PairDecision)}
     d = PairDecision(**{k: v for k, v in rec.items() if k in known})
     d.sessions, d.status = (str(rec["sessions"][0]), str(rec["sessions"][1])), KEPT
+    d.recorded = str(rec.get("status") or "judged")
     d.span_m = (float(rec["span_m"][0]), float(rec["span_m"][1]))
     spread = rec.get("span_deg") or (0.0, 0.0)
     d.span_deg = (float(spread[0]), float(spread[1]))

@@ -127,7 +127,16 @@ def map_summary(m, joined=None, *, current: str | None = None, pipe=None) -> dic
             "sessions": sessions, "components": m.components(), "n_keyframes": m.n_keyframes,
             "loops_within_sessions": accepted_within, "loops_within_sessions_offered": within, "visual_links": links,
             "inter_session_loops": inter, "inter_session_accepted_by_pair": pairs,
-            "inter_session_accepted": sum(1 for r in inter if r["accepted"])}
+            "inter_session_accepted": sum(1 for r in inter if r["accepted"]), "pairs": pair_verdicts(m)}
+
+
+def pair_verdicts(m) -> list[dict]:
+    """The recorded verdict on each pair of sessions with loops between them (the session table's records)."""
+    from .pair_verdicts import judged_pairs
+
+    return [{"sessions": list(names), "decision": r.get("decision"), "offered": r.get("offered"),
+             "largest": r.get("largest"), "kept": r.get("kept"), "status": r.get("status"), "reason": r.get("reason")}
+            for names, r in judged_pairs(m.manifest.sessions).items()]
 
 
 def _current(m, name: str, sessions: list[dict]) -> dict:
@@ -158,6 +167,11 @@ def summary_lines(summary: dict) -> list[str]:
             ate = f", ATE {s['ate_odometry']:.3f} -> {s['ate_map']:.3f} m (map frame, one alignment)"
         lines.append(f"  {s['name']}: {s['keyframes']} keyframes, {s['inter_session_loops']} loops to other "
                      f"sessions{ate}" + ("" if s["joined"] else f" -- {s['note']}"))
+    for p in summary.get("pairs", []):
+        why = f": {p['reason']}" if p["decision"] != "joined" and p.get("reason") else ""
+        again = " (re-judged: the joint graph contradicted it)" if p.get("status") == "re-judged" else ""
+        lines.append(f"  pair {p['sessions'][0]} - {p['sessions'][1]}: {p['decision']}, {p['kept']} of "
+                     f"{p['offered']} loops kept{again}{why}")
     return lines
 
 

@@ -122,3 +122,29 @@ def test_a_verdict_recorded_under_other_rules_is_judged_again(world):
     res = solve([a, b], copy.deepcopy(loops[("s0", "s1")]), judged={("s0", "s1"): rec})
     assert res.pairs[0].status == "judged"
     assert isinstance(sessions["s0"], SessionPoses)
+
+
+def test_a_kept_verdict_that_a_later_session_contradicts_is_judged_again_and_undone():
+    """s0 and s1 joined by a consistent set of loops to one wrong place (nothing to tell it apart then); s2's
+    true loops to both place s1 elsewhere: the joint graph contradicts the kept pair, which is judged again."""
+    rng = np.random.default_rng(8)
+    route = _route(60, 3)
+    side = make_T(np.eye(3), np.array([0.0, 0.6, 0.0]))
+    gt = {"s0": route, "s1": route @ side, "s2": route @ inv(side)}
+    sessions = {n: _noisy_session(n, gt[n], FIRST[n], rng) for n in NAMES}
+    W = make_T(so3_exp(np.array([0, 0, 0.5])), np.array([4.0, -3.0, 0]))
+    wrong = [JointLoop(FIRST["s1"] + j, FIRST["s0"] + j, inv(gt["s0"][j]) @ W @ gt["s1"][j], INFO, True)
+             for j in range(4, 40, 3)]
+    L = np.linalg.cholesky(np.linalg.inv(INFO))
+    true = [JointLoop(FIRST["s2"] + j, FIRST[a] + j, inv(gt[a][j]) @ gt["s2"][j] @ se3_exp(L @ rng.normal(size=6)),
+                      INFO, True) for a in ("s0", "s1") for j in range(2, 58, 2)]
+    results, state = append_in_order(sessions, wrong + true, ("s0", "s1", "s2"))
+    assert results[1].pairs[0].decision == "joined"  # alone, the wrong set cannot be told apart
+    d = {p.sessions: p for p in results[2].pairs}
+    assert d[("s0", "s1")].status == "re-judged" and d[("s0", "s1")].decision == "undone by gnc"
+    assert "re-judged" in d[("s0", "s1")].reason
+    assert d[("s0", "s2")].decision == d[("s1", "s2")].decision == "joined"
+    assert _components(results[2]) == {frozenset(NAMES)}
+    assert not any(state[(lp.query, lp.match)][0] for lp in wrong)
+    rec = record(d[("s0", "s1")], results[2].rule)
+    assert rec["status"] == "re-judged"
