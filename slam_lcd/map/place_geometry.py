@@ -27,7 +27,8 @@ import numpy as np
 from ..lcd.config import LcdConfig
 from ..lcd.geometry import estimate_loop_pose
 from ..types import CameraModel, Features, Keyframe
-from .places import mutual_pairs
+
+Pairs = Callable[[], tuple[np.ndarray, np.ndarray]]  # rows of the going view, of the staying view: mutual matches
 
 
 @dataclass
@@ -71,23 +72,23 @@ class Localises:
         self.conf = conf or LcdConfig()
         self._done: dict[tuple[int, int], Check | None] = {}
 
-    def check(self, stays: int, stays_desc: np.ndarray, stays_view: Callable[[], View | None] | None,
-              goes: int, goes_desc: np.ndarray, goes_view: Callable[[], View | None] | None) -> Check | None:
-        """Whether view ``stays`` (its 3-D points) localises view ``goes`` (its keypoints) from the mutual
-        nearest neighbours of their descriptors; None where either view has no 3-D points (or no camera):
-        the share rule decides alone."""
+    def check(self, stays: int, stays_view: Callable[[], View | None] | None, goes: int,
+              goes_view: Callable[[], View | None] | None, pairs: Pairs) -> Check | None:
+        """Whether view ``stays`` (its 3-D points) localises view ``goes`` (its keypoints) from ``pairs``, the
+        mutual nearest neighbours of their descriptors (asked for only when both views have 3-D points);
+        None where either has none (or no camera): the share rule decides alone."""
         key = (stays, goes)
         if key not in self._done:
-            self._done[key] = self._solve(stays, stays_desc, stays_view, goes, goes_desc, goes_view)
+            self._done[key] = self._solve(stays, stays_view, goes, goes_view, pairs)
         return self._done[key]
 
-    def _solve(self, stays: int, stays_desc: np.ndarray, stays_view: Callable[[], View | None] | None,
-               goes: int, goes_desc: np.ndarray, goes_view: Callable[[], View | None] | None) -> Check | None:
+    def _solve(self, stays: int, stays_view: Callable[[], View | None] | None, goes: int,
+               goes_view: Callable[[], View | None] | None, pairs: Pairs) -> Check | None:
         vs = stays_view() if stays_view is not None else None
         vg = goes_view() if goes_view is not None else None
         if vs is None or vg is None or not vs.has_points() or not vg.has_points():
             return None
-        ig, is_ = mutual_pairs(goes_desc, stays_desc)
+        ig, is_ = pairs()
         matches = np.column_stack([ig, is_]).astype(np.int64)
         pose = estimate_loop_pose(vg.keyframe(goes), vs.keyframe(stays), matches, self.conf,
                                   points3d_m=np.asarray(vs.points3d, float), source=vs.source)

@@ -56,12 +56,10 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-if TYPE_CHECKING:  # (place_geometry matches with this module's mutual_pairs)
-    from .place_geometry import Localises, View
+from .place_geometry import Localises, View
 
 NEW_PLACE, VARIANT, REDUNDANT, RICHER = "place", "variant", "redundant", "richer"
 MATCH_COS = 0.75  # float descriptors (unit rows): mutual nearest neighbours at least this cosine apart
@@ -233,7 +231,7 @@ def judge(new: list[New], component: int, kept: list[Kept], conf, now: int, next
     (:mod:`slam_lcd.map.place_geometry`; default ones when not given).
     """
     out = Verdicts(appearance=appearance)
-    ratios, check = ratios or Ratios(), localises or _localises()
+    ratios, check = ratios or Ratios(), localises or Localises()
     for kf_id, T, desc in new:
         v = Kept(kf_id, T, component, -1, now, desc, appearance, (views or {}).get(kf_id))
         next_place = _place_view(v, kept, conf, ratios, check, out, next_place)
@@ -251,18 +249,12 @@ def prune(views: list[Kept], conf, ratios: Ratios | None = None, localises: Loca
     appearance and last use; one that a view before it holds (or that a richer view before it replaces)
     hands its last use on to that view, so the place's record of use stays."""
     out = Verdicts()
-    ratios, check = ratios or Ratios(), localises or _localises()
+    ratios, check = ratios or Ratios(), localises or Localises()
     kept: list[Kept] = []
     for v in views:
         _place_view(v, kept, conf, ratios, check, out, -1)
     views[:] = kept
     return out
-
-
-def _localises() -> Localises:
-    from .place_geometry import Localises
-
-    return Localises()
 
 
 def _place_view(v: Kept, kept: list[Kept], conf, ratios: Ratios, check: Localises, out: Verdicts,
@@ -315,8 +307,9 @@ def _unlocalised(stays: Kept, goes: Kept, ratios: Ratios, check: Localises) -> s
     Why: ``goes`` keeps only its pose, and a log passing there is localised by ``stays`` alone. A share of
     look-alike descriptors (a night view a metre off) gives matches but no pose; only a pose says the kept
     view serves that spot. Run for the one pair the share rule picked: a pose costs more than a share."""
-    c = check.check(stays.kf_id, ratios.decoded(stays.kf_id, stays.descriptors), stays.view,
-                    goes.kf_id, ratios.decoded(goes.kf_id, goes.descriptors), goes.view)
+    c = check.check(stays.kf_id, stays.view, goes.kf_id, goes.view,
+                    lambda: mutual_pairs(ratios.decoded(goes.kf_id, goes.descriptors),
+                                         ratios.decoded(stays.kf_id, stays.descriptors)))
     if c is None or c.ok:
         return ""
     return (f"view {stays.kf_id} would not localise view {goes.kf_id}: {c.reason} "
