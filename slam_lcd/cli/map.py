@@ -99,7 +99,7 @@ def compact(args) -> int:
 
     cfg = config_from_args(args)
     with Map.open(args.map_dir, conf=cfg.map, write=True) as m:
-        figures = m.compact()
+        figures = m.compact(cfg.lcd)
         m.save()
     b, a = figures["before"], figures["after"]
     print(f"map {args.map_dir}: {a['keyframes']} keyframes, kept {b['kept_keyframes']} -> {a['kept_keyframes']} "

@@ -21,7 +21,10 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..lcd.config import LcdConfig
 from .contents import REMOVED, MapGraph, SessionKeyframes
+from .keyframe_arrays import camera_from_json
+from .place_geometry import Localises, stored_view
 from .places import Kept, Ratios, Verdicts, appearance_of, familiarity, judge, prune
 
 log = logging.getLogger(__name__)
@@ -62,13 +65,14 @@ def kept_keyframes(table: list[dict], sessions: list[SessionKeyframes], graph: M
     out: list[Kept] = []
     next_place = max([p for p in place.values() if p >= 0], default=-1) + 1
     for si, (meta, s) in enumerate(zip(table, sessions, strict=True)):
+        camera = camera_from_json(meta.get("camera"))
         for i in np.flatnonzero(s.kept()):
             k = int(s.ids[i])
             p = place.get(k, -1)
             if p < 0:
                 p, next_place = next_place, next_place + 1
             out.append(Kept(k, camera_pose(poses[k], meta), components[meta["name"]], p, int(used.get(k, si + 1)),
-                            _descriptors(s, int(i)), max(0, int(look.get(k, 0)))))
+                            _descriptors(s, int(i)), max(0, int(look.get(k, 0))), _view(s, int(i), camera)))
     return out, next_place
 
 
@@ -76,26 +80,36 @@ def _descriptors(s: SessionKeyframes, i: int):
     return lambda: s.descriptors_of(i)
 
 
+def _view(s: SessionKeyframes, i: int, camera):
+    """Keyframe i's keypoints and 3-D points for the pose check (:mod:`slam_lcd.map.place_geometry`)."""
+    r = s.rows(i)
+    return stored_view(s.keypoints[r], s.points3d[r], str(s.points_source[i]), camera)
+
+
 def judge_session(meta: dict, sess: SessionKeyframes, component: int, poses: dict[int, np.ndarray],
                   kept: list[Kept], conf, now: int, next_place: int, used: Collection[int] = (),
-                  only: np.ndarray | None = None) -> Verdicts:
+                  only: np.ndarray | None = None, pose_conf: LcdConfig | None = None) -> Verdicts:
     """Judge a session's keyframes (module docstring of :mod:`slam_lcd.map.places`); ``used``: map keyframes
     its accepted loops matched (marked used now, before the judging, so a place's variant in use stays);
-    ``only``: the keyframes to judge (default all; the others are not kept)."""
+    ``only``: the keyframes to judge (default all; the others are not kept); ``pose_conf``: the ``lcd``
+    settings whose pose stage says whether a kept view would localise a new one (default ones)."""
     for k in kept:
         if k.kf_id in used:
             k.last_used = now
     which = np.ones(len(sess), bool) if only is None else np.asarray(only, bool)
     new = [(int(sess.ids[i]), camera_pose(poses[int(sess.ids[i])], meta), _descriptors(sess, int(i)))
            for i in np.flatnonzero(which)]
+    camera = camera_from_json(meta.get("camera"))
+    views = {int(sess.ids[i]): _view(sess, int(i), camera) for i in np.flatnonzero(which)}
     ratios = Ratios()
     known, own = familiarity(new, component, kept, conf, ratios)
     look, fresh = appearance_of(known, own, kept, conf)
-    out = judge(new, component, kept, conf, now, next_place, look, ratios)
+    out = judge(new, component, kept, conf, now, next_place, look, ratios, views, Localises(pose_conf))
     out.new_appearance = fresh
-    log.info("session %s: median match ratio with the kept appearances %s, %s with itself: %s %d",
-             meta.get("name"), {a: round(v, 2) for a, v in sorted(known.items())},
-             "-" if own is None else f"{own:.2f}", "a new appearance" if fresh else "judged in appearance", look)
+    log.info("session %s: median match ratio with the kept appearances %s, %s with itself: %s %d; %d variants "
+             "kept because the matching view would not localise them", meta.get("name"),
+             {a: round(v, 2) for a, v in sorted(known.items())}, "-" if own is None else f"{own:.2f}",
+             "a new appearance" if fresh else "judged in appearance", look, len(out.reason))
     out.used |= set(used)
     return out
 
@@ -123,21 +137,21 @@ def apply(kept: list[Kept], sessions: list[SessionKeyframes],
 
 
 def reduce_append(table: list[dict], sessions: list[SessionKeyframes], old_graph: MapGraph, new_graph: MapGraph,
-                  result, meta: dict, sess: SessionKeyframes, loops, conf) -> tuple[list[SessionKeyframes], set[int],
-                                                                                   MapGraph]:
+                  result, meta: dict, sess: SessionKeyframes, loops, conf,
+                  pose_conf: LcdConfig | None = None) -> tuple[list[SessionKeyframes], set[int], MapGraph]:
     """An append's verdicts applied: (every session after it, the indices that changed, the graph with places).
 
     ``table``/``sessions``/``old_graph``: the map before the append; ``new_graph``, ``result``: after its
     joint solve; ``loops``: every loop of that solve (the session's accepted ones to the map mark their
-    map keyframe used)."""
+    map keyframe used); ``pose_conf``: the ``lcd`` settings of the pose check (:func:`judge_session`)."""
     kept, next_place = kept_keyframes(table, sessions, old_graph, result.poses, result.component)
     judge_session(meta, sess, int(result.component[meta["name"]]), result.poses, kept, conf, len(sessions) + 1,
-                  next_place, _used_by(loops, {int(k) for k in sess.ids}))
+                  next_place, _used_by(loops, {int(k) for k in sess.ids}), pose_conf=pose_conf)
     return apply(kept, [*sessions, sess], new_graph)
 
 
 def compact(table: list[dict], sessions: list[SessionKeyframes], graph: MapGraph, poses: dict[int, np.ndarray],
-            loops, conf) -> tuple[list[SessionKeyframes], set[int], MapGraph]:
+            loops, conf, pose_conf: LcdConfig | None = None) -> tuple[list[SessionKeyframes], set[int], MapGraph]:
     """A map reduced by the rules: (every session after it, the indices that changed, the graph with places).
 
     A map built without ``map.lifelong`` is reduced as if each session had been appended with it, in order
@@ -145,17 +159,20 @@ def compact(table: list[dict], sessions: list[SessionKeyframes], graph: MapGraph
     ``kf_place``, ``kf_appearance``, ``kf_last_used``) and loses only what the rules drop now
     (:func:`slam_lcd.map.places.prune`: a smaller ``map.max_variants``, poses moved by later appends).
     Why not judge its kept keyframes again: they lie too far apart for a session's own ratio, so the
-    appearances would merge (night views judged as days) and every last use would be that of the judging."""
+    appearances would merge (night views judged as days) and every last use would be that of the judging.
+    Either way a view is dropped only when the view that stays would localise it (``pose_conf``: the ``lcd``
+    settings of that check, :mod:`slam_lcd.map.place_geometry`), as at an append."""
     if graph.kf_place is not None:
         views, _ = kept_keyframes(table, sessions, graph, poses, {m["name"]: int(m["component"]) for m in table})
-        prune(views, conf)
+        prune(views, conf, localises=Localises(pose_conf))
         return apply(views, sessions, graph)
     kept: list[Kept] = []
     for si, (meta, s) in enumerate(zip(table, sessions, strict=True)):
         earlier = {int(k) for t in sessions[:si] for k in t.ids}
         used = {k for k in _used_by(loops, {int(k) for k in s.ids}) if k in earlier}
         next_place = max((k.place for k in kept), default=-1) + 1
-        judge_session(meta, s, int(meta["component"]), poses, kept, conf, si + 1, next_place, used, only=s.kept())
+        judge_session(meta, s, int(meta["component"]), poses, kept, conf, si + 1, next_place, used, only=s.kept(),
+                      pose_conf=pose_conf)
     return apply(kept, sessions, graph)
 
 

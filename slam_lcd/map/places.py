@@ -10,13 +10,16 @@ keyframe is judged against the keyframes the map keeps, in order:
   at least ``map.redundant_match_ratio`` of *its* descriptors are mutual nearest neighbours of the
   kept one's within the matching distance (:func:`match_ratio`). It keeps its pose (every session
   stays in the map frame at full rate) but not its descriptors, keypoints, points or bag of words;
-  the keyframe it matched is marked used now;
+  the keyframe it matched is marked used now. Only when that kept keyframe would localise it: its 3-D
+  points give this view a pose through the loop chain's pose stage (:mod:`slam_lcd.map.place_geometry`);
+  otherwise it is kept as a variant (``Verdicts.reason`` says why);
 - **richer**: not redundant, but that share of a near kept keyframe's descriptors lies in it: the
   same appearance, seen better (the kept one a blurred or dim moment). It takes the kept one's
   place, appearance and use (now); the kept one keeps only its pose. Why replace and not add a
   variant: both show one appearance, and the poor one would take a variant's room that another
   appearance may need; why not drop the new one: a later visit would find its matches in the poor
-  view only;
+  view only. Only when it would localise the kept one (the same pose check, the other way round);
+  otherwise it is kept as a variant;
 - **new appearance** (a variant): kept keyframes are near but none matches it well either way
   (:func:`alike_ratio`; other lighting, moved objects): it is kept as another variant of the
   nearest kept keyframe's place. A place holds at most ``map.max_variants`` variants; a new one
@@ -39,11 +42,14 @@ against kept keyframes of its appearance, never against another's (which a view 
 pose would not match), so each place a session passes gets a variant in its appearance, which the
 next session in that appearance then matches.
 
-Why mutual nearest neighbours of the stored descriptors rather than the loop chain: the question
-is whether the map would recognise this view from what it keeps, and the share of mutual matches
-between two views of one place falls with the change of appearance (the table in
-docs/multisession.md gives the measured figures); the chain's geometric checks answer another
-question (is this the same place), which the poses already answer here.
+Why mutual nearest neighbours of the stored descriptors first: the question is whether the map
+would recognise this view from what it keeps, and the share of mutual matches between two views
+of one place falls with the change of appearance (the table in docs/multisession.md gives the
+measured figures). Why the pose check after it: a share does not say the matches agree with one
+pose; night descriptors are less distinctive, and a night view a metre off its place's night view
+shares a third of its descriptors with it yet gets no pose from it. The check runs only for the
+pair the share rule picked; where either view has no 3-D points (a monocular map) the share rule
+decides alone.
 """
 from __future__ import annotations
 
@@ -53,15 +59,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .place_geometry import Localises, View
+
 NEW_PLACE, VARIANT, REDUNDANT, RICHER = "place", "variant", "redundant", "richer"
 MATCH_COS = 0.75  # float descriptors (unit rows): mutual nearest neighbours at least this cosine apart
 MATCH_HAMMING = 64  # binary descriptors (ORB, 256 bits): at most this many bits apart
 
 
-def mutual_matches(a: np.ndarray, b: np.ndarray) -> int:
-    """Descriptors of ``a`` and ``b`` that are each other's nearest neighbour within the matching distance."""
+def mutual_pairs(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rows of ``a`` and of ``b`` that are each other's nearest neighbour within the matching distance."""
     if len(a) == 0 or len(b) == 0:
-        return 0
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
     if a.dtype == np.uint8:  # binary: Hamming distances from the bits
         A, B = np.unpackbits(a, axis=1).astype(np.float32), np.unpackbits(b, axis=1).astype(np.float32)
         dist = A @ (1 - B).T + (1 - A) @ B.T
@@ -71,8 +79,13 @@ def mutual_matches(a: np.ndarray, b: np.ndarray) -> int:
         sim = np.asarray(a, np.float32) @ np.asarray(b, np.float32).T
         fwd, back = sim.argmax(1), sim.argmax(0)
         good = sim[np.arange(len(a)), fwd] >= MATCH_COS
-    mutual = back[fwd] == np.arange(len(a))
-    return int(np.count_nonzero(mutual & good))
+    rows = np.flatnonzero((back[fwd] == np.arange(len(a))) & good)
+    return rows, fwd[rows]
+
+
+def mutual_matches(a: np.ndarray, b: np.ndarray) -> int:
+    """How many descriptors of ``a`` and ``b`` are each other's nearest neighbour (:func:`mutual_pairs`)."""
+    return len(mutual_pairs(a, b)[0])
 
 
 def match_ratio(a: np.ndarray, b: np.ndarray) -> float:
@@ -103,6 +116,9 @@ class Kept:
     last_used: int
     descriptors: Callable[[], np.ndarray]
     appearance: int = 0
+    # keypoints, 3-D points and camera (:mod:`slam_lcd.map.place_geometry`), read only when a pair is checked;
+    # None: no geometry (the share rule decides alone)
+    view: Callable[[], View | None] | None = None
 
 
 @dataclass
@@ -116,6 +132,7 @@ class Verdicts:
     used: set[int] = field(default_factory=set)  # kept kf ids matched now (their last_used becomes now)
     evicted: list[int] = field(default_factory=list)  # kept kf ids no longer kept (a full place's oldest variant)
     # (a replaced or evicted keyframe of the same append: status redundant, and out of ``place``)
+    reason: dict[int, str] = field(default_factory=dict)  # new kf id -> why it is a variant the share rule dropped
     appearance: int = 0  # the appearance the session was judged in
     new_appearance: bool = False  # one the map did not hold (map.appearance_share)
 
@@ -149,6 +166,10 @@ class Ratios:
         appearance does not depend on how many descriptors each found; a dim view of the day is still
         the day, and only the descriptors it has can say so."""
         return max(self.shares(a, desc_a, b, desc_b))
+
+    def decoded(self, kf_id: int, desc: Callable[[], np.ndarray]) -> np.ndarray:
+        """A keyframe's descriptors, decoded once."""
+        return self._of(kf_id, desc)
 
     def _of(self, kf_id: int, desc: Callable[[], np.ndarray]) -> np.ndarray:
         if kf_id not in self._decoded:
@@ -198,23 +219,26 @@ def appearance_of(known: dict[int, float], own: float | None, kept: list[Kept], 
 
 
 def judge(new: list[New], component: int, kept: list[Kept], conf, now: int, next_place: int,
-          appearance: int = 0, ratios: Ratios | None = None) -> Verdicts:
+          appearance: int = 0, ratios: Ratios | None = None, views: dict[int, Callable[[], View | None]] | None = None,
+          localises: Localises | None = None) -> Verdicts:
     """Judge the new keyframes ``(kf id, camera pose in the map frame, descriptors)`` in order (module docstring).
 
     ``kept``: the map's kept keyframes (changed in place: new kept keyframes are added, replaced and
     evicted ones removed); ``now``: the append's generation (what ``last_used`` records);
     ``next_place``: the first free place id; ``appearance``: the appearance the session is judged in
-    (:func:`appearance_of`): its keyframes are redundant only against kept keyframes of it.
+    (:func:`appearance_of`): its keyframes are redundant only against kept keyframes of it; ``views``:
+    the new keyframes' keypoints and 3-D points, ``localises``: the pose check with the ``lcd`` settings
+    (:mod:`slam_lcd.map.place_geometry`; default ones when not given).
     """
     out = Verdicts(appearance=appearance)
-    ratios = ratios or Ratios()
+    ratios, check = ratios or Ratios(), localises or Localises()
     for kf_id, T, desc in new:
-        next_place = _place_view(Kept(kf_id, T, component, -1, now, desc, appearance), kept, conf, ratios, out,
-                                 next_place)
+        v = Kept(kf_id, T, component, -1, now, desc, appearance, (views or {}).get(kf_id))
+        next_place = _place_view(v, kept, conf, ratios, check, out, next_place)
     return out
 
 
-def prune(views: list[Kept], conf, ratios: Ratios | None = None) -> Verdicts:
+def prune(views: list[Kept], conf, ratios: Ratios | None = None, localises: Localises | None = None) -> Verdicts:
     """Views a map keeps already, with their records (place, appearance, last use), less what the rules
     drop now: each, in the order they were added, judged as :func:`judge` judges a new keyframe against
     the ones before it that stay, in its own appearance (``views`` changed in place).
@@ -225,19 +249,21 @@ def prune(views: list[Kept], conf, ratios: Ratios | None = None) -> Verdicts:
     appearance and last use; one that a view before it holds (or that a richer view before it replaces)
     hands its last use on to that view, so the place's record of use stays."""
     out = Verdicts()
-    ratios = ratios or Ratios()
+    ratios, check = ratios or Ratios(), localises or Localises()
     kept: list[Kept] = []
     for v in views:
-        _place_view(v, kept, conf, ratios, out, -1)
+        _place_view(v, kept, conf, ratios, check, out, -1)
     views[:] = kept
     return out
 
 
-def _place_view(v: Kept, kept: list[Kept], conf, ratios: Ratios, out: Verdicts, next_place: int) -> int:
+def _place_view(v: Kept, kept: list[Kept], conf, ratios: Ratios, check: Localises, out: Verdicts,
+                next_place: int) -> int:
     """Judge one view against ``kept`` (changed in place), record the verdict in ``out``; the next free place id.
 
     A view with a place (``v.place >= 0``, :func:`prune`) keeps it when it stays as a new place or variant;
-    one without (:func:`judge`) gets a new place, or the nearest kept view's."""
+    one without (:func:`judge`) gets a new place, or the nearest kept view's. Redundant or richer only when
+    the view that stays localises the one that goes (:func:`_unlocalised`); otherwise a variant."""
     near = _near(v.T_map_camera, v.component, kept, conf.place_radius_m, np.cos(np.radians(conf.place_angle_deg)))
     if not near:
         if v.place < 0:
@@ -247,24 +273,47 @@ def _place_view(v: Kept, kept: list[Kept], conf, ratios: Ratios, out: Verdicts, 
     alike = [k for k in near if k.appearance == v.appearance][:max(1, int(conf.place_compare))]
     shares = [ratios.shares(v.kf_id, v.descriptors, k.kf_id, k.descriptors) for k in alike]
     of_new, of_kept = [s[0] for s in shares], [s[1] for s in shares]
+    why = ""
     if of_new and max(of_new) >= conf.redundant_match_ratio:  # the kept view holds this one
         match = alike[int(np.argmax(of_new))]
-        match.last_used = max(match.last_used, v.last_used)
-        out.status[v.kf_id], out.matched[v.kf_id] = REDUNDANT, match.kf_id
-        out.used.add(match.kf_id)
-        return next_place
-    if of_kept and max(of_kept) >= conf.redundant_match_ratio:  # this view holds the kept one, and more
+        why = _unlocalised(match, v, ratios, check)
+        if not why:
+            match.last_used = max(match.last_used, v.last_used)
+            out.status[v.kf_id], out.matched[v.kf_id] = REDUNDANT, match.kf_id
+            out.used.add(match.kf_id)
+            return next_place
+    elif of_kept and max(of_kept) >= conf.redundant_match_ratio:  # this view holds the kept one, and more
         poor = alike[int(np.argmax(of_kept))]
-        v.place, v.last_used = poor.place, max(poor.last_used, v.last_used)
-        kept[kept.index(poor)] = v
-        out.status[v.kf_id], out.place[v.kf_id], out.replaced[v.kf_id] = RICHER, v.place, poor.kf_id
-        out.matched.update({q: v.kf_id for q, m in out.matched.items() if m == poor.kf_id})
-        _dropped(poor, out)
-        return next_place
+        why = _unlocalised(v, poor, ratios, check)
+        if not why:
+            v.place, v.last_used = poor.place, max(poor.last_used, v.last_used)
+            kept[kept.index(poor)] = v
+            out.status[v.kf_id], out.place[v.kf_id], out.replaced[v.kf_id] = RICHER, v.place, poor.kf_id
+            out.matched.update({q: v.kf_id for q, m in out.matched.items() if m == poor.kf_id})
+            _dropped(poor, out)
+            return next_place
     if v.place < 0:
         v.place = near[0].place
+    if why:
+        out.reason[v.kf_id] = why
     _keep(v, kept, VARIANT, conf, out)
     return next_place
+
+
+def _unlocalised(stays: Kept, goes: Kept, ratios: Ratios, check: Localises) -> str:
+    """Why view ``stays`` would not localise view ``goes`` (the loop chain's pose stage on their mutual
+    matches, :mod:`slam_lcd.map.place_geometry`); '' when it would, or when either has no 3-D points.
+
+    Why: ``goes`` keeps only its pose, and a log passing there is localised by ``stays`` alone. A share of
+    look-alike descriptors (a night view a metre off) gives matches but no pose; only a pose says the kept
+    view serves that spot. Run for the one pair the share rule picked: a pose costs more than a share."""
+    c = check.check(stays.kf_id, stays.view, goes.kf_id, goes.view,
+                    lambda: mutual_pairs(ratios.decoded(goes.kf_id, goes.descriptors),
+                                         ratios.decoded(stays.kf_id, stays.descriptors)))
+    if c is None or c.ok:
+        return ""
+    return (f"view {stays.kf_id} would not localise view {goes.kf_id}: {c.reason} "
+            f"({c.inliers} PnP inliers of {c.matches} mutual matches)")
 
 
 def _keep(v: Kept, kept: list[Kept], status: str, conf, out: Verdicts) -> None:

@@ -292,7 +292,7 @@ class Map:
         if self.conf.lifelong:  # keep places and variants, not every keyframe (slam_lcd.map.lifelong)
             table = [dict(m) for m in self.manifest.sessions]
             after, changed, graph = reduce_append(table, self.sessions, self.graph, graph, result, meta, sess, loops,
-                                                  self.conf)
+                                                  self.conf, getattr(pipeline.detector, "conf", None))
             sess = after[-1]
             for i in changed - {len(self.sessions)}:
                 self._rewritten[table[i]["name"]] = after[i]
@@ -329,16 +329,17 @@ class Map:
             return None
         return state if len(kept) == len(expected) else keep_only(state, kept)
 
-    def compact(self) -> dict:
+    def compact(self, lcd_conf=None) -> dict:
         """Keep places and variants, not every keyframe (in memory: :meth:`save` commits it); a map that keeps
-        places already keeps its records (:func:`slam_lcd.map.lifelong.compact`). Returns the map's counts
-        (:func:`slam_lcd.map.lifelong.counts`) before and after."""
+        places already keeps its records (:func:`slam_lcd.map.lifelong.compact`); ``lcd_conf``: the loop
+        chain's settings whose pose stage says whether a kept view would localise another (default ones).
+        Returns the map's counts (:func:`slam_lcd.map.lifelong.counts`) before and after."""
         if self._lock is None:
             raise MapError("the map was opened read-only: open it with write=True to compact it", self.root)
 
         before = counts(self.graph, self.sessions)
         after, changed, graph = compact(self.manifest.sessions, self.sessions, self.graph, self.poses(),
-                                        existing_loops(self.sessions, self.graph), self.conf)
+                                        existing_loops(self.sessions, self.graph), self.conf, lcd_conf)
         state = read_vocab(self.root, self.manifest) if self.manifest.vocab_file else None
         self.sessions, self.graph = after, graph
         self._rewritten.update({self.manifest.sessions[i]["name"]: after[i] for i in changed})
