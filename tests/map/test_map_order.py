@@ -148,3 +148,21 @@ def test_a_kept_verdict_that_a_later_session_contradicts_is_judged_again_and_und
     assert not any(state[(lp.query, lp.match)][0] for lp in wrong)
     rec = record(d[("s0", "s1")], results[2].rule)
     assert rec["status"] == "re-judged"
+
+
+def test_a_map_written_without_own_estimates_gets_them_from_each_sessions_odometry_and_own_loops(world):
+    """Sessions of a map that did not record ``T_own``: their own estimate is solved from the session alone
+    (its odometry and its own accepted loops), so the verdicts read no pose of another session."""
+    from slam_lcd.map.session_graph import own_estimate
+
+    sessions, _ = world
+    s = copy.deepcopy(sessions["s0"])
+    gt = _route(60, 3)
+    closing = [JointLoop(int(s.ids[j]), int(s.ids[i]), inv(gt[i]) @ gt[j], INFO, False, True, "ok")
+               for i, j in ((0, 48), (1, 49), (12, 36))]
+    alone = own_estimate(s, [])
+    np.testing.assert_allclose(alone, s.T_odom, atol=1e-9)
+    own = own_estimate(s, closing)
+    err = [np.linalg.norm((inv(own[i]) @ own[j])[:3, 3] - (inv(gt[i]) @ gt[j])[:3, 3]) for i, j in ((0, 48), (1, 49))]
+    drift = np.linalg.norm((inv(s.T_odom[0]) @ s.T_odom[48])[:3, 3] - (inv(gt[0]) @ gt[48])[:3, 3])
+    assert max(err) < 0.1 * drift and max(err) < 0.05, (err, drift)
