@@ -7,7 +7,7 @@ keyframe's keypoints anyway, so the run writes them as they are when it ends.
 
 Why this form: pixel coordinates as ``uint16`` in quarter pixels (:data:`QUARTER`; 4 bytes a
 keypoint, exact to 0.125 px, images up to 16,383 px wide), rows of all keyframes concatenated
-with an offset per keyframe, deflated (``numpy.savez_compressed``). On the demo log at 640x480
+with an offset per keyframe, deflated (:func:`slam_lcd.files.npz.write_npz`). On the demo log at 640x480
 with ORB (670 keypoints per keyframe) that is 1.9 kB per keyframe; 1,000 keypoints spread over
 the whole image take 3.3 kB, written in about 1.5 ms per keyframe.
 
@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..files.npz import write_npz
 
 KEYPOINTS_FILE = "keyframe_keypoints.npz"
 QUARTER = 4.0  # stored value = round(pixel * QUARTER)
@@ -46,7 +47,7 @@ def write_keyframe_keypoints(path: Path, stamps: np.ndarray, kps: list[np.ndarra
     offsets = np.concatenate([[0], np.cumsum([len(r) for r in rows])]).astype(np.int64)
     xy = np.round(np.concatenate(rows) * QUARTER).astype(np.uint16) if rows else np.zeros((0, 2), np.uint16)
     with open(path, "wb") as fh:
-        np.savez_compressed(fh, stamps=np.asarray(stamps, np.int64), offsets=offsets, xy=xy.reshape(-1, 2))
+        write_npz(fh, {"stamps": np.asarray(stamps, np.int64), "offsets": offsets, "xy": xy.reshape(-1, 2)})
 
 
 def read_keyframe_keypoints(path: Path) -> dict[int, np.ndarray]:
