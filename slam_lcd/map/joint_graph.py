@@ -49,12 +49,11 @@ from .config import MapConfig
 from .joins import recheck
 from .joint_types import JOINED, LINK, JointLoop, JointResult, PairDecision, SessionPoses
 from .pcm import SessionChains
-from .session_factors import ODOM_SIGMAS, between, information_noise, odometry_covariance
+from .session_factors import between
 
 log = logging.getLogger(__name__)
 
-__all__ = ["LINK", "ODOM_SIGMAS", "JointLoop", "JointResult", "PairDecision", "SessionPoses", "information_noise",
-           "odometry_covariance", "solve", "solve_lm"]
+__all__ = ["LINK", "JointLoop", "JointResult", "PairDecision", "SessionPoses", "solve", "solve_lm"]
 
 
 def solve_lm(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values) -> gtsam.Values:
@@ -150,18 +149,11 @@ def _joint_graph(sessions, graphs: pv.SessionGraphs, joins, comp, init) -> gtsam
 def _rejudge(against, sessions, graphs, joins, decisions, comp, init, chains, conf, p_inlier) -> list:
     """Judge the contradicted pairs again in the joint graph: their loops as GNC candidates (the rest known
     inliers), then the join rules on the survivors. Returns the pairs undone (removed from ``joins``)."""
-    cands = []
-    for pair in against:
-        for lp in joins[pair]:
-            if lp.accepted or lp.reason.startswith("gnc"):
-                lp.accepted = True
-                cands.append(lp)
-    for pair in against:  # the candidates leave the known graph while they are judged
-        for lp in joins[pair]:
-            lp.accepted = False
-    known = _joint_graph(sessions, graphs, joins, comp, init)
+    cands = [lp for pair in against for lp in joins[pair] if lp.accepted or lp.reason.startswith("gnc")]
     for lp in cands:
         lp.accepted = True
+    others = {p: g for p, g in joins.items() if p not in against}  # the candidates are not known inliers
+    known = _joint_graph(sessions, graphs, others, comp, init)
     pv.gnc_check(known, cands, chains, pv.values_of(init), p_inlier)
     undone = []
     for pair in against:

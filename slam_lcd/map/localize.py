@@ -52,7 +52,8 @@ from ..geometry import inv, rotation_angle_deg
 from ..types import LoopClosure, Trajectory
 from .config import MapConfig
 from .contents import MapError
-from .joint_graph import information_noise, odometry_covariance, solve_lm
+from .joint_graph import solve_lm
+from .session_factors import information_noise, odometry_covariance
 
 NEIGHBOURS = 10  # keyframes either side whose fixes may confirm a fix
 # fixes this close along the log (or within NEIGHBOURS keyframes) that agree are one group: near
