@@ -129,7 +129,7 @@ def section_orders(args) -> None:
     print(f"demo sessions 1-3, {args.size}, {args.features}: their sessions and loops in all six orders")
     m = _append_all((1, 2, 3), logs, cfg, work / "runs_orders", "123")
     loops = [fresh(lp) for lp in existing_loops(m.sessions, m.graph)]
-    poses = session_poses(m.manifest.sessions, m.sessions, {}, loops)
+    poses = session_poses(m.manifest.sessions, m.sessions, {}, loops, cfg.map)
     sessions = {p.name: p for p in poses}
     gt = {int(k): T for s in m.sessions for k, T in zip(s.ids, s.T_gt, strict=True)}
     name_of = {int(k): p.name for p in poses for k in p.ids}

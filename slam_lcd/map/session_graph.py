@@ -11,9 +11,9 @@ import numpy as np
 from ..geometry import inv
 from .config import MapConfig
 from .contents import MapGraph, SessionKeyframes
-from .joint_graph import JointLoop, SessionPoses, information_noise, odometry_covariance, solve_lm
+from .joint_graph import JointLoop, SessionPoses, solve_lm
 from .joint_types import is_link
-from .session_factors import between, odometry_factors
+from .session_factors import between, information_noise, odometry_covariance, odometry_factors
 
 BUILTIN_VO = "visual odometry (built in)"  # a session's odometry source when slam-lcd's own VO made it
 
@@ -34,15 +34,16 @@ def existing_loops(sessions: list[SessionKeyframes], graph: MapGraph) -> list[Jo
     return out
 
 
-def own_estimate(s: SessionPoses, loops: list[JointLoop]) -> np.ndarray:
+def own_estimate(s: SessionPoses, loops: list[JointLoop], conf: MapConfig | None = None) -> np.ndarray:
     """(n, 4, 4) a session's own estimate where the map did not record it: its odometry and its own accepted loops
-    and links (``loops``: within the session), solved alone in its odometry frame."""
+    and links (``loops``: within the session), solved alone in its odometry frame (``conf``: the map's settings,
+    for the allowance of modelled steps)."""
     import gtsam
 
     graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
     for i, k in enumerate(s.ids):
         values.insert(int(k), gtsam.Pose3(s.T_odom[i]))
-    for f in odometry_factors(s, MapConfig()):
+    for f in odometry_factors(s, conf or MapConfig()):
         graph.add(f)
     graph.add(gtsam.PriorFactorPose3(int(s.ids[0]), gtsam.Pose3(s.T_odom[0]),
                                      gtsam.noiseModel.Diagonal.Sigmas(np.full(6, 1e-6))))
@@ -56,7 +57,7 @@ def own_estimate(s: SessionPoses, loops: list[JointLoop]) -> np.ndarray:
 
 
 def session_poses(table: list[dict], sessions: list[SessionKeyframes], poses: dict[int, np.ndarray],
-                  loops: list[JointLoop] | None = None) -> list[SessionPoses]:
+                  loops: list[JointLoop] | None = None, conf: MapConfig | None = None) -> list[SessionPoses]:
     """Each session with its best-known poses (the map frame's where the map has them), component and own estimate
     (recorded, else :func:`own_estimate` from ``loops``, the map's loops)."""
     out = []
@@ -69,7 +70,7 @@ def session_poses(table: list[dict], sessions: list[SessionKeyframes], poses: di
         T = np.array([poses[int(k)] for k in s.ids]) if poses else s.T_odom.copy()
         sp = SessionPoses(meta["name"], s.ids, s.T_odom, s.cov, T.reshape(-1, 4, 4), int(meta["component"]),
                           odometry_independent=odometry_independent(meta), cov_modelled=s.cov_modelled())
-        sp.T_own = s.T_own if s.T_own is not None else own_estimate(sp, own.get(si, []))
+        sp.T_own = s.T_own if s.T_own is not None else own_estimate(sp, own.get(si, []), conf)
         out.append(sp)
     return out
 

@@ -264,7 +264,7 @@ class Map:
             loops.append(JointLoop(int(c.query_id), int(c.match_id), np.asarray(c.T_match_query, float),
                                    np.asarray(c.information, float), True, False, ""))
         sess.T_own = np.asarray(own.poses, float).reshape(-1, 4, 4)
-        sessions = session_poses(self.manifest.sessions, self.sessions, self.poses(), loops)
+        sessions = session_poses(self.manifest.sessions, self.sessions, self.poses(), loops, self.conf)
         sessions.append(SessionPoses(name, sess.ids, sess.T_odom, sess.cov, sess.T_own, None,
                                      odometry_independent=odometry_independent(extra or {}),
                                      cov_modelled=sess.cov_modelled(), T_own=sess.T_own))
