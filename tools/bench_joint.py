@@ -21,6 +21,7 @@ import statistics
 import time
 
 import numpy as np
+from bench_pcm import session as noisy_session  # tools/ is the script's folder
 
 from slam_lcd.geometry import inv, make_T, se3_exp, so3_exp
 from slam_lcd.map.joint_graph import JointLoop, SessionPoses, solve
@@ -42,13 +43,11 @@ def route(n: int, seed: int) -> np.ndarray:
 
 
 def session(name: str, gt: np.ndarray, first: int, rng) -> SessionPoses:
-    L = np.linalg.cholesky(STEP_COV)
-    odo = [np.eye(4)]
-    for i in range(1, len(gt)):
-        odo.append(odo[-1] @ inv(gt[i - 1]) @ gt[i] @ se3_exp(L @ rng.normal(size=6)))
-    o = np.array(odo)
-    return SessionPoses(name, np.arange(first, first + len(gt)), o, np.repeat(STEP_COV[None], len(gt), 0), o.copy(),
-                        T_own=o.copy())
+    """Odometry noised by the covariance it reports (:func:`bench_pcm.session`), its own estimate recorded: the
+    placed sessions' ``T_init`` become map poses, and the verdicts read ``T_own``."""
+    s = noisy_session(name, gt, first, rng, STEP_COV)
+    s.T_own = s.T_odom.copy()
+    return s
 
 
 def world(n_sessions: int, keyframes: int, n_loops: int, seed: int):

@@ -48,14 +48,14 @@ def route(n: int, rng) -> np.ndarray:
     return np.array(T)
 
 
-def session(name: str, gt: np.ndarray, first_id: int, rng) -> SessionPoses:
-    """Odometry noised by exactly the covariance the session reports for each step."""
-    L = np.linalg.cholesky(STEP_COV)
+def session(name: str, gt: np.ndarray, first_id: int, rng, step_cov: np.ndarray = STEP_COV) -> SessionPoses:
+    """Odometry noised by exactly the covariance the session reports for each step (``step_cov``)."""
+    L = np.linalg.cholesky(step_cov)
     odo = [np.eye(4)]
     for i in range(1, len(gt)):
         odo.append(odo[-1] @ inv(gt[i - 1]) @ gt[i] @ se3_exp(L @ rng.normal(size=6)))
     o = np.array(odo)
-    return SessionPoses(name, np.arange(first_id, first_id + len(gt)), o, np.repeat(STEP_COV[None], len(gt), 0),
+    return SessionPoses(name, np.arange(first_id, first_id + len(gt)), o, np.repeat(step_cov[None], len(gt), 0),
                         o.copy())
 
 

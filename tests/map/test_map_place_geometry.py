@@ -13,6 +13,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from test_map_lifelong import _pose  # tests/ is on sys.path (pytest rootdir import)
 
 from slam_lcd.geometry import inv
 from slam_lcd.map.config import MapConfig
@@ -24,14 +25,6 @@ from slam_lcd.map.places import REDUNDANT, RICHER, VARIANT, Kept, judge, prune
 from slam_lcd.types import CameraModel
 
 CAM = CameraModel(320, 240, 200.0, 200.0, 160.0, 120.0)
-
-
-def _pose(x: float, yaw_deg: float = 0.0) -> np.ndarray:
-    a = np.radians(yaw_deg)
-    T = np.eye(4)
-    T[:3, :3] = [[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]]
-    T[0, 3] = x
-    return T
 
 
 def _unit(rows: np.ndarray) -> np.ndarray:
