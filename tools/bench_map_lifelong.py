@@ -10,8 +10,8 @@ appearance variants) and ``map.lifelong=false`` (every keyframe kept). Held-out 
 state, are localised against both maps; the renovated one also against the lifelong map as it was
 before the renovated session (the state unseen).
 
-Printed, with the targets beside them: kept and total keyframes and bytes on disk after sessions 3
-and 20 (ratio 20/3); append wall time per keyframe of sessions 3 and 20 (median of ``--cost-repeats``
+Printed, with the targets beside them: kept and total keyframes, the joint graph's variables and
+factors, and bytes on disk after sessions 3 and 20 (ratio 20/3); append wall time per keyframe of sessions 3 and 20 (median of ``--cost-repeats``
 appends, each to a copy of the map it met; features cached for all, so the cost is the map's);
 ``Map.open`` + loop detector ready after 3 and 20 (median of ``--load-repeats`` fresh processes);
 every session's ATE in the map frame against its odometry's, false loops between sessions; the
@@ -117,15 +117,16 @@ def append(root: Path, log: Path, out: Path, cfg, extractor, meta, name: str) ->
 
 
 def contents(root: Path) -> dict:
-    """Kept and total keyframes, places and bytes on disk of the map at ``root``, from its arrays."""
+    """Kept and total keyframes, places, the joint graph's variables and factors, and bytes on disk of the map at
+    ``root``, from its arrays."""
+    from slam_lcd.map.lifelong import counts
     from slam_lcd.map.session_map import Map
 
     m = Map.open(root)
-    kept = int(sum(int(np.count_nonzero(s.kept())) for s in m.sessions))
-    place = m.graph.kf_place
-    places = len({int(p) for p in place if p >= 0}) if place is not None else kept
+    c = counts(m.graph, m.sessions)
     size = sum(p.stat().st_size for p in root.rglob("*") if p.is_file() and p.name != ".lock")
-    return {"kept": kept, "total": int(m.n_keyframes), "places": places, "bytes": int(size)}
+    return {"kept": c["kept_keyframes"], "total": c["keyframes"], "places": c["places"], "bytes": int(size),
+            "variables": c["graph_variables"], "factors": c["graph_factors"]}
 
 
 def ready_time(root: Path, repeats: int) -> float:
@@ -212,6 +213,8 @@ def report_map(label: str, r: dict) -> None:
           f"(ratio {cb['total'] / ca['total']:.2f})")
     print(_ratio_line("stored (kept) keyframes", ca["kept"], cb["kept"], 1.5, "d"))
     print(_ratio_line("bytes on disk (MB)", ca["bytes"] / 1e6, cb["bytes"] / 1e6, 1.5, ".1f"))
+    print(_ratio_line("joint graph variables", ca["variables"], cb["variables"], 1.5, "d"))
+    print(_ratio_line("joint graph factors", ca["factors"], cb["factors"], 1.5, "d"))
     print(_ratio_line("append cost (ms per keyframe)", 1e3 * r["cost"][a], 1e3 * r["cost"][b], 1.3, ".1f"))
     print(_ratio_line("Map.open + detector ready (s)", r["ready"][a], r["ready"][b], 1.5, ".2f"))
     worst = 0.0

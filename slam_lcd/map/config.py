@@ -96,3 +96,7 @@ class MapConfig:
     # kept keyframes (appearance variants) of one place at most; a new one beyond that evicts the
     # variant matched longest ago, first of its own appearance, then of one the place holds twice
     max_variants: int = ranged(4, "[1, inf)")
+    # a lifelong map folds its dropped keyframes out of the joint graph (slam_lcd.map.fold) once every
+    # loop touching them was made this many appends ago (a later contradiction can still judge a recent
+    # pair's loops again); 0: never fold, the graph keeps a variable per keyframe of every visit
+    fold_after_appends: int = ranged(3, "[0, inf)")

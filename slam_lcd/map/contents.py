@@ -150,9 +150,16 @@ class MapGraph:
     # each kept keyframe's appearance (slam_lcd.map.places: sessions that look alike share one; -1: not
     # kept); None: a map without it, whose kept keyframes are all of one appearance
     kf_appearance: np.ndarray | None = None  # (N,) int64
+    # the keyframes folded out of the joint graph (slam_lcd.map.fold: no variable, their factors marginalised
+    # into "fold" loops; the pose is derived from their session's variables); None: none folded
+    kf_folded: np.ndarray | None = None  # (N,) bool
 
     ARRAYS = ("kf_ids", "T_map", "loop_query", "loop_match", "loop_T", "loop_info", "loop_accepted", "loop_reason")
-    OPTIONAL = ("kf_place", "kf_last_used", "kf_appearance")
+    OPTIONAL = ("kf_place", "kf_last_used", "kf_appearance", "kf_folded")
+
+    def folded_ids(self) -> set[int]:
+        """The ids of the keyframes folded out of the joint graph."""
+        return set() if self.kf_folded is None else {int(k) for k in self.kf_ids[np.asarray(self.kf_folded, bool)]}
 
     def arrays(self) -> dict[str, np.ndarray]:
         """Every array to write (the optional ones where present), in the file's compact forms.

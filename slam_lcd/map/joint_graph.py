@@ -46,8 +46,9 @@ from ..backend.poses import levenberg_marquardt
 from ..geometry import inv
 from . import pair_verdicts as pv
 from .config import MapConfig
+from .fold import fill_folded
 from .joins import recheck
-from .joint_types import JOINED, LINK, JointLoop, JointResult, PairDecision, SessionPoses
+from .joint_types import FOLD, JOINED, LINK, JointLoop, JointResult, PairDecision, SessionPoses
 from .pcm import SessionChains
 from .session_factors import between
 
@@ -65,7 +66,7 @@ def _pairs(loops: list[JointLoop], chains: SessionChains) -> dict[tuple[int, int
     """The loops between sessions, by pair of sessions (a loop with both ends in one session is refused)."""
     by_pair: dict[tuple[int, int], list[JointLoop]] = {}
     for lp in loops:
-        if not lp.inter:
+        if not lp.inter or lp.reason == FOLD:
             continue
         s, t = chains.session_of(lp.query), chains.session_of(lp.match)
         if s == t:
@@ -75,12 +76,24 @@ def _pairs(loops: list[JointLoop], chains: SessionChains) -> dict[tuple[int, int
     return by_pair
 
 
+def _folded_between(loops: list[JointLoop], chains: SessionChains) -> dict[tuple[int, int], list[JointLoop]]:
+    """The folded factors between sessions, by pair of sessions: they join sessions as accepted loops do."""
+    out: dict[tuple[int, int], list[JointLoop]] = {}
+    for lp in loops:
+        if lp.inter and lp.reason == FOLD:
+            s, t = chains.session_of(lp.query), chains.session_of(lp.match)
+            out.setdefault((min(s, t), max(s, t)), []).append(lp)
+    return out
+
+
 def _earlier(pair: tuple[int, int], group: list[JointLoop], sessions: list[SessionPoses], judged: dict,
              rule: str) -> PairDecision | None:
-    """The pair's recorded verdict when it still holds: made under the same rules, on the same loops."""
+    """The pair's recorded verdict when it still holds: made under the same rules, on the same loops (less those
+    folded since: a folded pair's verdict stands)."""
     names = (sessions[pair[0]].name, sessions[pair[1]].name)
     rec = judged.get(names) or judged.get(names[::-1])
-    if rec is None or rec.get("rule") != rule or int(rec.get("offered", -1)) != len(group):
+    if rec is None or (rec.get("rule") != rule and not rec.get("folded")) \
+            or int(rec.get("offered", -1)) - int(rec.get("folded", 0)) != len(group):
         return None
     d = pv.from_record(rec)
     d.sessions = names
@@ -104,8 +117,14 @@ def solve(sessions: list[SessionPoses], loops: list[JointLoop], conf: MapConfig 
     rule = pv.rule_key(conf, gnc_inlier_probability)
     decisions: dict[tuple[int, int], PairDecision] = {}
     joins: dict[tuple[int, int], list[JointLoop]] = {}
-    for pair, group in sorted(_pairs(loops, chains).items()):
+    folded = _folded_between(loops, chains)
+    groups = _pairs(loops, chains)
+    for pair in folded:  # every raw loop of the pair folded: its verdict stands as recorded
+        groups.setdefault(pair, [])
+    for pair, group in sorted(groups.items()):
         d = _earlier(pair, group, sessions, judged or {}, rule)
+        if d is None and not group:
+            continue
         if d is None:
             for lp in group:
                 lp.accepted = False
@@ -114,46 +133,52 @@ def solve(sessions: list[SessionPoses], loops: list[JointLoop], conf: MapConfig 
         if d.decision == JOINED and any(lp.accepted for lp in group):
             joins[pair] = group
     while True:
-        comp, init = _components(sessions, joins, chains)
-        graph = _joint_graph(sessions, graphs, joins, comp, init)
+        comp, init = _components(sessions, joins, folded, chains)
+        graph = _joint_graph(sessions, graphs, joins, folded, comp, init)
         values = solve_lm(graph, pv.values_of(init))
         against = pv.contradicted(joins, values, gnc_inlier_probability)
         if not against:
             break
-        undone = _rejudge(against, sessions, graphs, joins, decisions, comp, init, chains, conf,
+        undone = _rejudge(against, sessions, graphs, joins, folded, decisions, comp, init, chains, conf,
                           gnc_inlier_probability)
         if not undone:
-            graph = _joint_graph(sessions, graphs, joins, comp, init)
+            graph = _joint_graph(sessions, graphs, joins, folded, comp, init)
             values = solve_lm(graph, values)
             break
-    poses = {int(k): values.atPose3(int(k)).matrix() for s in sessions for k in s.ids}
+    poses = {int(k): values.atPose3(int(k)).matrix() for s in sessions for k in s.ids[s.in_graph()]}
+    fill_folded(sessions, comp, poses)
     # a component that the solve left isolated keeps its first session's frame
     anchors = {s.name: poses[int(s.ids[0])] @ inv(s.T_odom[0]) for s in sessions}
     return JointResult(poses, {s.name: comp[si] for si, s in enumerate(sessions)}, anchors, list(loops),
                        [decisions[p] for p in sorted(decisions)], rule)
 
 
-def _joint_graph(sessions, graphs: pv.SessionGraphs, joins, comp, init) -> gtsam.NonlinearFactorGraph:
-    """Every session's known inliers, a prior per component, and the accepted loops of the joined pairs."""
+def _joint_graph(sessions, graphs: pv.SessionGraphs, joins, folded, comp, init) -> gtsam.NonlinearFactorGraph:
+    """Every session's known inliers, a prior per component, the accepted loops of the joined pairs and the
+    folded factors between sessions."""
     roots: dict[int, int] = {}
     for si in range(len(sessions)):
-        roots.setdefault(comp[si], si)
+        if sessions[si].in_graph().any():
+            roots.setdefault(comp[si], si)
     graph = graphs.known(list(range(len(sessions))), list(roots.values()), init)
     for group in joins.values():
         for lp in group:
             if lp.accepted:
                 graph.add(between(lp))
+    for group in folded.values():
+        for lp in group:
+            graph.add(between(lp))
     return graph
 
 
-def _rejudge(against, sessions, graphs, joins, decisions, comp, init, chains, conf, p_inlier) -> list:
+def _rejudge(against, sessions, graphs, joins, folded, decisions, comp, init, chains, conf, p_inlier) -> list:
     """Judge the contradicted pairs again in the joint graph: their loops as GNC candidates (the rest known
     inliers), then the join rules on the survivors. Returns the pairs undone (removed from ``joins``)."""
     cands = [lp for pair in against for lp in joins[pair] if lp.accepted or lp.reason.startswith("gnc")]
     for lp in cands:
         lp.accepted = True
     others = {p: g for p, g in joins.items() if p not in against}  # the candidates are not known inliers
-    known = _joint_graph(sessions, graphs, others, comp, init)
+    known = _joint_graph(sessions, graphs, others, folded, comp, init)
     pv.gnc_check(known, cands, chains, pv.values_of(init), p_inlier)
     undone = []
     for pair in against:
@@ -169,21 +194,25 @@ def _rejudge(against, sessions, graphs, joins, decisions, comp, init, chains, co
     return undone
 
 
-def _components(sessions, joins, chains) -> tuple[dict[int, int], dict[int, np.ndarray]]:
-    """Components of the joined sessions and initial values, breadth-first from each component's first session."""
+def _components(sessions, joins, folded, chains) -> tuple[dict[int, int], dict[int, np.ndarray]]:
+    """Components of the joined sessions (by accepted loops or folded factors) and initial values, breadth-first
+    from each component's first session."""
+    edges = {p: [lp for lp in g if lp.accepted] for p, g in joins.items()}
+    for p, g in folded.items():
+        edges[p] = edges.get(p, []) + g
     comp = {si: -1 for si in range(len(sessions))}
     init: dict[int, np.ndarray] = {}
     n_comp = 0
     for root in range(len(sessions)):
-        if comp[root] >= 0:
+        if comp[root] >= 0 or not sessions[root].in_graph().any():
             continue
         comp[root] = n_comp
         _place(sessions[root], np.eye(4), init)
         queue = [root]
         while queue:
             s = queue.pop(0)
-            for (p, q), group in sorted(joins.items()):
-                if s not in (p, q):
+            for (p, q), group in sorted(edges.items()):
+                if s not in (p, q) or not group:
                     continue
                 t = q if s == p else p
                 if comp[t] >= 0:
@@ -193,13 +222,17 @@ def _components(sessions, joins, chains) -> tuple[dict[int, int], dict[int, np.n
                 if prev is not None and prev == sessions[root].prev_component:  # together before too
                     _place(sessions[t], np.eye(4), init)
                 else:
-                    alive = [lp for lp in group if lp.accepted] or group
-                    _place(sessions[t], pv.alignment(alive, chains, init, t, sessions[t].T_init), init)
+                    _place(sessions[t], pv.alignment(group, chains, init, t, sessions[t].T_init), init)
                 queue.append(t)
         n_comp += 1
+    for si, s in enumerate(sessions):  # a session folded whole: in the component of its earlier one
+        if comp[si] < 0:
+            same = [comp[o] for o, x in enumerate(sessions) if comp[o] >= 0 and s.prev_component is not None
+                    and x.prev_component == s.prev_component]
+            comp[si] = same[0] if same else n_comp
+            n_comp += 0 if same else 1
     return comp, init
 
 
 def _place(s: SessionPoses, A: np.ndarray, init: dict[int, np.ndarray]) -> None:
-    for k, T in zip(s.ids, s.T_init, strict=True):
-        init[int(k)] = A @ T
+    init.update(s.graph_init(s.T_init, A))

@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 LINK = "link"  # the reason of a visual link between consecutive keyframes (not a loop)
+FOLD = "fold"  # the reason of a folded factor: dropped keyframes' factors marginalised (slam_lcd.map.fold)
 
 # the decision on one pair of sessions (PairDecision.decision)
 JOINED = "joined"
@@ -42,10 +43,21 @@ class SessionPoses:
     # never bent by other sessions' loops (what the pairwise test and the pair's own verdict read, so that a
     # verdict depends on the two sessions alone, not on the order of appends); None: ``T_init`` is it
     T_own: np.ndarray | None = None
+    # (n,) bool: the keyframes folded out of the joint graph (no variable; slam_lcd.map.fold); None: none
+    folded: np.ndarray | None = None
 
     def own(self) -> np.ndarray:
         """(n, 4, 4) the session's own estimate (:attr:`T_own`, else :attr:`T_init`)."""
         return np.asarray(self.T_own if self.T_own is not None else self.T_init, float)
+
+    def in_graph(self) -> np.ndarray:
+        """(n,) bool: the keyframes with a variable in the joint graph (not folded)."""
+        return np.ones(len(self.ids), bool) if self.folded is None else ~np.asarray(self.folded, bool)
+
+    def graph_init(self, T: np.ndarray, A: np.ndarray | None = None) -> dict[int, np.ndarray]:
+        """Initial values of the session's variables from its poses ``T`` (one per keyframe), moved by ``A``."""
+        live = self.in_graph()
+        return {int(k): (A @ P if A is not None else P) for k, P, ok in zip(self.ids, T, live, strict=True) if ok}
 
 
 @dataclass
@@ -85,6 +97,7 @@ class PairDecision:
     # an earlier verdict that the joint graph contradicted, judged again with every loop as a candidate
     status: str = "judged"
     recorded: str = ""  # a kept verdict's status when it was recorded ("judged" or "re-judged")
+    folded: int = 0  # loops of the pair folded out of the graph since (slam_lcd.map.fold); its verdict stands
 
 
 @dataclass

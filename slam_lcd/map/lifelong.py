@@ -10,8 +10,9 @@ for appends; ``Map.compact`` applies it to a map built without it, session by se
 order they were appended, as if each had been appended with it, and to a map that keeps places
 already from its records (:func:`compact`).
 
-What this does not reduce: the joint graph keeps a variable per keyframe (kept or not) and
-every loop and visual link, so its size still follows the keyframes of every visit.
+The joint graph follows: once the loops touching a dropped keyframe are settled, it is folded out
+of the graph (:func:`fold_graph`, :mod:`slam_lcd.map.fold`), so the graph's size follows the places
+and the last few visits, not every visit.
 """
 from __future__ import annotations
 
@@ -23,9 +24,11 @@ import numpy as np
 
 from ..lcd.config import LcdConfig
 from .contents import REMOVED, MapGraph, SessionKeyframes
+from .fold import FoldReport, fold, foldable
 from .keyframe_arrays import camera_from_json
 from .place_geometry import Localises, stored_view
 from .places import Kept, Ratios, Verdicts, appearance_of, familiarity, judge, prune
+from .session_graph import existing_loops, session_poses
 
 log = logging.getLogger(__name__)
 
@@ -176,6 +179,47 @@ def compact(table: list[dict], sessions: list[SessionKeyframes], graph: MapGraph
     return apply(kept, sessions, graph)
 
 
+def fold_graph(table: list[dict], sessions: list[SessionKeyframes], graph: MapGraph,
+               conf) -> tuple[MapGraph, FoldReport]:
+    """The map's graph with its settled dropped keyframes folded out (:mod:`slam_lcd.map.fold`), and what was
+    folded (``report.by_pair``: raw loops folded per pair of sessions, for the pairs' records). A map that keeps
+    every keyframe, or ``map.fold_after_appends`` 0: as it is."""
+    if not conf.fold_after_appends or graph.kf_place is None:
+        return graph, FoldReport()
+    poses = {int(k): T for k, T in zip(graph.kf_ids, graph.T_map, strict=True)}
+    loops = existing_loops(sessions, graph)
+    sp = session_poses(table, sessions, poses, loops, conf, graph.folded_ids())
+    drop = foldable(sp, loops, {si: ~s.kept() for si, s in enumerate(sessions)}, conf)
+    if not drop:
+        return graph, FoldReport()
+    loops, report = fold(sp, loops, poses, drop, conf)
+    log.info("folded %d keyframes out of the joint graph: %d raw loops and links removed, %d folded factors "
+             "(KL %.2f nats)", report.keyframes, report.removed, report.added, report.kl_nats)
+    folded = np.concatenate([s.folded if s.folded is not None else np.zeros(len(s.ids), bool) for s in sp])
+    order = {int(k): i for i, k in enumerate(np.concatenate([s.ids for s in sp]))}
+    out = replace(graph, kf_folded=folded[[order[int(k)] for k in graph.kf_ids]],
+                  loop_query=np.array([lp.query for lp in loops], np.int64),
+                  loop_match=np.array([lp.match for lp in loops], np.int64),
+                  loop_T=np.array([lp.T for lp in loops], float).reshape(-1, 4, 4),
+                  loop_info=np.array([lp.info for lp in loops], float).reshape(-1, 6, 6),
+                  loop_accepted=np.array([lp.accepted for lp in loops], bool),
+                  loop_reason=np.array([lp.reason for lp in loops], dtype="<U160"))
+    return out, report
+
+
+def count_folded(records: list, by_pair: dict[frozenset, int]) -> None:
+    """Add the loops folded per pair (``by_pair``) to the pairs' verdicts (``PairDecision`` or its record)."""
+    for r in records:
+        names = frozenset(r.sessions if hasattr(r, "sessions") else r["sessions"])
+        n = by_pair.get(names, 0)
+        if not n:
+            continue
+        if hasattr(r, "folded"):
+            r.folded += n
+        else:
+            r["folded"] = int(r.get("folded", 0)) + n
+
+
 def _used_by(loops, ids: set[int]) -> set[int]:
     """The keyframes outside ``ids`` that accepted loops between sessions match from a keyframe in ``ids``."""
     return {int(lp.match) if int(lp.query) in ids else int(lp.query) for lp in loops
@@ -190,13 +234,20 @@ def array_bytes(sessions: list[SessionKeyframes], graph: MapGraph, vocab: dict |
 
 
 def counts(graph: MapGraph, sessions: list[SessionKeyframes]) -> dict:
-    """Places, variants (kept keyframes beyond the first of their place), appearances and kept / total keyframes."""
+    """Places, variants (kept keyframes beyond the first of their place), appearances, kept / total keyframes, and
+    the joint graph's variables and factors (odometry steps between variables, accepted loops, links and folded
+    factors)."""
     kept = int(sum(int(s.kept().sum()) for s in sessions))
     total = int(sum(len(s) for s in sessions))
     places = len({int(p) for p in graph.kf_place if p >= 0}) if graph.kf_place is not None else kept
     looks = len({int(a) for a in graph.kf_appearance if a >= 0}) if graph.kf_appearance is not None else int(kept > 0)
+    gone = graph.folded_ids()
+    live = [np.array([int(k) not in gone for k in s.ids], bool) for s in sessions]
+    steps = sum(int((v[1:] & v[:-1]).sum()) for v in live)
     return {"places": places, "variants": kept - places, "appearances": looks, "kept_keyframes": kept,
-            "keyframes": total}
+            "keyframes": total, "graph_variables": int(sum(v.sum() for v in live)),
+            "graph_factors": steps + int(np.count_nonzero(graph.loop_accepted))}
 
 
-__all__ = ["apply", "compact", "counts", "judge_session", "kept_keyframes", "reduce_append", "strip"]
+__all__ = ["apply", "compact", "count_folded", "counts", "fold_graph", "judge_session", "kept_keyframes",
+           "reduce_append", "strip"]

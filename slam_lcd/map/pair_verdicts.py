@@ -69,6 +69,7 @@ def from_record(rec: dict) -> PairDecision:
     d = PairDecision(**{k: v for k, v in rec.items() if k in known})
     d.sessions, d.status = (str(rec["sessions"][0]), str(rec["sessions"][1])), KEPT
     d.recorded = str(rec.get("status") or "judged")
+    d.folded = int(rec.get("folded", 0))
     d.span_m = (float(rec["span_m"][0]), float(rec["span_m"][1]))
     spread = rec.get("span_deg") or (0.0, 0.0)
     d.span_deg = (float(spread[0]), float(spread[1]))
@@ -112,29 +113,31 @@ class SessionGraphs:
             si = chains.session_of(lp.query)
             (self.links if is_link(lp) else self.own).setdefault(si, []).append(lp)
 
+    def factors_of(self, si: int, links_known: bool = True) -> list:
+        """Session ``si``'s known-inlier factors: odometry steps between its variables (weighed with the accepted
+        links), own accepted loops and folded factors, the accepted links unless they are the candidates."""
+        s = self.sessions[si]
+        shared = frozenset(linked_steps(self.links.get(si, []), self.chains))
+        w = shared_weight(s)
+        if (si, shared) not in self._odometry:
+            weights = np.array([w if int(k) in shared else 1.0 for k in s.ids])
+            self._odometry[(si, shared)] = odometry_factors(s, self.chains.conf, weights)
+        out = list(self._odometry[(si, shared)])
+        out += [between(lp) for lp in self.own.get(si, []) if lp.accepted]
+        out += [between(lp, w) for lp in (self.links.get(si, []) if links_known else []) if lp.accepted]
+        return out
+
     def known(self, subset: list[int], roots: list[int], init: dict[int, np.ndarray],
               links_known: bool = True) -> gtsam.NonlinearFactorGraph:
-        """Known inliers of ``subset``: odometry (weighed with the accepted links), own accepted loops, the
-        accepted links unless they are the candidates (``links_known`` False); a tight prior at the first
-        keyframe of each session of ``roots``."""
+        """Known inliers of ``subset`` (:meth:`factors_of`); a tight prior at the first keyframe of each session
+        of ``roots``."""
         graph = gtsam.NonlinearFactorGraph()
         for si in subset:
-            s = self.sessions[si]
-            shared = frozenset(linked_steps(self.links.get(si, []), self.chains))
-            w = shared_weight(s)
-            if (si, shared) not in self._odometry:
-                weights = np.array([w if int(k) in shared else 1.0 for k in s.ids])
-                self._odometry[(si, shared)] = odometry_factors(s, self.chains.conf, weights)
-            for f in self._odometry[(si, shared)]:
+            for f in self.factors_of(si, links_known):
                 graph.add(f)
-            for lp in self.own.get(si, []):
-                if lp.accepted:
-                    graph.add(between(lp))
-            for lp in self.links.get(si, []) if links_known else []:
-                if lp.accepted:
-                    graph.add(between(lp, w))
         for si in roots:
-            k0 = int(self.sessions[si].ids[0])
+            s = self.sessions[si]
+            k0 = int(s.ids[np.argmax(s.in_graph())])  # its first variable
             tight = gtsam.noiseModel.Diagonal.Sigmas(np.full(6, 1e-6))
             graph.add(gtsam.PriorFactorPose3(k0, gtsam.Pose3(init[k0]), tight))
         return graph
@@ -179,7 +182,7 @@ def judge_links(si: int, graphs: SessionGraphs, chains: SessionChains, conf: Map
     cands = [lp for lp in links if lp.accepted]
     if cands:
         s = graphs.sessions[si]
-        init = {int(k): T for k, T in zip(s.ids, s.own(), strict=True)}
+        init = s.graph_init(s.own())
         known = graphs.known([si], [si], init, links_known=False)
         gnc_check(known, cands, chains, values_of(init), inlier_probability, "the session's own graph")
     return failed
@@ -212,9 +215,9 @@ def judge(pair: tuple[int, int], group: list[JointLoop], graphs: SessionGraphs, 
         return d
     p, q = pair
     sp, sq = graphs.sessions[p], graphs.sessions[q]
-    init = {int(k): T for k, T in zip(sp.ids, sp.own(), strict=True)}
+    init = sp.graph_init(sp.own())
     A = alignment(chosen, chains, init, q, sq.own())
-    init.update({int(k): A @ T for k, T in zip(sq.ids, sq.own(), strict=True)})
+    init.update(sq.graph_init(sq.own(), A))
     gnc_check(graphs.known([p, q], [p], init), chosen, chains, values_of(init), inlier_probability,
               "the two sessions' graph")
     recheck(d, pair, chosen, chains, conf)

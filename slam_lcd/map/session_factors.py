@@ -47,13 +47,17 @@ def odometry_covariances(s: SessionPoses, conf: MapConfig) -> np.ndarray:
 
 
 def odometry_factors(s: SessionPoses, conf: MapConfig, weights: np.ndarray | None = None) -> list:
-    """Session ``s``'s odometry steps as factors, step i's covariance divided by ``weights[i]`` (default 1)."""
+    """Session ``s``'s odometry steps between its variables as factors (a step to or from a folded keyframe has
+    none), step i's covariance divided by ``weights[i]`` (default 1)."""
+    live = s.in_graph()
+    both = np.flatnonzero(live[1:] & live[:-1]) + 1
+    if not len(both):
+        return []
     covs = odometry_covariances(s, conf)
     w = np.ones(len(s.ids)) if weights is None else weights
     steps = inv(s.T_odom[:-1]) @ s.T_odom[1:]
     return [gtsam.BetweenFactorPose3(int(s.ids[i - 1]), int(s.ids[i]), gtsam.Pose3(steps[i - 1]),
-                                     gtsam.noiseModel.Gaussian.Covariance(covs[i] / w[i]))
-            for i in range(1, len(s.ids))]
+                                     gtsam.noiseModel.Gaussian.Covariance(covs[i] / w[i])) for i in both]
 
 
 def between(lp: JointLoop, scale: float = 1.0) -> gtsam.BetweenFactorPose3:

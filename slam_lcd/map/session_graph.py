@@ -57,9 +57,10 @@ def own_estimate(s: SessionPoses, loops: list[JointLoop], conf: MapConfig | None
 
 
 def session_poses(table: list[dict], sessions: list[SessionKeyframes], poses: dict[int, np.ndarray],
-                  loops: list[JointLoop] | None = None, conf: MapConfig | None = None) -> list[SessionPoses]:
-    """Each session with its best-known poses (the map frame's where the map has them), component and own estimate
-    (recorded, else :func:`own_estimate` from ``loops``, the map's loops)."""
+                  loops: list[JointLoop] | None = None, conf: MapConfig | None = None,
+                  folded: set[int] | frozenset[int] = frozenset()) -> list[SessionPoses]:
+    """Each session with its best-known poses (the map frame's where the map has them), component, own estimate
+    (recorded, else :func:`own_estimate` from ``loops``, the map's loops) and its keyframes in ``folded``."""
     out = []
     sess_of = {int(k): si for si, s in enumerate(sessions) for k in s.ids}
     own: dict[int, list[JointLoop]] = {}
@@ -71,6 +72,8 @@ def session_poses(table: list[dict], sessions: list[SessionKeyframes], poses: di
         sp = SessionPoses(meta["name"], s.ids, s.T_odom, s.cov, T.reshape(-1, 4, 4), int(meta["component"]),
                           odometry_independent=odometry_independent(meta), cov_modelled=s.cov_modelled())
         sp.T_own = s.T_own if s.T_own is not None else own_estimate(sp, own.get(si, []), conf)
+        if folded:
+            sp.folded = np.isin(s.ids, list(folded))
         out.append(sp)
     return out
 
@@ -80,20 +83,25 @@ def factor_graph(table: list[dict], sessions: list[SessionKeyframes], graph: Map
     """(``gtsam.NonlinearFactorGraph``, ``gtsam.Values``) of a map: see :meth:`Map.factor_graph`.
 
     The factors are the joint solve's: a session on the built-in visual odometry has its linked
-    odometry steps and their links at half their information (:func:`slam_lcd.map.links.shared_weight`)."""
+    odometry steps and their links at half their information (:func:`slam_lcd.map.links.shared_weight`);
+    keyframes folded out of the graph (:mod:`slam_lcd.map.fold`) have no variable, their folded factors
+    stand in for their steps and loops."""
     import gtsam
 
     key = key or (lambda k: int(k))
     half = {int(k) for meta, s in zip(table, sessions, strict=True) if odometry_independent(meta) is False
             for k in s.ids}
+    gone = graph.folded_ids()
     loops = [lp for lp in existing_loops(sessions, graph) if lp.accepted]
     linked = {max(int(lp.query), int(lp.match)) for lp in loops if is_link(lp)}  # consecutive ids: the later one
     g, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
     for s in sessions:
         modelled = s.cov_modelled()
         for i, k in enumerate(s.ids):
+            if int(k) in gone:
+                continue
             values.insert(key(int(k)), gtsam.Pose3(poses.get(int(k), s.T_odom[i])))
-            if i:
+            if i and int(s.ids[i - 1]) not in gone:
                 step = inv(s.T_odom[i - 1]) @ s.T_odom[i]
                 cov = odometry_covariance(s.cov[i], bool(modelled[i]), step, conf)
                 cov = cov * (2.0 if int(k) in half and int(k) in linked else 1.0)

@@ -37,7 +37,7 @@ from .keyframe_arrays import (
     session_holding,
     visual_links,
 )
-from .lifelong import array_bytes, compact, counts, reduce_append
+from .lifelong import array_bytes, compact, count_folded, counts, fold_graph, reduce_append
 from .localize import localise_pipeline
 from .locks import WriterLock
 from .pair_verdicts import judged_pairs, keep_pairs
@@ -264,7 +264,8 @@ class Map:
             loops.append(JointLoop(int(c.query_id), int(c.match_id), np.asarray(c.T_match_query, float),
                                    np.asarray(c.information, float), True, False, ""))
         sess.T_own = np.asarray(own.poses, float).reshape(-1, 4, 4)
-        sessions = session_poses(self.manifest.sessions, self.sessions, self.poses(), loops, self.conf)
+        sessions = session_poses(self.manifest.sessions, self.sessions, self.poses(), loops, self.conf,
+                                 self.graph.folded_ids())
         sessions.append(SessionPoses(name, sess.ids, sess.T_odom, sess.cov, sess.T_own, None,
                                      odometry_independent=odometry_independent(extra or {}),
                                      cov_modelled=sess.cov_modelled(), T_own=sess.T_own))
@@ -279,7 +280,8 @@ class Map:
             loop_info=np.array([lp.info for lp in loops], float).reshape(-1, 6, 6),
             loop_accepted=np.array([lp.accepted and not (lp.inter and lp.reason.startswith("gnc")) for lp in loops],
                                    bool),
-            loop_reason=np.array([lp.reason for lp in loops], dtype="<U160"))
+            loop_reason=np.array([lp.reason for lp in loops], dtype="<U160"),
+            kf_folded=np.isin([k for s in sessions for k in s.ids], list(self.graph.folded_ids())))
         cam = getattr(pipeline, "camera", None)
         meta = {"name": name, "keyframes": len(sess), "kf_id_start": int(sess.ids.min()),
                 "kf_id_end": int(sess.ids.max()) + 1, "stamps": [int(sess.stamps[0]), int(sess.stamps[-1])],
@@ -297,6 +299,8 @@ class Map:
             for i in changed - {len(self.sessions)}:
                 self._rewritten[table[i]["name"]] = after[i]
             self.sessions = after[:-1]
+            graph, folded = fold_graph([*table, meta], after, graph, self.conf)
+            count_folded(result.pairs, folded.by_pair)
         # the in-memory map follows at once (a second session may be added before saving)
         self._apply(meta, sess, graph, result)
         self._vocab = self._vocab_snapshot(pipeline.detector, expected)
@@ -341,6 +345,8 @@ class Map:
         after, changed, graph = compact(self.manifest.sessions, self.sessions, self.graph, self.poses(),
                                         existing_loops(self.sessions, self.graph), self.conf, lcd_conf)
         state = read_vocab(self.root, self.manifest) if self.manifest.vocab_file else None
+        graph, folded = fold_graph(self.manifest.sessions, after, graph, self.conf)
+        count_folded([r for m in self.manifest.sessions for r in m.get("pairs", [])], folded.by_pair)
         self.sessions, self.graph = after, graph
         self._rewritten.update({self.manifest.sessions[i]["name"]: after[i] for i in changed})
         self._vocab = keep_only(state, kept_ids(self.sessions)) if state is not None else None

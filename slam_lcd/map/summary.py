@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from ..eval.align import umeyama
-from .joint_types import LINK
+from .joint_types import FOLD, LINK
 from .lifelong import counts
 
 
@@ -83,9 +83,12 @@ def map_summary(m, joined=None, *, current: str | None = None, pipe=None) -> dic
     gt_of = {int(k): s.T_gt[i, :3, 3] for s in m.sessions for i, k in enumerate(s.ids)}
     g = m.graph
     inter: list[dict[str, Any]] = []  # JSON rows
-    within = accepted_within = links = 0
+    within = accepted_within = links = folded = 0
     for q, mt, acc, why in zip(g.loop_query, g.loop_match, g.loop_accepted, g.loop_reason, strict=True):
         a, b = sess_of.get(int(mt)), sess_of.get(int(q))
+        if str(why) == FOLD:  # dropped keyframes' factors marginalised (slam_lcd.map.fold), not a loop
+            folded += 1
+            continue
         if str(why).startswith(LINK):  # a visual link between consecutive keyframes (or a dropped one), not a loop
             links += bool(acc)
             continue
@@ -126,6 +129,7 @@ def map_summary(m, joined=None, *, current: str | None = None, pipe=None) -> dic
                        for t in m.manifest.sessions],
             "sessions": sessions, "components": m.components(), "n_keyframes": m.n_keyframes,
             "loops_within_sessions": accepted_within, "loops_within_sessions_offered": within, "visual_links": links,
+            "folded_keyframes": len(g.folded_ids()), "folded_factors": folded,
             "inter_session_loops": inter, "inter_session_accepted_by_pair": pairs,
             "inter_session_accepted": sum(1 for r in inter if r["accepted"]), "pairs": pair_verdicts(m)}
 
@@ -135,7 +139,8 @@ def pair_verdicts(m) -> list[dict]:
     from .pair_verdicts import judged_pairs
 
     return [{"sessions": list(names), "decision": r.get("decision"), "offered": r.get("offered"),
-             "largest": r.get("largest"), "kept": r.get("kept"), "status": r.get("status"), "reason": r.get("reason")}
+             "largest": r.get("largest"), "kept": r.get("kept"), "status": r.get("status"), "reason": r.get("reason"),
+             "folded": r.get("folded", 0)}
             for names, r in judged_pairs(m.manifest.sessions).items()]
 
 
@@ -144,7 +149,7 @@ def _current(m, name: str, sessions: list[dict]) -> dict:
     ids = {int(k) for k in m.sessions[m.session_names.index(name)].ids}
     g = m.graph
     within = sum(1 for q, mt, acc, why in zip(g.loop_query, g.loop_match, g.loop_accepted, g.loop_reason, strict=True)
-                 if acc and not str(why).startswith(LINK) and int(q) in ids and int(mt) in ids)
+                 if acc and not str(why).startswith((LINK, FOLD)) and int(q) in ids and int(mt) in ids)
     entry = next(s for s in sessions if s["name"] == name)
     return {"name": name, "joined": entry["joined"], "component": entry["component"],
             "loops_accepted": within + entry["inter_session_loops"], "within_session_loops": within,
@@ -161,6 +166,9 @@ def summary_lines(summary: dict) -> list[str]:
     lines = [f"map {summary['root']}: {len(summary['sessions'])} sessions, {summary['n_keyframes']} keyframes{kept}, "
              f"{summary['inter_session_accepted']} loops between sessions accepted "
              f"({len(summary['inter_session_loops'])} offered), {len(summary['components'])} component(s)"]
+    if summary.get("folded_keyframes"):
+        lines.append(f"  joint graph: {summary['graph_variables']} variables, {summary['graph_factors']} factors "
+                     f"({summary['folded_keyframes']} keyframes folded into {summary['folded_factors']} factors)")
     for s in summary["sessions"]:
         ate = ""
         if s.get("ate_map") is not None:

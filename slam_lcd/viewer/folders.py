@@ -27,6 +27,7 @@ from ..errors import FileMissingError, InputError, SlamLcdError
 from ..eval.config import EvalConfig
 from ..eval.metrics import ate_with_config
 from ..io.trajectory_files import read_tum
+from ..map.joint_types import FOLD
 from ..map.store import is_map
 from ..types import Trajectory
 
@@ -261,6 +262,8 @@ def read_map(root: str | Path) -> MapFolder:
         g = m.graph
         loops = []
         for q, t, ok, why in zip(g.loop_query, g.loop_match, g.loop_accepted, g.loop_reason, strict=True):
+            if str(why) == FOLD:  # folded keyframes' factors: graph edges, not loops that were seen
+                continue
             qs, ts = session_of.get(int(q), "?"), session_of.get(int(t), "?")
             loops.append({"query_id": int(q), "match_id": int(t), "query_session": qs, "match_session": ts,
                           "accepted": bool(ok), "reason": str(why), "inter_session": qs != ts})
