@@ -8,32 +8,24 @@ grows with every visit. Folding removes such a variable, as generic node removal
 1. **Which.** A dropped keyframe folds once every factor that touches it is *settled*: made at
    least ``map.fold_after_appends`` appends ago (a loop between two sessions counts from the later
    one's append, when its pair was judged). A loop of a recent pair stays raw, so that a later
-   contradiction can still judge it again. A whole session may fold (a visit that added no view);
-   its poses then follow the nearest variables of its component.
+   contradiction can still judge it again. A whole session may fold (a visit that added no view).
 2. **Marginalise.** The factors touching a connected group of such keyframes are linearised at the
    map's solution and the group is eliminated (``eliminatePartialMultifrontal``): what is left is
    the exact Gaussian marginal on the group's blanket, the variables it touched.
 3. **Relative factors, not dense ones.** The marginal is re-expressed as a spanning tree of
    ``BetweenFactorPose3`` over the blanket, each with the marginal's covariance of its relative
-   pose, and measurements that pull the blanket at the map's solution as the exact marginal does
-   (its gradient there). Why not the marginal's own mean: the groups folded at once pull against
-   each other and against the factors that stay, and trees that approximate the information moved
-   the optimum by decimetres in a synthetic test; why not the relative pose at the solution: that
-   drops the pull, and a loop that stays then bends the chain it was balanced against. With the
-   gradient kept the optimum stays where it was, and a tree that is exact (a chain) is the
-   marginal itself. Among trees this product of relative-pose marginals loses the least (the
-   Chow-Liu tree: with one variable fixed, the tree's relative poses are a unit-triangular change
-   of coordinates, so the KL divergence is the sum of the edges' log-determinants minus a constant
-   and the minimum spanning tree by log-determinant minimises it). The tree first links the
-   blanket's variables of one session among themselves, then the sessions: each session's graph
-   stays connected on its own, as a pair's verdict reads two sessions' graphs alone. The result is
-   re-linearisable, and robust solvers still see individual factors (not one dense block, and not
-   the re-links to a loop's target that assume every loop is right).
+   pose, measured at the map's solution: every folded factor is satisfied there, so the graph's
+   optimum stays where it was, but for the pull the removed factors had on the raw ones that
+   stay (a millimetre on a chain that a loop bends by decimetres). Why not the marginal's own
+   mean, or measurements that keep the marginal's pull at the solution: the groups folded at
+   once pull against each other and against the factors that stay, and a tree, which leaves out
+   part of the information, turns those pulls into residuals of metres on its weak edges; on the
+   twenty-day benchmark either moved every session by about 5 cm.
 4. **Merge.** Folded factors between the same two variables merge by adding their information.
 
-A folded keyframe's pose in the map frame follows its session's variables: where the joint solution
-put it when it was folded, moved as its two nearest variables move since (interpolated on SE(3) by
-position in the chain): every session stays given at full rate.
+A folded keyframe's pose in the map frame follows the variables nearest to it: where the joint
+solution put it when it was folded, moved as they move since (:func:`fill_folded`): every session
+stays given at full rate.
 """
 from __future__ import annotations
 
@@ -173,7 +165,7 @@ def _tree(group: list, drop: set[int], values: gtsam.Values, session_of: dict[in
     keep = gtsam.Ordering()
     for k in blanket:
         keep.push_back(k)
-    H, eta = rest.hessian(keep)
+    H = rest.hessian(keep)[0]
     H = 0.5 * (H + H.T)
     X = [values.atPose3(k).matrix() for k in blanket]
     Sigma = np.zeros_like(H)
@@ -206,25 +198,9 @@ def _tree(group: list, drop: set[int], values: gtsam.Values, session_of: dict[in
         parent[find(i)] = find(j)
         total += logdet
         tree.append((inter, i, j, z, np.linalg.inv(cov)))
-    residual = _residuals(tree, eta, b)
-    out = [JointLoop(blanket[j], blanket[i], z @ gtsam.Pose3.Expmap(-r).matrix(), info, inter, True, FOLD)
-           for (inter, i, j, z, info), r in zip(tree, residual, strict=True)]
+    out = [JointLoop(blanket[j], blanket[i], z, info, inter, True, FOLD) for inter, i, j, z, info in tree]
     _, logdet_all = np.linalg.slogdet(Sigma[6:, 6:])
     return out, max(0.0, 0.5 * (total - logdet_all))
-
-
-def _residuals(tree: list, eta: np.ndarray, b: int) -> np.ndarray:
-    """(edges, 6) each tree factor's residual at the solution such that the tree pulls the blanket as the exact
-    marginal does there (its gradient ``eta``, GTSAM's sign): with the gradient kept, the graph's optimum stays
-    at the solution whatever the tree leaves out of the information, and a tree that is exact (a chain) is the
-    marginal itself."""
-    if not tree:
-        return np.zeros((0, 6))
-    JtL = np.zeros((6 * b, 6 * len(tree)))
-    for e, (_, i, j, z, info) in enumerate(tree):
-        JtL[6 * i:6 * i + 6, 6 * e:6 * e + 6] = -_adjoint(inv(z)).T @ info
-        JtL[6 * j:6 * j + 6, 6 * e:6 * e + 6] = info
-    return np.linalg.lstsq(JtL, -eta, rcond=None)[0].reshape(-1, 6)
 
 
 def merge_parallel(factors: list[JointLoop]) -> list[JointLoop]:
@@ -249,35 +225,32 @@ def merge_parallel(factors: list[JointLoop]) -> list[JointLoop]:
     return list(by_pair.values())
 
 
+NEAREST = 3  # variables whose motion a folded keyframe follows
+
+
 def fill_folded(sessions: list[SessionPoses], comp: dict[int, int], poses: dict[int, np.ndarray]) -> None:
     """The folded keyframes' poses in ``poses``: where the previous solve put them (``T_init``, the joint solution
-    when they were folded, carried on), corrected as their nearest variables moved since: in their session, the
-    variables before and after them (SE(3) interpolation by position between them), so a fixed offset from a
-    variable where its neighbours move together; a session without a variable, the nearest variable of the
-    sessions of its component that were placed in the same frame (``comp``: session index -> component)."""
+    when they were folded, carried on), moved as the nearest variables around them moved since (``comp``:
+    session index -> component; the variables of the sessions that lay in the same frame before).
+
+    Why the nearest in space and not the session's own variables along its chain: a visit that added one or two
+    views keeps one or two variables, tens of metres from most of its keyframes, and a tenth of a degree of
+    their rotation moved those keyframes by centimetres. The variables nearest a keyframe are the views of its
+    place; their motion is the map's deformation there. Each of the nearest :data:`NEAREST` moves the keyframe
+    as a rigid offset from itself; the positions are averaged weighted by inverse distance (plus 0.5 m), the
+    orientation is the nearest one's."""
     refs: dict[tuple, tuple[np.ndarray, list]] = {}
     for si, s in enumerate(sessions):
         folded = _folded(s)
         if not folded.any():
             continue
-        prev = np.asarray(s.T_init, float)
-        live = np.flatnonzero(~folded)
-        if not len(live):
-            key = (comp[si], s.prev_component)
-            if key not in refs:
-                refs[key] = _references(sessions, comp, *key)
-            _follow_nearest(s, prev, poses, *refs[key])
-            continue
-        corr = {int(i): poses[int(s.ids[i])] @ inv(prev[i]) for i in live}
-        for i in np.flatnonzero(folded):
-            pos = int(np.searchsorted(live, i))
-            if pos == 0 or pos >= len(live):
-                C = corr[int(live[min(pos, len(live) - 1)])]
-            else:
-                a, b = int(live[pos - 1]), int(live[pos])
-                xi = gtsam.Pose3.Logmap(gtsam.Pose3(inv(corr[a]) @ corr[b]))
-                C = corr[a] @ gtsam.Pose3.Expmap((i - a) / (b - a) * xi).matrix()
-            poses[int(s.ids[i])] = C @ prev[i]
+        key = (comp[si], s.prev_component)
+        if key not in refs:
+            refs[key] = _references(sessions, comp, *key)
+        P, ids = refs[key]
+        prev = np.asarray(s.T_init, float)[folded]
+        out = _follow(prev, P, np.array([poses[k] for k in ids]).reshape(-1, 4, 4))
+        poses.update({int(k): T for k, T in zip(s.ids[folded], out, strict=True)})
 
 
 def _references(sessions: list[SessionPoses], comp: dict[int, int], c: int, prev_component) -> tuple:
@@ -292,15 +265,19 @@ def _references(sessions: list[SessionPoses], comp: dict[int, int], c: int, prev
     return (np.concatenate(P) if P else np.zeros((0, 4, 4))), ids
 
 
-def _follow_nearest(s: SessionPoses, prev: np.ndarray, poses: dict[int, np.ndarray], P: np.ndarray,
-                    ids: list) -> None:
-    """Each keyframe of a session without variables moved as the nearest reference variable was (none: as it was)."""
-    if not ids:
-        poses.update({int(k): T for k, T in zip(s.ids, prev, strict=True)})
-        return
-    near = np.argmin(np.linalg.norm(prev[:, None, :3, 3] - P[None, :, :3, 3], axis=2), axis=1)
-    C = np.array([poses[ids[j]] for j in near]) @ inv(P[near])
-    poses.update({int(k): T for k, T in zip(s.ids, C @ prev, strict=True)})
+def _follow(prev: np.ndarray, P: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """(n, 4, 4) poses ``prev`` moved as the nearest of the variables that lay at ``P`` and lie at ``X`` now."""
+    if not len(P):
+        return prev.copy()
+    d = np.linalg.norm(prev[:, None, :3, 3] - P[None, :, :3, 3], axis=2)
+    k = min(NEAREST, len(P))
+    near = np.argsort(d, axis=1)[:, :k]
+    C = X[near] @ inv(P[near])  # (n, k, 4, 4): each variable's motion since
+    moved = C @ prev[:, None]
+    w = 1.0 / (np.take_along_axis(d, near, axis=1) + 0.5)
+    out = moved[:, 0].copy()
+    out[:, :3, 3] = np.einsum("nk,nkj->nj", w / w.sum(1, keepdims=True), moved[:, :, :3, 3])
+    return out
 
 
 __all__ = ["FoldReport", "fill_folded", "fold", "foldable", "merge_parallel"]

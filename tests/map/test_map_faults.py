@@ -49,7 +49,9 @@ def digest(root) -> str:
         for k in s.ARRAYS:
             a = np.ascontiguousarray(getattr(s, k))
             h.update(f"{k}{a.dtype}{a.shape}".encode() + a.tobytes())
-    for k in m.graph.ARRAYS:
+    for k in (*m.graph.ARRAYS, *m.graph.OPTIONAL):
+        if getattr(m.graph, k) is None:
+            continue
         a = np.ascontiguousarray(getattr(m.graph, k))
         h.update(f"{k}{a.dtype}{a.shape}".encode() + a.tobytes())
     return h.hexdigest()
@@ -409,6 +411,112 @@ def test_disk_full_at_every_write_of_the_commit_leaves_the_map_as_it_was(world, 
         monkeypatch.undo()
     assert digest(mapdir) == world.after_state
     assert_tidy_after_next_writer(mapdir)
+
+
+FOLD_NOW = ["--set", "map.fold_after_appends=1"]  # a third session folds the second one's dropped keyframes
+
+
+@pytest.fixture(scope="module")
+def folding(world, tmp_path_factory):
+    """The reference append of session 3 to the map of sessions 1+2 that folds: the map after it."""
+    from slam_lcd.map.session_map import Map
+
+    ref = tmp_path_factory.mktemp("fold") / "map"
+    shutil.copytree(world.after, ref)
+    p = slam(["run", world.logs[3], "--map", ref, "--out", ref.parent / "out", *world.orb, *FOLD_NOW], world.env)
+    _, err = p.communicate(timeout=300)
+    assert p.returncode == 0, err
+    with Map.open(ref) as m:
+        assert len(m.graph.folded_ids()) > 0  # the append folded keyframes out of the graph
+    return SimpleNamespace(root=ref, state=state(ref))
+
+
+@pytest.mark.parametrize("point, sig", [("graph-done", "SIGINT"), ("manifest-write", "SIGTERM")])
+def test_an_append_that_folds_signalled_inside_its_commit(world, folding, tmp_path, point, sig):
+    """A fold changes only what the commit writes: signalled inside it, the map is the one before or the one
+    after the fold; a SIGTERM before the rename leaves the one before."""
+    d = tmp_path / "map"
+    shutil.copytree(world.after, d)
+    p = slam(["run", world.logs[3], "--map", d, "--out", tmp_path / "out", *world.orb, *FOLD_NOW],
+             _fault_env(world, point, sig, d))
+    _, err = p.communicate(timeout=300)
+    assert state(d) in (world.after_state, folding.state), (p.returncode, err[-400:])
+    if p.returncode == -signal.SIGTERM:
+        assert state(d) == world.after_state
+    if sig == "SIGINT" and p.returncode != 0:
+        assert p.returncode == 130
+    assert_tidy_after_next_writer(d)
+
+
+def test_an_append_that_folds_with_the_disk_full_leaves_the_map_as_it_was(world, folding, tmp_path, monkeypatch):
+    """The disk full at the first file of a folding append's commit: a MapError, every file as it was; the save
+    that finds room commits the folded map."""
+    from slam_lcd.config import load_config
+    from slam_lcd.features import load_extractor
+    from slam_lcd.map import store
+    from slam_lcd.map.session_map import Map, extractor_meta
+    from slam_lcd.map.store import MapError
+    from slam_lcd.run import MapUse, Models, OutputOptions, run_log
+
+    d = tmp_path / "map"
+    shutil.copytree(world.after, d)
+    full = [True]
+    real = store.write_npz
+
+    def write_npz(file, *a, **k):
+        if full[0]:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        return real(file, *a, **k)
+
+    cfg = load_config("default", ["features.kind=orb", "run.plots=false", "run.loop_pictures=false", "lcd.top_k=1",
+                                  f"features.cache_dir={world.root / 'cache'}", "map.fold_after_appends=1"])
+    extractor = load_extractor(cfg.features)
+    before = files(d)
+    with Map.open(d, features=extractor_meta(extractor, cfg.map.descriptor_form), conf=cfg.map, write=True) as m:
+        monkeypatch.setattr(store, "write_npz", write_npz)
+        with pytest.raises(MapError, match="No space left on device"):
+            run_log(world.logs[3], tmp_path / "out", cfg, models=Models(extractor=extractor), map_use=MapUse(m),
+                    output=OutputOptions(progress=False, write_mcap=False))
+        assert files(d) == before
+        full[0] = False
+        m.save()
+    assert state(d) == folding.state
+    assert_tidy_after_next_writer(d)
+
+
+def test_a_folded_map_gives_every_session_whole_and_its_graph_to_a_users_optimiser(world, folding):
+    """After the fold: every session at full rate in the map frame, as the same append without folding put it
+    (within 5 cm); ``map info`` names the folded keyframes and their factors; the graph a user's
+    optimiser takes has a variable per keyframe left in it, and its optimum is the map's poses."""
+    import gtsam
+
+    from slam_lcd.map.lifelong import counts
+    from slam_lcd.map.session_map import Map
+    from slam_lcd.map.summary import map_summary
+
+    plain = folding.root.parent / "plain"
+    shutil.copytree(world.after, plain)
+    p = slam(["run", world.logs[3], "--map", plain, "--out", plain.parent / "out-plain", *world.orb,
+              "--set", "map.fold_after_appends=0"], world.env)
+    _, err = p.communicate(timeout=300)
+    assert p.returncode == 0, err
+    with Map.open(folding.root) as m, Map.open(plain) as ref:
+        c, s = counts(m.graph, m.sessions), map_summary(m)
+        assert c["graph_variables"] == c["keyframes"] - len(m.graph.folded_ids()) < counts(ref.graph, ref.sessions)[
+            "graph_variables"]
+        assert s["folded_keyframes"] > 0 and s["folded_factors"] > 0
+        for i in range(len(m.sessions)):
+            a, b = m.session_trajectory(i), ref.session_trajectory(i)
+            assert len(a.stamps) == len(m.sessions[i].ids)
+            assert np.max(np.linalg.norm(a.poses[:, :3, 3] - b.poses[:, :3, 3], axis=1)) < 0.05
+        graph, values = m.factor_graph()
+        assert values.size() == c["graph_variables"]
+        k0 = int(values.keys()[0])
+        graph.add(gtsam.PriorFactorPose3(k0, values.atPose3(k0), gtsam.noiseModel.Isotropic.Sigma(6, 1e-6)))
+        out = gtsam.LevenbergMarquardtOptimizer(graph, values).optimize()
+        moved = max(np.linalg.norm(out.atPose3(k).translation() - values.atPose3(k).translation())
+                    for k in values.keys())
+        assert moved < 0.01
 
 
 # ---------------------------------------------------------------------------- concurrent writers

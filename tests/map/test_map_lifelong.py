@@ -220,6 +220,35 @@ def test_a_session_of_another_world_adds_its_own_places(world, capfd, tmp_path):
     assert s4["kept_keyframes"] >= 0.4 * s4["keyframes"], s4  # nothing of the map's world is near it
 
 
+def test_a_third_append_folds_the_second_visit_out_of_the_graph(world, capfd, tmp_path):
+    """With one append to wait (``map.fold_after_appends=1``), the append of another world folds the second
+    visit's dropped keyframes: the graph loses their variables and raw loops, the pair keeps its verdict (with
+    its folded loops counted), both visits stay where they were (5 cm), and localisation is as good as before."""
+    from slam_lcd.map.session_map import Map
+
+    d = tmp_path / "map"
+    shutil.copytree(world.life, d)
+    before = _info(capfd, d)
+    rc, _, err = run_cli(["run", world.logs[4], "--map", d, "--out", tmp_path / "o", *world.orb,
+                          "--set", "map.fold_after_appends=1"], capfd)
+    assert rc == 0, err
+    after = _info(capfd, d)
+    assert after["folded_keyframes"] > 0.3 * before["sessions"][1]["keyframes"], after["folded_keyframes"]
+    assert after["graph_variables"] < before["graph_variables"]
+    (pair,) = [r for r in after["pairs"] if set(r["sessions"]) == {"s1", "s2"}]
+    assert pair["decision"] == "joined" and pair["status"] == "judged" and pair["folded"] > 0, pair
+    with Map.open(world.life) as m0, Map.open(d) as m1:
+        for i in (0, 1):
+            a, b = m0.session_trajectory(i), m1.session_trajectory(i)
+            assert np.max(np.linalg.norm(a.poses[:, :3, 3] - b.poses[:, :3, 3], axis=1)) < 0.05
+    share = {}
+    for name, root in (("before", world.life), ("folded", d)):
+        rc, _, err = run_cli(["localize", world.logs[1], "--map", root, "--out", tmp_path / name, *world.orb], capfd)
+        assert rc == 0, err
+        share[name] = json.loads((tmp_path / name / "report.json").read_text())["localization"]["share_localised"]
+    assert share["folded"] >= share["before"] - 0.05, share
+
+
 def test_map_compact_reduces_a_full_map_like_appending_with_the_rule(world, capfd, tmp_path):
     d = tmp_path / "map"
     shutil.copytree(world.full, d)
