@@ -28,7 +28,7 @@ from .fold import FoldReport, fold, foldable
 from .keyframe_arrays import camera_from_json
 from .place_geometry import Localises, stored_view
 from .places import Kept, Ratios, Verdicts, appearance_of, familiarity, judge, prune
-from .session_graph import existing_loops, session_poses
+from .session_graph import existing_loops, loop_arrays, session_poses
 
 log = logging.getLogger(__name__)
 
@@ -197,13 +197,7 @@ def fold_graph(table: list[dict], sessions: list[SessionKeyframes], graph: MapGr
              "(KL %.2f nats)", report.keyframes, report.removed, report.added, report.kl_nats)
     folded = np.concatenate([s.folded if s.folded is not None else np.zeros(len(s.ids), bool) for s in sp])
     order = {int(k): i for i, k in enumerate(np.concatenate([s.ids for s in sp]))}
-    out = replace(graph, kf_folded=folded[[order[int(k)] for k in graph.kf_ids]],
-                  loop_query=np.array([lp.query for lp in loops], np.int64),
-                  loop_match=np.array([lp.match for lp in loops], np.int64),
-                  loop_T=np.array([lp.T for lp in loops], float).reshape(-1, 4, 4),
-                  loop_info=np.array([lp.info for lp in loops], float).reshape(-1, 6, 6),
-                  loop_accepted=np.array([lp.accepted for lp in loops], bool),
-                  loop_reason=np.array([lp.reason for lp in loops], dtype="<U160"))
+    out = replace(graph, kf_folded=folded[[order[int(k)] for k in graph.kf_ids]], **loop_arrays(loops))
     return out, report
 
 

@@ -34,6 +34,18 @@ def existing_loops(sessions: list[SessionKeyframes], graph: MapGraph) -> list[Jo
     return out
 
 
+def loop_arrays(loops: list[JointLoop]) -> dict[str, np.ndarray]:
+    """The graph file's loop arrays of ``loops`` (:func:`existing_loops` read back); a loop between sessions that
+    GNC rejected is stored as not accepted."""
+    return {"loop_query": np.array([lp.query for lp in loops], np.int64),
+            "loop_match": np.array([lp.match for lp in loops], np.int64),
+            "loop_T": np.array([lp.T for lp in loops], float).reshape(-1, 4, 4),
+            "loop_info": np.array([lp.info for lp in loops], float).reshape(-1, 6, 6),
+            "loop_accepted": np.array([lp.accepted and not (lp.inter and lp.reason.startswith("gnc")) for lp in loops],
+                                      bool),
+            "loop_reason": np.array([lp.reason for lp in loops], dtype="<U160")}
+
+
 def own_estimate(s: SessionPoses, loops: list[JointLoop], conf: MapConfig | None = None) -> np.ndarray:
     """(n, 4, 4) a session's own estimate where the map did not record it: its odometry and its own accepted loops
     and links (``loops``: within the session), solved alone in its odometry frame (``conf``: the map's settings,

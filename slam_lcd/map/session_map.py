@@ -41,7 +41,7 @@ from .lifelong import array_bytes, compact, count_folded, counts, fold_graph, re
 from .localize import localise_pipeline
 from .locks import WriterLock
 from .pair_verdicts import judged_pairs, keep_pairs
-from .session_graph import existing_loops, factor_graph, odometry_independent, session_poses
+from .session_graph import existing_loops, factor_graph, loop_arrays, odometry_independent, session_poses
 from .store import LogAlreadyInMapError, MapError, MapGraph, MapManifest, SessionKeyframes, check_map_target, read_vocab
 
 log = logging.getLogger(__name__)
@@ -271,17 +271,9 @@ class Map:
                                      cov_modelled=sess.cov_modelled(), T_own=sess.T_own))
         result = solve(sessions, loops, self.conf, judged=judged_pairs(self.manifest.sessions))
         self.last_join = result
-        graph = MapGraph(
-            kf_ids=np.array([k for s in sessions for k in s.ids], np.int64),
-            T_map=np.array([result.poses[int(k)] for s in sessions for k in s.ids]).reshape(-1, 4, 4),
-            loop_query=np.array([lp.query for lp in loops], np.int64),
-            loop_match=np.array([lp.match for lp in loops], np.int64),
-            loop_T=np.array([lp.T for lp in loops], float).reshape(-1, 4, 4),
-            loop_info=np.array([lp.info for lp in loops], float).reshape(-1, 6, 6),
-            loop_accepted=np.array([lp.accepted and not (lp.inter and lp.reason.startswith("gnc")) for lp in loops],
-                                   bool),
-            loop_reason=np.array([lp.reason for lp in loops], dtype="<U160"),
-            kf_folded=np.isin([k for s in sessions for k in s.ids], list(self.graph.folded_ids())))
+        ids = np.array([k for s in sessions for k in s.ids], np.int64)
+        graph = MapGraph(kf_ids=ids, T_map=np.array([result.poses[int(k)] for k in ids]).reshape(-1, 4, 4),
+                         **loop_arrays(loops), kf_folded=np.isin(ids, list(self.graph.folded_ids())))
         cam = getattr(pipeline, "camera", None)
         meta = {"name": name, "keyframes": len(sess), "kf_id_start": int(sess.ids.min()),
                 "kf_id_end": int(sess.ids.max()) + 1, "stamps": [int(sess.stamps[0]), int(sess.stamps[-1])],
