@@ -97,7 +97,8 @@ def fold(sessions: list[SessionPoses], loops: list[JointLoop], poses: dict[int, 
         return loops, report
     chains = SessionChains(sessions, conf)
     graphs = SessionGraphs(sessions, loops, chains)
-    holding = [si for si, s in enumerate(sessions) if np.isin(s.ids, list(drop)).any()]  # a session's own factors
+    dropped = np.fromiter(drop, np.int64, len(drop))
+    holding = [si for si, s in enumerate(sessions) if np.isin(s.ids, dropped).any()]  # a session's own factors
     factors = [f for si in holding for f in graphs.factors_of(si)]  # touch its keyframes only
     factors += [between(lp) for lp in loops
                 if lp.inter and lp.accepted and (int(lp.query) in drop or int(lp.match) in drop)]
@@ -125,7 +126,7 @@ def fold(sessions: list[SessionPoses], loops: list[JointLoop], poses: dict[int, 
             continue
         kept.append(lp)
     for s in sessions:
-        s.folded = _folded(s) | np.isin(s.ids, list(drop))
+        s.folded = _folded(s) | np.isin(s.ids, dropped)
     merged = merge_parallel([lp for lp in kept if lp.reason == FOLD] + new)
     report.keyframes, report.added = len(drop), len(merged)
     return [lp for lp in kept if lp.reason != FOLD] + merged, report
@@ -242,15 +243,15 @@ def fill_folded(sessions: list[SessionPoses], comp: dict[int, int], poses: dict[
     place; their motion is the map's deformation there. Each of the nearest :data:`NEAREST` moves the keyframe
     as a rigid offset from itself; the positions are averaged weighted by inverse distance (plus 0.5 m), the
     orientation is the nearest one's."""
-    groups: dict[tuple, list[SessionPoses]] = {}  # one call per group: the cost stays with the keyframes
+    groups: dict[tuple, list[tuple[SessionPoses, np.ndarray]]] = {}  # one call per group, not per session
     for si, s in enumerate(sessions):
-        if _folded(s).any():
-            groups.setdefault((comp[si], s.prev_component), []).append(s)
+        if (folded := _folded(s)).any():
+            groups.setdefault((comp[si], s.prev_component), []).append((s, folded))
     for key, members in groups.items():
         P, ids = _references(sessions, comp, *key)
-        prev = np.concatenate([np.asarray(s.T_init, float)[_folded(s)] for s in members])
+        prev = np.concatenate([np.asarray(s.T_init, float)[f] for s, f in members])
         out = _follow(prev, P, np.array([poses[k] for k in ids]).reshape(-1, 4, 4))
-        folded_ids = np.concatenate([s.ids[_folded(s)] for s in members])
+        folded_ids = np.concatenate([s.ids[f] for s, f in members])
         poses.update({int(k): T for k, T in zip(folded_ids, out, strict=True)})
 
 
